@@ -1,0 +1,17 @@
+"""Sweep pipeline: scenes (TOML) fanned out with dask into resumable Zarr stores, with reductions.
+
+Public API::
+
+    scene = pipeline.load_scene("workflows/quick.toml")     # validated, frozen
+    summary = pipeline.run_scene(scene, "out/quick.zarr", scheduler="processes")
+    print(summary.line())
+
+The command line is ``python -m pipeline run workflows/<scene>.toml``.
+"""
+
+from ._run import RunSummary, default_store, run_scene
+from ._scene import Axis, Execution, Reduction, Scene, SceneError, load_scene, parse_scene
+from ._store import StoreBusy, StoreMismatch
+
+__all__ = ["Axis", "Execution", "Reduction", "RunSummary", "Scene", "SceneError", "StoreBusy", "StoreMismatch",
+           "default_store", "load_scene", "parse_scene", "run_scene"]

@@ -1,0 +1,93 @@
+"""Command line: ``python -m pipeline run SCENE.toml`` and ``python -m pipeline paper``.
+
+Exit codes: 0 done; 2 bad scene file or arguments (nothing written); 3 store refused (a
+different scene is stored there, it is not a Zarr store, or another run holds it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from ._run import run_scene
+from ._scene import SceneError, load_scene
+from ._store import StoreBusy, StoreMismatch
+
+EXIT_BAD_SCENE = 2
+EXIT_REFUSED = 3
+
+#: Shipped scenes in the order ``paper`` runs them.
+PAPER_SCENES = ("quick", "harmonic_grid", "harmonic_diagonals", "harmonic_optimum", "duty_cycle",
+                "linear_two_phase", "exponent_sets", "power_law")
+WORKFLOWS = Path(__file__).resolve().parent.parent / "workflows"
+
+
+def _scheduler(value: str) -> str:
+    if value in ("processes", "threads", "synchronous") or "://" in value:
+        return value
+    raise argparse.ArgumentTypeError(f"must be processes, threads, synchronous or tcp://host:port, got {value!r}")
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="compute one scene into its Zarr store (resumes an interrupted run)")
+    run.add_argument("scene", help="scene TOML file, e.g. workflows/quick.toml")
+    paper = sub.add_parser("paper", help="run every shipped scene (or only quick) and print the total time")
+    paper.add_argument("--quick", action="store_true", help="only the quick scene")
+    paper.add_argument("--out", default="out", help="directory of the stores (default out/)")
+    for p in (run, paper):
+        if p is run:
+            p.add_argument("--store", help="Zarr store (default out/<scene>.zarr)")
+        p.add_argument("--scheduler", type=_scheduler, default=None,
+                       help="processes (default), threads, synchronous, or tcp://host:port of a dask cluster")
+        p.add_argument("--workers", type=int, default=None, help="local worker count (default: all cores)")
+        p.add_argument("--overwrite", action="store_true", help="replace a store built from a different scene")
+        p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return ap
+
+
+def _run_one(path, store, args) -> int:
+    try:
+        scene = load_scene(path)
+    except SceneError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_SCENE
+    try:
+        summary = run_scene(scene, store, scheduler=args.scheduler, workers=args.workers,
+                            overwrite=args.overwrite, progress=not args.no_progress)
+    except (StoreMismatch, StoreBusy) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+    print(summary.line(), flush=True)
+    return 0
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    if args.workers is not None and args.workers < 1:
+        print("error: --workers: must be >= 1", file=sys.stderr)
+        return EXIT_BAD_SCENE
+    if args.command == "run":
+        return _run_one(args.scene, args.store, args)
+    names = ("quick",) if args.quick else PAPER_SCENES
+    # Validate every scene before running any, so a bad file costs nothing.
+    for name in names:
+        try:
+            load_scene(WORKFLOWS / f"{name}.toml")
+        except SceneError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_BAD_SCENE
+    t0 = time.perf_counter()
+    for name in names:
+        rc = _run_one(WORKFLOWS / f"{name}.toml", Path(args.out) / f"{name}.zarr", args)
+        if rc:
+            return rc
+    print(f"paper: {len(names)} scenes, total wall {time.perf_counter() - t0:.1f} s", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

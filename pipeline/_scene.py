@@ -1,0 +1,691 @@
+"""Scene files: parse and validate a TOML scene into frozen dataclasses.
+
+A scene is split in two parts:
+
+* the **science** part (family, axes, fixed parameters, solver settings,
+  outputs, reductions) which decides every number in the store; it is
+  normalised to plain JSON, hashed (sha256) and stored as provenance, and a
+  store built from a different science part is refused;
+* the **execution** part (points per task, scheduler, workers, store path)
+  which decides only how the numbers are computed; it is not hashed.
+
+Every error is a :class:`SceneError` whose message names the file, the key
+and the reason, on one line.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "Axis",
+    "Execution",
+    "Reduction",
+    "Scene",
+    "SceneError",
+    "Subsets",
+    "load_scene",
+    "parse_scene",
+    "FAMILY_PARAMETERS",
+    "QUANTITIES",
+    "DIAGNOSTICS",
+]
+
+
+class SceneError(ValueError):
+    """A scene file that cannot be used; the message names file, key and reason."""
+
+    def __init__(self, file: str, key: str, reason: str):
+        self.file, self.key, self.reason = file, key, reason
+        super().__init__(f"{file}: {key}: {reason}")
+
+
+# ---------------------------------------------------------------------------
+# Vocabulary: parameters, their physical domains, and outputs.
+# ---------------------------------------------------------------------------
+
+#: Parameters every family takes. ``anisotropy_ratio`` = mu_n/mu_s and
+#: ``scaled_period`` = (mu_n mu_s)^(1/(4-2p)) T may be replaced by the pair
+#: ``T2_mu_n`` = T^(2-p) mu_n and ``T2_mu_s`` = T^(2-p) mu_s (figure EtaA0A1).
+_PHYSICS = ("p", "delta")
+_FRICTION_SCALED = ("anisotropy_ratio", "scaled_period")
+_FRICTION_PRODUCTS = ("T2_mu_n", "T2_mu_s")
+
+FAMILY_PARAMETERS: dict[str, tuple[str, ...]] = {
+    "harmonic": ("A0", "A1_ratio"),
+    "powerlaw": ("A0", "A1_ratio", "duty_cycle", "closing_shape", "opening_shape"),
+}
+
+#: Defaults for parameters a scene may leave out (paper: delta = 1e-5, p = 0).
+_DEFAULTS = {"p": 0.0, "delta": 1e-5}
+
+_PI = math.pi
+
+
+def _open_interval(lo, hi):
+    return lambda v: lo < v < hi
+
+
+#: name -> (predicate on one value, description of the domain, units)
+_DOMAINS: dict[str, tuple[Any, str, str]] = {
+    "anisotropy_ratio": (lambda v: 0 < v < math.inf, "must be > 0 (mu_n/mu_s)", "1"),
+    "scaled_period": (lambda v: 0 < v < math.inf, "must be > 0 ((mu_n mu_s)^(1/(4-2p)) T)", "1"),
+    "T2_mu_n": (lambda v: 0 < v < math.inf, "must be > 0 (T^(2-p) mu_n)", "1"),
+    "T2_mu_s": (lambda v: 0 < v < math.inf, "must be > 0 (T^(2-p) mu_s)", "1"),
+    "A0": (lambda v: 0 < v < _PI, "must be in (0, pi) [rad]", "rad"),
+    "A1_ratio": (lambda v: 0 < v <= 1, "must be in (0, 1] (A1/A0)", "1"),
+    "duty_cycle": (_open_interval(0.0, 1.0), "must be in (0, 1) (tau0)", "1"),
+    "closing_shape": (lambda v: abs(v) >= 1 and math.isfinite(v),
+                      "must be an exponent >= 1 with a concavity (up:g, down:g, or linear)", "1"),
+    "opening_shape": (lambda v: abs(v) >= 1 and math.isfinite(v),
+                      "must be an exponent >= 1 with a concavity (up:g, down:g, or linear)", "1"),
+    "p": (lambda v: 0 <= v < 2, "must be in [0, 2)", "1"),
+    "delta": (lambda v: 0 <= v < math.inf, "must be >= 0", "1"),
+}
+
+_LONG_NAMES = {
+    "anisotropy_ratio": "friction anisotropy ratio mu_n/mu_s",
+    "scaled_period": "scaled period (mu_n mu_s)^(1/(4-2p)) T",
+    "T2_mu_n": "T^(2-p) mu_n",
+    "T2_mu_s": "T^(2-p) mu_s",
+    "A0": "mean half-opening angle A0",
+    "A1_ratio": "normalised amplitude A1/A0",
+    "duty_cycle": "duration of the closing phase tau0 (duty cycle)",
+    "closing_shape": "closing power law: +g concave up (eq. rapidbegc), -g concave down (eq. rapidendc), 1 linear",
+    "opening_shape": "opening power law: +g concave up (eq. rapidendo), -g concave down (eq. rapidbego), 1 linear",
+    "p": "exponent p of the resistive force law (eq. frictionp)",
+    "delta": "velocity regularisation delta (eq. delta)",
+}
+
+#: Quantities a scene can store: solver outputs plus derived ones.
+QUANTITIES: dict[str, str] = {
+    "U": "time-averaged speed U (eq. U), at mu_n mu_s = 1",
+    "P": "time-averaged power P (eq. power), at mu_n mu_s = 1",
+    "efficiency": "efficiency lambda = U/P (eq. lambda), at mu_n mu_s = 1; signed like U",
+    "scaled_speed": "scaled speed (mu_n mu_s)^(-1/(4-2p)) U",
+    "scaled_power": "scaled power",
+    "scaled_efficiency": "scaled efficiency sqrt(mu_n mu_s) lambda; signed like U",
+    "relative_efficiency": "relative efficiency lambda/lambda_ub (eq. relefficiency); signed like U",
+    "efficiency_upper_bound": "lambda_ub = 1/min(mu_n, mu_s), at mu_n mu_s = 1",
+    "displacement_per_period": "T U: distance travelled per period [body lengths]",
+}
+#: Per-point diagnostics a scene can store.
+DIAGNOSTICS: dict[str, str] = {
+    "error_estimate": "solver error estimate",
+    "iterations": "solver iterations",
+    "n_tau": "final tau-grid size",
+}
+_STATISTICS = ("max", "min", "absmax")
+_POLISH_METHODS = ("Nelder-Mead", "L-BFGS-B", "Powell")
+_SCHEDULERS = ("processes", "threads", "synchronous")
+
+_NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+_PI_RE = re.compile(r"^\s*([-+]?\d*\.?\d*)\s*\*?\s*pi\s*(?:/\s*(\d+(?:\.\d*)?))?\s*$")
+_SHAPE_RE = re.compile(r"^\s*(up|down)\s*:\s*(\d+(?:\.\d*)?)\s*$")
+
+
+# ---------------------------------------------------------------------------
+# Dataclasses
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One swept parameter.
+
+    Attributes
+    ----------
+    name : str
+        Parameter name (a key of the module's domain table).
+    values : tuple of float
+        Grid values, strictly increasing.
+    spacing : str
+        "linear", "log2" or "list": how the values were given (used to polish in log space).
+    """
+
+    name: str
+    values: tuple[float, ...]
+    spacing: str
+
+    @property
+    def size(self) -> int:
+        return len(self.values)
+
+    @property
+    def continuous(self) -> bool:
+        """True for axes a local optimiser may move along (not the discrete power-law shapes)."""
+        return self.name not in ("closing_shape", "opening_shape") and self.size > 1
+
+    def array(self) -> np.ndarray:
+        return np.asarray(self.values, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Subsets:
+    """Nested subsets of one or two axes over which a reduction is repeated.
+
+    kind "window": values v of ``axes[0]`` with |v - center| <= halfwidth, one subset per halfwidth
+    (figure EtaVsMint0). kind "exponent_sets": shapes whose exponent |g| is in the set, for every
+    axis in ``axes`` (figure EtaVsMinGamma).
+    """
+
+    kind: str
+    axes: tuple[str, ...]
+    dim: str
+    labels: tuple[float, ...]
+    center: float = 0.5
+    sets: tuple[tuple[float, ...], ...] = ()
+
+    def masks(self, scene: "Scene") -> list[dict[str, np.ndarray]]:
+        """For each subset, a boolean mask per axis in ``axes`` (shape (axis size,))."""
+        out = []
+        for k, label in enumerate(self.labels):
+            masks = {}
+            for name in self.axes:
+                v = scene.axis(name).array()
+                if self.kind == "window":
+                    masks[name] = np.abs(v - self.center) <= label + 1e-12
+                else:
+                    masks[name] = np.isin(np.abs(v), np.asarray(self.sets[k]))
+            out.append(masks)
+        return out
+
+
+@dataclass(frozen=True)
+class Reduction:
+    """A statistic of one stored quantity over some axes, with its arg-max parameters.
+
+    The result keeps the other axes (plus ``subsets.dim`` when given). With ``polish`` the best
+    grid point of every cell is refined by a bounded local optimiser over the continuous axes
+    in ``over``.
+    """
+
+    name: str
+    quantity: str
+    statistic: str
+    over: tuple[str, ...]
+    report: tuple[str, ...] = ()
+    polish: bool = False
+    polish_method: str = "Nelder-Mead"
+    polish_rtol: float | None = None
+    polish_max_evaluations: int = 200
+    subsets: Subsets | None = None
+
+
+@dataclass(frozen=True)
+class Execution:
+    """How to run; not part of the scene hash."""
+
+    points_per_task: int | None = None
+    scheduler: str = "processes"
+    workers: int | None = None
+    store: str | None = None
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene. ``science`` is the normalised JSON-able dict that is hashed."""
+
+    path: str
+    name: str
+    title: str
+    figure: str
+    family: str
+    axes: tuple[Axis, ...]
+    fixed: tuple[tuple[str, float], ...]
+    method: str
+    rtol: float
+    quantities: tuple[str, ...]
+    diagnostics: tuple[str, ...]
+    reductions: tuple[Reduction, ...]
+    execution: Execution
+    science: dict = field(compare=False, repr=False)
+    text: str = field(default="", compare=False, repr=False)
+
+    # -- convenience -------------------------------------------------------
+    @property
+    def dims(self) -> tuple[str, ...]:
+        return tuple(a.name for a in self.axes)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(a.size for a in self.axes)
+
+    @property
+    def n_points(self) -> int:
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        return self.quantities + self.diagnostics
+
+    def axis(self, name: str) -> Axis:
+        for a in self.axes:
+            if a.name == name:
+                return a
+        raise KeyError(name)
+
+    @property
+    def hash(self) -> str:
+        return scene_hash(self.science)
+
+    def fixed_dict(self) -> dict[str, float]:
+        return dict(self.fixed)
+
+
+def scene_hash(science: dict) -> str:
+    blob = json.dumps(science, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+# ---------------------------------------------------------------------------
+# Parsing helpers
+# ---------------------------------------------------------------------------
+
+
+class _Ctx:
+    def __init__(self, file: str):
+        self.file = file
+
+    def err(self, key: str, reason: str) -> SceneError:
+        return SceneError(self.file, key, reason)
+
+    def table(self, obj, key: str, allowed: dict[str, str], required=()) -> dict:
+        """Check ``obj`` is a table with only ``allowed`` keys (key -> description)."""
+        if not isinstance(obj, dict):
+            raise self.err(key, f"must be a table, got {_tname(obj)}")
+        for k in obj:
+            if k not in allowed:
+                raise self.err(f"{key}.{k}" if key else k,
+                               f"unknown key (allowed: {', '.join(sorted(allowed))})")
+        for k in required:
+            if k not in obj:
+                raise self.err(f"{key}.{k}" if key else k, "missing required key")
+        return obj
+
+    def string(self, obj, key, choices=None) -> str:
+        if not isinstance(obj, str):
+            raise self.err(key, f"must be a string, got {_tname(obj)}")
+        if choices is not None and obj not in choices:
+            raise self.err(key, f"must be one of {', '.join(choices)}, got {obj!r}")
+        return obj
+
+    def boolean(self, obj, key) -> bool:
+        if not isinstance(obj, bool):
+            raise self.err(key, f"must be true or false, got {_tname(obj)}")
+        return obj
+
+    def integer(self, obj, key, lo=None) -> int:
+        if isinstance(obj, bool) or not isinstance(obj, int):
+            raise self.err(key, f"must be an integer, got {_tname(obj)}")
+        if lo is not None and obj < lo:
+            raise self.err(key, f"must be >= {lo}, got {obj}")
+        return obj
+
+    def number(self, obj, key, allow_pi=False) -> float:
+        if isinstance(obj, bool):
+            raise self.err(key, "must be a number, got a boolean")
+        if isinstance(obj, (int, float)):
+            v = float(obj)
+        elif allow_pi and isinstance(obj, str) and _PI_RE.match(obj):
+            m = _PI_RE.match(obj)
+            coef = m.group(1)
+            c = 1.0 if coef in ("", "+") else (-1.0 if coef == "-" else float(coef))
+            v = c * math.pi / (float(m.group(2)) if m.group(2) else 1.0)
+        else:
+            extra = " or a multiple of pi such as \"pi/2\"" if allow_pi else ""
+            raise self.err(key, f"must be a number{extra}, got {_tname(obj)} {obj!r}")
+        if not math.isfinite(v):
+            raise self.err(key, f"must be finite, got {v}")
+        return v
+
+    def names(self, obj, key, choices, nonempty=True) -> tuple[str, ...]:
+        if not isinstance(obj, list):
+            raise self.err(key, f"must be a list of names, got {_tname(obj)}")
+        if nonempty and not obj:
+            raise self.err(key, "must not be empty")
+        out = []
+        for i, v in enumerate(obj):
+            if not isinstance(v, str):
+                raise self.err(f"{key}[{i}]", f"must be a string, got {_tname(v)}")
+            if v not in choices:
+                raise self.err(f"{key}[{i}]", f"{v!r} is not one of {', '.join(choices)}")
+            if v in out:
+                raise self.err(f"{key}[{i}]", f"{v!r} is listed twice")
+            out.append(v)
+        return tuple(out)
+
+
+def _tname(obj) -> str:
+    return {dict: "a table", list: "an array", str: "a string", bool: "a boolean",
+            int: "an integer", float: "a float"}.get(type(obj), type(obj).__name__)
+
+
+def _shape_value(ctx: _Ctx, obj, key) -> float:
+    """Power-law shape as a signed exponent: +g concave up, -g concave down, 1 linear."""
+    if isinstance(obj, str):
+        s = obj.strip().lower()
+        if s == "linear":
+            return 1.0
+        m = _SHAPE_RE.match(s)
+        if not m:
+            raise ctx.err(key, f"must be \"up:g\", \"down:g\", \"linear\" or a signed exponent, got {obj!r}")
+        g = float(m.group(2))
+        if g < 1:
+            raise ctx.err(key, f"exponent must be >= 1, got {g}")
+        return 1.0 if g == 1 else (g if m.group(1) == "up" else -g)
+    v = ctx.number(obj, key)
+    if abs(v) < 1:
+        raise ctx.err(key, f"exponent must be >= 1 in magnitude, got {v}")
+    return 1.0 if abs(v) == 1 else v
+
+
+def _value(ctx: _Ctx, name: str, obj, key) -> float:
+    if name in ("closing_shape", "opening_shape"):
+        v = _shape_value(ctx, obj, key)
+    else:
+        v = ctx.number(obj, key, allow_pi=(name == "A0"))
+    ok, why, _ = _DOMAINS[name]
+    if not ok(v):
+        raise ctx.err(key, f"value {v:g} outside the physical domain: {name} {why}")
+    return v
+
+
+_AXIS_KEYS = {
+    "values": "explicit list of values",
+    "range": "[lo, hi] of a linear grid",
+    "log2_range": "[lo, hi] of log2 of the values",
+    "num": "number of points",
+    "step": "grid step (in log2 units for log2_range)",
+    "include": "which ends of the range are grid points: both, lower, upper, neither",
+}
+_INCLUDE = ("both", "lower", "upper", "neither")
+
+
+def _grid(lo: float, hi: float, num: int | None, step: float | None, include: str) -> np.ndarray:
+    if num is not None:
+        if include == "both":
+            return np.linspace(lo, hi, num) if num > 1 else np.array([lo])
+        denom = {"lower": num, "upper": num, "neither": num + 1}[include]
+        k = np.arange(num) + (0 if include == "lower" else 1)
+        return lo + (hi - lo) * k / denom
+    n = int(math.floor((hi - lo) / step + 1e-9))
+    g = lo + step * np.arange(n + 1)
+    if include in ("upper", "neither"):
+        g = g[1:]
+    if include in ("lower", "neither") and g.size and abs(g[-1] - hi) < 1e-9 * max(1.0, abs(hi)):
+        g = g[:-1]
+    return g
+
+
+def _parse_axis(ctx: _Ctx, name: str, spec, key: str) -> Axis:
+    if name in ("closing_shape", "opening_shape") and isinstance(spec, list):
+        spec = {"values": spec}
+    if isinstance(spec, list):
+        spec = {"values": spec}
+    ctx.table(spec, key, _AXIS_KEYS)
+    forms = [k for k in ("values", "range", "log2_range") if k in spec]
+    if len(forms) != 1:
+        raise ctx.err(key, "give exactly one of values, range, log2_range")
+    form = forms[0]
+    if form == "values":
+        for k in ("num", "step", "include"):
+            if k in spec:
+                raise ctx.err(f"{key}.{k}", "only allowed with range or log2_range")
+        raw = spec["values"]
+        if not isinstance(raw, list):
+            raise ctx.err(f"{key}.values", f"must be an array, got {_tname(raw)}")
+        if not raw:
+            raise ctx.err(f"{key}.values", "empty list")
+        vals = [_value(ctx, name, v, f"{key}.values[{i}]") for i, v in enumerate(raw)]
+        if any(b <= a for a, b in zip(vals, vals[1:])):
+            raise ctx.err(f"{key}.values", "must be strictly increasing (no repeats)")
+        return Axis(name, tuple(vals), "list")
+    bounds = spec[form]
+    if not isinstance(bounds, list) or len(bounds) != 2:
+        raise ctx.err(f"{key}.{form}", f"must be [lo, hi], got {bounds!r}")
+    lo, hi = (ctx.number(b, f"{key}.{form}", allow_pi=(name == "A0" and form == "range")) for b in bounds)
+    if hi < lo:
+        raise ctx.err(f"{key}.{form}", f"reversed range [{lo:g}, {hi:g}]")
+    if ("num" in spec) == ("step" in spec):
+        raise ctx.err(key, f"give exactly one of num, step with {form}")
+    num = ctx.integer(spec["num"], f"{key}.num", lo=1) if "num" in spec else None
+    step = ctx.number(spec["step"], f"{key}.step") if "step" in spec else None
+    if step is not None and step <= 0:
+        raise ctx.err(f"{key}.step", f"must be > 0, got {step:g}")
+    include = ctx.string(spec.get("include", "both"), f"{key}.include", _INCLUDE)
+    if hi == lo and not (include == "both" and (num == 1 or step is not None)):
+        raise ctx.err(f"{key}.{form}", f"empty range [{lo:g}, {hi:g}]")
+    g = _grid(lo, hi, num, step, include)
+    if g.size == 0:
+        raise ctx.err(key, "empty range: no grid point inside")
+    if form == "log2_range":
+        g = np.exp2(g)
+    vals = [float(v) for v in g]
+    for v in vals:
+        ok, why, _ = _DOMAINS[name]
+        if not ok(v):
+            raise ctx.err(f"{key}.{form}", f"grid value {v:g} outside the physical domain: {name} {why}")
+    return Axis(name, tuple(vals), "log2" if form == "log2_range" else "linear")
+
+
+_REDUCTION_KEYS = {
+    "name": "name of the result arrays",
+    "quantity": "stored quantity to reduce",
+    "statistic": "max, min or absmax",
+    "over": "axes reduced",
+    "report": "other quantities reported at the arg-max",
+    "polish": "refine the grid optimum with a local optimiser",
+    "polish_method": "Nelder-Mead, L-BFGS-B or Powell",
+    "polish_rtol": "solver rtol while polishing",
+    "polish_max_evaluations": "solver calls per polished optimum",
+    "window": "nested windows of one axis",
+    "exponent_sets": "nested sets of power-law exponents",
+}
+
+
+def _parse_reduction(ctx: _Ctx, obj, key: str, dims, stored) -> Reduction:
+    ctx.table(obj, key, _REDUCTION_KEYS, required=("name", "quantity", "over"))
+    name = ctx.string(obj["name"], f"{key}.name")
+    if not _NAME_RE.match(name):
+        raise ctx.err(f"{key}.name", f"must be an identifier, got {name!r}")
+    quantity = ctx.string(obj["quantity"], f"{key}.quantity")
+    if quantity not in stored:
+        raise ctx.err(f"{key}.quantity", f"{quantity!r} is not among the scene's outputs ({', '.join(stored)})")
+    statistic = ctx.string(obj.get("statistic", "max"), f"{key}.statistic", _STATISTICS)
+    over = ctx.names(obj["over"], f"{key}.over", dims)
+    report = ctx.names(obj.get("report", []), f"{key}.report", stored, nonempty=False)
+    polish = ctx.boolean(obj.get("polish", False), f"{key}.polish")
+    method = ctx.string(obj.get("polish_method", "Nelder-Mead"), f"{key}.polish_method", _POLISH_METHODS)
+    prtol = None
+    if "polish_rtol" in obj:
+        prtol = ctx.number(obj["polish_rtol"], f"{key}.polish_rtol")
+        if not 0 < prtol <= 0.1:
+            raise ctx.err(f"{key}.polish_rtol", f"must be in (0, 0.1], got {prtol:g}")
+    pmax = ctx.integer(obj.get("polish_max_evaluations", 200), f"{key}.polish_max_evaluations", lo=1)
+    subsets = None
+    if "window" in obj and "exponent_sets" in obj:
+        raise ctx.err(key, "give at most one of window, exponent_sets")
+    if "window" in obj:
+        wkey = f"{key}.window"
+        w = ctx.table(obj["window"], wkey, {"axis": "axis windowed", "center": "window centre",
+                                            "halfwidths": "list of half-widths"},
+                      required=("axis", "halfwidths"))
+        axis = ctx.string(w["axis"], f"{wkey}.axis", over)
+        center = ctx.number(w.get("center", 0.5), f"{wkey}.center")
+        hw = w["halfwidths"]
+        if not isinstance(hw, list) or not hw:
+            raise ctx.err(f"{wkey}.halfwidths", "must be a non-empty array of numbers")
+        hws = [ctx.number(v, f"{wkey}.halfwidths[{i}]") for i, v in enumerate(hw)]
+        if any(v < 0 for v in hws):
+            raise ctx.err(f"{wkey}.halfwidths", "half-widths must be >= 0")
+        if any(b <= a for a, b in zip(hws, hws[1:])):
+            raise ctx.err(f"{wkey}.halfwidths", "must be strictly increasing")
+        subsets = Subsets("window", (axis,), f"{axis}_halfwidth", tuple(hws), center=center)
+    if "exponent_sets" in obj:
+        ekey = f"{key}.exponent_sets"
+        e = ctx.table(obj["exponent_sets"], ekey, {"axes": "shape axes", "sets": "list of exponent sets"},
+                      required=("axes", "sets"))
+        axes = ctx.names(e["axes"], f"{ekey}.axes", [d for d in over if d.endswith("_shape")])
+        sets = e["sets"]
+        if not isinstance(sets, list) or not sets:
+            raise ctx.err(f"{ekey}.sets", "must be a non-empty array of arrays of exponents")
+        parsed = []
+        for i, s in enumerate(sets):
+            if not isinstance(s, list) or not s:
+                raise ctx.err(f"{ekey}.sets[{i}]", "must be a non-empty array of exponents")
+            vals = tuple(sorted(ctx.number(v, f"{ekey}.sets[{i}]") for v in s))
+            if any(v < 1 for v in vals):
+                raise ctx.err(f"{ekey}.sets[{i}]", "exponents must be >= 1")
+            parsed.append(vals)
+        subsets = Subsets("exponent_sets", axes, "exponent_set", tuple(float(i) for i in range(len(parsed))),
+                          sets=tuple(parsed))
+    return Reduction(name, quantity, statistic, over, report, polish, method, prtol, pmax, subsets)
+
+
+_TOP_KEYS = {
+    "scene": "name, title, figure, family",
+    "axes": "swept parameters",
+    "fixed": "parameters held fixed",
+    "solver": "method and rtol",
+    "outputs": "stored quantities and diagnostics",
+    "reductions": "maxima over axes",
+    "execution": "points_per_task, scheduler, workers, store (not hashed)",
+}
+
+
+def parse_scene(text: str, file: str = "<scene>") -> Scene:
+    """Parse and validate scene TOML ``text``; ``file`` is used in error messages."""
+    ctx = _Ctx(file)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ctx.err("(toml)", f"not valid TOML: {exc}") from None
+    ctx.table(doc, "", _TOP_KEYS, required=("scene", "axes", "solver", "outputs"))
+
+    head = ctx.table(doc["scene"], "scene", {"name": "", "title": "", "figure": "", "family": ""},
+                     required=("name", "family"))
+    name = ctx.string(head["name"], "scene.name")
+    if not _NAME_RE.match(name):
+        raise ctx.err("scene.name", f"must be an identifier, got {name!r}")
+    title = ctx.string(head.get("title", ""), "scene.title")
+    figure = ctx.string(head.get("figure", ""), "scene.figure")
+    family = ctx.string(head["family"], "scene.family", tuple(FAMILY_PARAMETERS))
+
+    known = FAMILY_PARAMETERS[family] + _FRICTION_SCALED + _FRICTION_PRODUCTS + _PHYSICS
+    allowed = {k: _LONG_NAMES[k] for k in known}
+    axes_doc = ctx.table(doc["axes"], "axes", allowed)
+    if not axes_doc:
+        raise ctx.err("axes", "at least one axis is needed")
+    fixed_doc = ctx.table(doc.get("fixed", {}), "fixed", allowed)
+    axes = tuple(_parse_axis(ctx, k, v, f"axes.{k}") for k, v in axes_doc.items())
+    fixed: dict[str, float] = {}
+    for k, v in fixed_doc.items():
+        if k in axes_doc:
+            raise ctx.err(f"fixed.{k}", "is also an axis")
+        fixed[k] = _value(ctx, k, v, f"fixed.{k}")
+    given = set(axes_doc) | set(fixed)
+    for k, v in _DEFAULTS.items():
+        if k not in given:
+            fixed[k] = v
+            given.add(k)
+    for k in FAMILY_PARAMETERS[family]:
+        if k not in given:
+            raise ctx.err(f"axes.{k}", f"missing: family {family!r} needs {k} as an axis or in [fixed]")
+    scaled = [k for k in _FRICTION_SCALED if k in given]
+    products = [k for k in _FRICTION_PRODUCTS if k in given]
+    if not ((len(scaled) == 2 and not products) or (len(products) == 2 and not scaled)):
+        raise ctx.err("axes", "give friction as anisotropy_ratio and scaled_period, or as T2_mu_n and T2_mu_s "
+                              f"(axes or fixed); got {', '.join(scaled + products) or 'none'}")
+
+    def extreme(k, f):
+        return f(axes[[a.name for a in axes].index(k)].values) if k in axes_doc else fixed[k]
+
+    # Cross-parameter domains: phi stays in [0, pi]; delta = 0 needs p > 0.
+    if extreme("A0", max) * (1 + extreme("A1_ratio", max)) > math.pi + 1e-12:
+        raise ctx.err("axes.A1_ratio", "A0 (1 + A1/A0) exceeds pi: the angle phi would leave [0, pi]")
+    if extreme("delta", min) == 0 and extreme("p", min) == 0:
+        raise ctx.err("fixed.delta" if "delta" in fixed else "axes.delta", "delta = 0 needs p > 0")
+
+    sol = ctx.table(doc["solver"], "solver", {"method": "periodic or march", "rtol": "relative tolerance"},
+                    required=("rtol",))
+    method = ctx.string(sol.get("method", "periodic"), "solver.method", ("periodic", "march"))
+    rtol = ctx.number(sol["rtol"], "solver.rtol")
+    if not 0 < rtol <= 0.1:
+        raise ctx.err("solver.rtol", f"must be in (0, 0.1], got {rtol:g}")
+
+    out = ctx.table(doc["outputs"], "outputs", {"quantities": "", "diagnostics": ""}, required=("quantities",))
+    quantities = ctx.names(out["quantities"], "outputs.quantities", tuple(QUANTITIES))
+    diagnostics = ctx.names(out.get("diagnostics", []), "outputs.diagnostics", tuple(DIAGNOSTICS), nonempty=False)
+    stored = quantities + diagnostics
+
+    red_doc = doc.get("reductions", [])
+    if not isinstance(red_doc, list):
+        raise ctx.err("reductions", "must be an array of tables ([[reductions]])")
+    dims = tuple(a.name for a in axes)
+    reductions = tuple(_parse_reduction(ctx, r, f"reductions[{i}]", dims, stored) for i, r in enumerate(red_doc))
+    seen = set()
+    for i, r in enumerate(reductions):
+        if r.name in seen or r.name in stored or r.name in dims:
+            raise ctx.err(f"reductions[{i}].name", f"{r.name!r} clashes with another array name")
+        seen.add(r.name)
+
+    ex = ctx.table(doc.get("execution", {}), "execution",
+                   {"points_per_task": "", "scheduler": "", "workers": "", "store": ""})
+    execution = Execution(
+        points_per_task=ctx.integer(ex["points_per_task"], "execution.points_per_task", lo=1)
+        if "points_per_task" in ex else None,
+        scheduler=ctx.string(ex.get("scheduler", "processes"), "execution.scheduler", _SCHEDULERS),
+        workers=ctx.integer(ex["workers"], "execution.workers", lo=1) if "workers" in ex else None,
+        store=ctx.string(ex["store"], "execution.store") if "store" in ex else None,
+    )
+
+    science = {
+        "name": name,
+        "family": family,
+        "axes": [{"name": a.name, "values": list(a.values), "spacing": a.spacing} for a in axes],
+        "fixed": dict(sorted(fixed.items())),
+        "solver": {"method": method, "rtol": rtol},
+        "outputs": {"quantities": list(quantities), "diagnostics": list(diagnostics)},
+        "reductions": [_reduction_json(r) for r in reductions],
+    }
+    return Scene(path=file, name=name, title=title, figure=figure, family=family, axes=axes,
+                 fixed=tuple(sorted(fixed.items())), method=method, rtol=rtol, quantities=quantities,
+                 diagnostics=diagnostics, reductions=reductions, execution=execution, science=science, text=text)
+
+
+def _reduction_json(r: Reduction) -> dict:
+    d = {"name": r.name, "quantity": r.quantity, "statistic": r.statistic, "over": list(r.over),
+         "report": list(r.report), "polish": r.polish}
+    if r.polish:
+        d.update(polish_method=r.polish_method, polish_rtol=r.polish_rtol,
+                 polish_max_evaluations=r.polish_max_evaluations)
+    if r.subsets is not None:
+        s = r.subsets
+        d["subsets"] = {"kind": s.kind, "axes": list(s.axes), "labels": list(s.labels), "center": s.center,
+                        "sets": [list(x) for x in s.sets]}
+    return d
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file. Raises :class:`SceneError`."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SceneError(str(path), "(file)", f"cannot read: {exc.strerror or exc}") from None
+    return parse_scene(text, str(path))
+
+
+def axis_attrs(name: str) -> dict:
+    """Attributes for a coordinate array: long name and units."""
+    return {"long_name": _LONG_NAMES.get(name, name), "units": _DOMAINS[name][2] if name in _DOMAINS else "1"}

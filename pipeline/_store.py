@@ -1,0 +1,361 @@
+"""The Zarr store of a scene: skeleton, provenance, per-chunk done markers, run lock.
+
+Layout (Zarr format 3, one group per scene)::
+
+    <store>/                      group; attrs["pipeline"] = provenance + layout + state
+        <axis>                    1-D coordinate array per axis, dimension_names [axis]
+        <output>                  one array per stored quantity/diagnostic, dims = scene axes
+        status                    int8, 0 converged, > 0 solver failure, -1 not computed
+        <reduction arrays>        labelled by the kept axes (+ a subset dimension)
+        pipeline_state/chunk_done uint8 per chunk, 1 once the chunk's outputs are all written
+
+Only the driver writes attributes; tasks write only their own chunks and then their marker.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import fcntl
+import json
+import os
+import platform
+import shutil
+import subprocess
+import warnings
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import zarr
+
+from ._scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
+
+__all__ = [
+    "ATTRS_KEY",
+    "StoreBusy",
+    "StoreMismatch",
+    "create_skeleton",
+    "open_existing",
+    "output_dtype",
+    "reduction_arrays",
+    "run_lock",
+    "read_done",
+    "mark_done",
+    "write_region",
+    "remove_partials",
+    "provenance",
+    "set_state",
+]
+
+ATTRS_KEY = "pipeline"
+STATE_GROUP = "pipeline_state"
+DONE_ARRAY = f"{STATE_GROUP}/chunk_done"
+NOT_COMPUTED = -1
+
+
+class StoreBusy(RuntimeError):
+    """Another run holds the store's lock."""
+
+
+class StoreMismatch(RuntimeError):
+    """The store was built from a different scene (or is not a pipeline store)."""
+
+
+# ---------------------------------------------------------------------------
+# Lock
+# ---------------------------------------------------------------------------
+
+
+def lock_path(store: Path) -> Path:
+    return store.with_name(store.name + ".lock")
+
+
+@contextmanager
+def run_lock(store: Path):
+    """Hold an exclusive lock on ``store`` for the duration of a run.
+
+    The lock is an ``flock`` on ``<store>.lock``, which also records the holder's pid and host.
+    The kernel drops an ``flock`` when its holder dies (SIGKILL, power loss), so a lock file
+    left behind by a dead run is stale and is taken over; a live holder makes this raise
+    :class:`StoreBusy` naming its pid.
+    """
+    path = lock_path(store)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)  # non-inheritable: spawned workers do not keep it
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
+            except (ValueError, OSError):
+                holder = {}
+            raise StoreBusy(
+                f"{store}: another run is using this store (pid {holder.get('pid', '?')} on "
+                f"{holder.get('host', '?')} since {holder.get('since', '?')}); lock file {path}"
+            ) from None
+        os.ftruncate(fd, 0)
+        info = {"pid": os.getpid(), "host": platform.node(),
+                "since": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+        os.pwrite(fd, json.dumps(info).encode(), 0)
+        yield path
+    finally:
+        try:
+            os.ftruncate(fd, 0)
+        except OSError:
+            pass
+        os.close(fd)  # releases the flock; the empty file is harmless and reused next time
+
+
+# ---------------------------------------------------------------------------
+# Provenance
+# ---------------------------------------------------------------------------
+
+
+def _git_commit() -> str | None:
+    here = Path(__file__).resolve().parent
+    try:
+        commit = subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True,
+                                text=True, timeout=5)
+        if commit.returncode != 0:
+            return None
+        dirty = subprocess.run(["git", "-C", str(here), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=5)
+        return commit.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def _versions() -> dict[str, str]:
+    import importlib.metadata as md
+
+    out = {"python": platform.python_version()}
+    for name in ("numpy", "scipy", "numba", "dask", "distributed", "zarr", "xarray"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            pass
+    return out
+
+
+def _package_version() -> str:
+    import importlib.metadata as md
+
+    try:
+        return md.version("twolink")
+    except md.PackageNotFoundError:
+        return "0+unknown"
+
+
+def provenance(scene: Scene) -> dict:
+    return {
+        "scene_name": scene.name,
+        "scene_file": str(scene.path),
+        "scene_hash": scene.hash,
+        "scene": scene.science,
+        "scene_toml": scene.text,
+        "title": scene.title,
+        "figure": scene.figure,
+        "package_version": _package_version(),
+        "git_commit": _git_commit(),
+        "library_versions": _versions(),
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "host": platform.node(),
+    }
+
+
+# ---------------------------------------------------------------------------
+# Skeleton
+# ---------------------------------------------------------------------------
+
+
+def output_dtype(name: str):
+    if name in ("iterations", "n_tau"):
+        return np.dtype(np.int32), 0
+    if name == "status":
+        return np.dtype(np.int8), NOT_COMPUTED
+    return np.dtype(np.float64), np.nan
+
+
+def _open_group(store: Path, mode: str):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return zarr.open_group(store=str(store), mode=mode, zarr_format=3, use_consolidated=False)
+
+
+def status_meanings() -> dict[str, str]:
+    import solver
+
+    meanings = {str(NOT_COMPUTED): "not computed yet"}
+    meanings.update({str(int(k)): str(v) for k, v in sorted(solver.STATUS_REASONS.items())})
+    return meanings
+
+
+def reduction_arrays(scene: Scene, r: Reduction) -> tuple[tuple[str, ...], tuple[int, ...], dict[str, tuple]]:
+    """Dimensions, shape and {array name: (dtype, fill, attrs)} of reduction ``r``'s results."""
+    kept = tuple(a for a in scene.axes if a.name not in r.over)
+    dims = tuple(a.name for a in kept)
+    shape = tuple(a.size for a in kept)
+    if r.subsets is not None:
+        dims += (r.subsets.dim,)
+        shape += (len(r.subsets.labels),)
+    f8 = np.dtype(np.float64)
+    what = f"{r.statistic} of {r.quantity} over {', '.join(r.over)}"
+    arrays: dict[str, tuple] = {}
+    prefixes = [("", "grid")] + ([("_polished", "polished")] if r.polish else [])
+    for suffix, kind in prefixes:
+        base = f"{r.name}{suffix}"
+        label = f"{what} ({'best grid point' if kind == 'grid' else 'polished by ' + r.polish_method})"
+        arrays[base] = (f8, np.nan, {"long_name": label})
+        if r.statistic == "absmax":
+            arrays[f"{base}_signed"] = (f8, np.nan, {"long_name": f"signed {r.quantity} at the optimum of {base}"})
+        for ax in r.over:
+            arrays[f"{base}_{ax}"] = (f8, np.nan, {"long_name": f"{ax} at the optimum of {base}",
+                                                 **{k: v for k, v in axis_attrs(ax).items() if k == "units"}})
+        for q in r.report:
+            if q in (r.quantity,):
+                continue
+            arrays[f"{base}_{q}"] = (f8, np.nan, {"long_name": f"{q} at the optimum of {base}"})
+        if kind == "polished":
+            arrays[f"{base}_status"] = (np.dtype(np.int8), NOT_COMPUTED,
+                                        {"long_name": f"solver status at the polished optimum of {r.name}",
+                                         "flag_meanings": status_meanings()})
+            arrays[f"{base}_evaluations"] = (np.dtype(np.int32), 0,
+                                             {"long_name": "solver calls spent polishing"})
+    return dims, shape, arrays
+
+
+def _create(group, name, *, shape, chunks, dtype, fill, dims, attrs):
+    return group.create_array(name, shape=shape, chunks=chunks, dtype=dtype, fill_value=fill,
+                              dimension_names=list(dims), attributes=attrs, overwrite=True)
+
+
+def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
+    """Create the whole store (every array, coordinate and attribute) before any task runs.
+
+    Any existing content at ``store`` is removed first (the caller decides whether that is allowed).
+    ``pipeline.state.skeleton_complete`` is set last, so a skeleton interrupted half-way is
+    simply rebuilt by the next run.
+    """
+    if store.exists():
+        shutil.rmtree(store)
+    g = _open_group(store, "w")
+    for a in scene.axes:
+        _create(g, a.name, shape=(a.size,), chunks=(a.size,), dtype=np.float64, fill=np.nan,
+                dims=(a.name,), attrs={**axis_attrs(a.name), "spacing": a.spacing})[:] = a.array()
+    shape = scene.shape
+    for name in scene.outputs + ("status",):
+        dtype, fill = output_dtype(name)
+        attrs = {"long_name": QUANTITIES.get(name) or DIAGNOSTICS.get(name) or "solver status"}
+        if name == "status":
+            attrs["flag_meanings"] = status_meanings()
+            attrs["long_name"] = "solver status: 0 converged; any other code is a failure (outputs NaN)"
+        _create(g, name, shape=shape, chunks=chunks, dtype=dtype, fill=fill, dims=scene.dims, attrs=attrs)
+    for r in scene.reductions:
+        dims, rshape, arrays = reduction_arrays(scene, r)
+        if r.subsets is not None:
+            s = r.subsets
+            attrs = {"long_name": ("half-width of the duty-cycle window around " + f"{s.center:g}"
+                                   if s.kind == "window" else "index of the allowed exponent set"),
+                     "sets": [list(x) for x in s.sets]} if s.kind != "window" else \
+                {"long_name": f"half-width of the {s.axes[0]} window centred at {s.center:g}"}
+            if s.dim not in g:
+                _create(g, s.dim, shape=(len(s.labels),), chunks=(len(s.labels),), dtype=np.float64,
+                        fill=np.nan, dims=(s.dim,), attrs=attrs)[:] = np.asarray(s.labels)
+        rchunks = tuple(max(1, n) for n in rshape)
+        for name, (dtype, fill, attrs) in arrays.items():
+            _create(g, name, shape=rshape, chunks=rchunks, dtype=dtype, fill=fill, dims=dims,
+                    attrs={**attrs, "reduction": r.name})
+    grid = tuple(-(-s // c) for s, c in zip(shape, chunks))
+    sg = g.create_group(STATE_GROUP)
+    _create(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
+            dims=tuple(f"chunk_{d}" for d in scene.dims),
+            attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+    g.attrs[ATTRS_KEY] = {
+        "provenance": provenance(scene),
+        "layout": {"dims": list(scene.dims), "shape": list(shape), "chunks": list(chunks),
+                   "chunk_grid": list(grid)},
+        "state": {"skeleton_complete": True, "chunks_complete": False, "reductions_complete": False},
+    }
+
+
+def open_existing(store: Path) -> dict | None:
+    """The pipeline attributes of an existing store, or None when the skeleton is absent or incomplete.
+
+    Raises :class:`StoreMismatch` when ``store`` holds something that is not a pipeline store.
+    """
+    if not store.exists():
+        return None
+    if store.is_dir() and not any(store.iterdir()):
+        return None
+    if not (store / "zarr.json").is_file():
+        raise StoreMismatch(f"{store}: exists and is not a Zarr store; refusing to touch it")
+    try:
+        g = _open_group(store, "r")
+        meta = dict(g.attrs).get(ATTRS_KEY)
+    except Exception:  # an unreadable group is an interrupted skeleton
+        return None
+    if not meta or not meta.get("state", {}).get("skeleton_complete"):
+        return None
+    return meta
+
+
+def set_state(store: Path, **state) -> None:
+    g = _open_group(store, "r+")
+    meta = dict(g.attrs[ATTRS_KEY])
+    meta["state"] = {**meta["state"], **state}
+    g.attrs[ATTRS_KEY] = meta
+
+
+def remove_partials(store: Path) -> int:
+    """Delete temporary files of writes interrupted by a kill (Zarr writes to *.partial then renames)."""
+    n = 0
+    for p in store.rglob("*.partial"):
+        p.unlink(missing_ok=True)
+        n += 1
+    return n
+
+
+def read_done(store: Path) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return zarr.open_array(store=str(store), path=DONE_ARRAY, mode="r")[...] == 1
+
+
+def _fsync_path(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return  # an all-fill chunk is not written by Zarr
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_region(store: Path, region: tuple[slice, ...], chunk_index: tuple[int, ...],
+                 chunks: tuple[int, ...], shape: tuple[int, ...], values: dict[str, np.ndarray]) -> None:
+    """Write one whole chunk of every output, then make it durable before the marker is written."""
+    for i, c, n, sl in zip(chunk_index, chunks, shape, region):
+        # Whole, aligned chunks only: two tasks never touch the same chunk file.
+        assert sl.start == i * c and sl.stop == min((i + 1) * c, n), f"region {region} is not chunk {chunk_index}"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, v in values.items():
+            arr = zarr.open_array(store=str(store), path=name, mode="r+")
+            assert tuple(arr.chunks) == tuple(chunks), f"{name}: chunks {arr.chunks} != layout {chunks}"
+            arr[region] = v
+    # Durable before the marker: after power loss a marked chunk must have its data on disk.
+    key = "/".join(str(i) for i in chunk_index)
+    for name in values:
+        _fsync_path(store / name / "c" / key)
+    dirs = {(store / name / "c" / key).parent for name in values}
+    for d in dirs:
+        _fsync_path(d)
+
+
+def mark_done(store: Path, chunk_index: tuple[int, ...]) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        done = zarr.open_array(store=str(store), path=DONE_ARRAY, mode="r+")
+        done[tuple(slice(i, i + 1) for i in chunk_index)] = 1

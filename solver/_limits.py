@@ -1,0 +1,140 @@
+"""The two limits of section "Model".
+
+T -> 0 (fast motions): u is constant, the constant making the period-averaged
+force zero.  T -> infinity (slow motions): inertia drops out of eq. (Newtonu)
+and u(tau) solves the algebraic equation F(u, tau) = 0 at each tau; then
+u = phi' h(phi) and U -> 0.
+
+Both equations are monotone in u (dF/du < 0), so a safeguarded Newton
+iteration with a bisection bracket always converges.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ._force import force_and_slope
+from ._kinematics import angle_and_rate, period_grid
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
+GL4_NODES = 0.5 * (_GL_X + 1.0)
+GL4_WEIGHTS = 0.5 * _GL_W
+
+
+@njit(cache=True)
+def _monotone_root(values_at, lo, hi, tol, args):
+    """Root of a decreasing function g(u) = values_at(u, args) -> (g, g') in [lo, hi]."""
+    u = 0.5 * (lo + hi)
+    for _ in range(200):
+        g, dg = values_at(u, args)
+        if g > 0.0:
+            lo = u
+        else:
+            hi = u
+        step = -g / dg if dg < 0.0 else math.nan
+        new = u + step
+        if not (lo < new < hi) or not math.isfinite(new):
+            new = 0.5 * (lo + hi)
+        if abs(new - u) <= tol or hi - lo <= tol:
+            return new
+        u = new
+    return u
+
+
+@njit(cache=True)
+def _mean_force(u, args):
+    phis, oms, wts, mu_n, mu_s, p, dtau = args
+    g = 0.0
+    dg = 0.0
+    for j in range(phis.shape[0]):
+        F, dF = force_and_slope(u, phis[j], oms[j], mu_n, mu_s, p, dtau)
+        g += wts[j] * F
+        dg += wts[j] * dF
+    return g, dg
+
+
+@njit(cache=True)
+def _pointwise_force(u, args):
+    phi, om, mu_n, mu_s, p, dtau = args
+    return force_and_slope(u, phi, om, mu_n, mu_s, p, dtau)
+
+
+@njit(cache=True, parallel=True)
+def _fast_limit(code, params, grids, mu_n, mu_s, p, dtau):
+    n, m = grids.shape
+    out = np.empty(n)
+    nq = GL4_NODES.shape[0]
+    for i in prange(n):
+        N = m - 1
+        phis = np.empty(N * nq)
+        oms = np.empty(N * nq)
+        wts = np.empty(N * nq)
+        for k in range(N):
+            h = grids[i, k + 1] - grids[i, k]
+            mid = grids[i, k] + 0.5 * h
+            for q in range(nq):
+                j = k * nq + q
+                phis[j], oms[j] = angle_and_rate(code, params[i], grids[i, k] + GL4_NODES[q] * h, mid)
+                wts[j] = GL4_WEIGHTS[q] * h
+        bound = np.max(np.abs(oms)) + 1e-300  # |u| > max|phi'|/4 makes F oppose u everywhere
+        out[i] = _monotone_root(_mean_force, -bound, bound, 1e-15 * bound,
+                                (phis, oms, wts, mu_n[i], mu_s[i], p[i], dtau[i]))
+    return out
+
+
+@njit(cache=True, parallel=True)
+def _quasi_static(code, params, tau, mu_n, mu_s, p, dtau):
+    n, m = tau.shape
+    out = np.empty((n, m))
+    for i in prange(n):
+        for j in range(m):
+            phi, om = angle_and_rate(code, params[i], tau[i, j], tau[i, j])
+            bound = abs(om) + 1e-300
+            out[i, j] = _monotone_root(_pointwise_force, -bound, bound, 1e-15 * bound,
+                                       (phi, om, mu_n[i], mu_s[i], p[i], dtau[i]))
+    return out
+
+
+def fast_limit_velocity(kinematics, physics, n_steps=256):
+    """T -> 0 limit: the constant u with zero period-averaged force.
+
+    Returns
+    -------
+    ndarray, shape (n_points,)
+        The constant scaled velocity u (U = u / T).
+    """
+    code, params = kinematics.kernel_encoding()
+    grids = period_grid(kinematics, n_steps)
+    return _fast_limit(code, params, grids, physics.mu_n, physics.mu_s, physics.p,
+                       physics.delta_tau)
+
+
+def quasi_static_velocity(kinematics, physics, tau):
+    """T -> infinity limit: u(tau) solving F(u, tau) = 0 at each tau (eq. Newtonu without inertia).
+
+    Uses physics.delta_tau as given: pass a small delta for the paper's delta -> 0 limit.
+
+    Returns
+    -------
+    ndarray, shape (n_points, n_tau)
+    """
+    code, params = kinematics.kernel_encoding()
+    tau = np.broadcast_to(np.asarray(tau, dtype=float), (params.shape[0], np.size(tau))).copy()
+    return _quasi_static(code, params, tau, physics.mu_n, physics.mu_s, physics.p, physics.delta_tau)
+
+
+def kinematic_speed(kinematics, n_samples=2048):
+    """V = (1/4) int_0^1 |dphi/dtau| dtau: a deformation speed scale (link lengths per period).
+
+    Computed as a quarter of the total variation of phi on a corner-aligned grid
+    (exact for the monotone phases of the harmonic and power-law families).
+    """
+    grid = period_grid(kinematics, n_samples)
+    code, params = kinematics.kernel_encoding()
+    mid = 0.5 * (grid[:, 1:] + grid[:, :-1])
+    from ._kinematics import evaluate_grid
+    phi_left, _ = evaluate_grid(code, params, grid[:, :-1].copy(), mid.copy())
+    phi_right, _ = evaluate_grid(code, params, grid[:, 1:].copy(), mid.copy())
+    return 0.25 * np.abs(phi_right - phi_left).sum(axis=1)

@@ -1,0 +1,121 @@
+"""The ``march`` method: explicit RK2 (Heun) from rest until the motion is periodic.
+
+This is the paper's first method.  Each period is marched on the same
+corner-aligned grid as ``periodic``; after every period the change of u(0)
+is compared with the contraction of the period map (the ratio of
+successive changes, M): the distance to the periodic state is bounded by
+|change| / (1 - M), and the march stops when that bound is below the
+tolerance.  When the contraction is slow (M close to 1, short scaled
+periods) an Aitken extrapolation jumps to the estimated fixed point.
+
+It is explicit, so it is only stable while h T^(2-p) |dF/du| stays below
+about 2; on stiff sticking phases it is not, the iterates blow up, and the
+point is reported UNSTABLE rather than returned wrong.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ._force import force_and_slope, power_density
+from ._kinematics import angle_and_rate
+from ._status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
+
+#: Heun's method (explicit trapezoidal RK2).
+HEUN_C = np.array([0.0, 1.0])
+HEUN_A = np.array([[0.0, 0.0], [1.0, 0.0]])
+HEUN_B = np.array([0.5, 0.5])
+ORDER = 2
+
+
+@njit(cache=True)
+def heun_step(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
+    """One RK2 step (Butcher tableau HEUN_*): pure function, no state."""
+    k1 = kappa * force_and_slope(u, phi0, om0, mu_n, mu_s, p, dtau)[0]
+    k2 = kappa * force_and_slope(u + h * k1, phi1, om1, mu_n, mu_s, p, dtau)[0]
+    return u + 0.5 * h * (k1 + k2)
+
+
+@njit(cache=True)
+def _march_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
+                 max_steps, u_out, want_series):
+    """Returns (int_u, int_Pi, u0, status, periods)."""
+    N = grid.shape[0] - 1
+    phis = np.empty(2 * N)
+    oms = np.empty(2 * N)
+    hs = np.empty(N)
+    for n in range(N):
+        h = grid[n + 1] - grid[n]
+        hs[n] = h
+        mid = grid[n] + 0.5 * h
+        phis[2 * n], oms[2 * n] = angle_and_rate(code, params, grid[n], mid)
+        phis[2 * n + 1], oms[2 * n + 1] = angle_and_rate(code, params, grid[n + 1], mid)
+    nodes = np.empty(N + 1)
+    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
+    bound = 1e3 * vscale + 1.0
+    max_periods = max(max_steps // N, 3)
+    u = u_init
+    prev_change = math.nan
+    prev_ratio = math.nan
+    status = STEP_BUDGET_EXCEEDED
+    period = 0
+    for period in range(1, max_periods + 1):
+        u_begin = u
+        nodes[0] = u
+        for n in range(N):
+            u = heun_step(u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
+                          kappa, mu_n, mu_s, p, dtau)
+            nodes[n + 1] = u
+            if not (abs(u) <= bound):
+                return math.nan, math.nan, u_begin, UNSTABLE if math.isfinite(u) else NON_FINITE, period
+        change = u - u_begin
+        if change == 0.0:
+            status = CONVERGED
+            break
+        ratio = change / prev_change if period > 1 else math.nan
+        if period > 2 and 0.0 <= ratio < 1.0 and 0.0 <= prev_ratio < 1.0:
+            contraction = max(ratio, prev_ratio)
+            if abs(change) / (1.0 - contraction) <= tol_fix:
+                status = CONVERGED
+                break
+            if contraction > 0.5 and abs(ratio - prev_ratio) < 0.05 * (1.0 - contraction):
+                # geometric regime: jump to the fixed point (Aitken delta^2)
+                u = u + change * ratio / (1.0 - ratio)
+                prev_change = math.nan
+                prev_ratio = math.nan
+                continue
+        prev_ratio = ratio
+        prev_change = change
+    if status != CONVERGED:
+        return math.nan, math.nan, u, status, period
+    # the last period marched (from u_begin) is periodic to tolerance: trapezoidal quadrature
+    int_u = 0.0
+    int_pi = 0.0
+    for n in range(N):
+        h = hs[n]
+        int_u += 0.5 * h * (nodes[n] + nodes[n + 1])
+        P0 = power_density(nodes[n], phis[2 * n], oms[2 * n], mu_n, mu_s, p, dtau)
+        P1 = power_density(nodes[n + 1], phis[2 * n + 1], oms[2 * n + 1], mu_n, mu_s, p, dtau)
+        int_pi += 0.5 * h * (P0 + P1)
+        if want_series:
+            u_out[n] = nodes[n]
+    return int_u, int_pi, nodes[0], CONVERGED, period
+
+
+@njit(cache=True, parallel=True)
+def march_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
+                 max_steps, want_series):
+    n, m = grids.shape
+    int_u = np.empty(n)
+    int_pi = np.empty(n)
+    u0_out = np.empty(n)
+    status = np.empty(n, np.int8)
+    periods = np.empty(n, np.int64)
+    series = np.empty((n, m - 1) if want_series else (n, 0))
+    for i in prange(n):
+        int_u[i], int_pi[i], u0_out[i], status[i], periods[i] = _march_point(
+            code, params[i], grids[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i], u_init[i],
+            vscale[i], rtol, max_steps, series[i], want_series)
+    return int_u, int_pi, u0_out, status, periods, series

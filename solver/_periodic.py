@@ -1,0 +1,201 @@
+"""The ``periodic`` method: the periodic boundary-value problem on a tau-grid.
+
+Discretisation: the 2-stage Radau IIA collocation method (order 3, stage
+order 2, L-stable and stiffly accurate).  L-stability matters: when the body
+sticks the friction rate T^(2-p) dF/du ~ T^(2-p) mu / delta_tau is huge, and
+an A-stable but not L-stable rule (trapezoidal, implicit midpoint) passes the
+stiff mode through with amplification -1 per step, so the discrete solution
+rings.  Radau IIA damps it to 0.  Grid nodes sit at the corners of phi.
+
+Solution of the discrete periodic problem: Newton on the single unknown
+u(0), with the step equations eliminated step by step.  Each step solves the
+2 x 2 stage system by damped Newton (it has a unique solution for any step
+size: the force is monotone in u and Radau IIA is algebraically stable), and
+carries the exact derivative du_{n+1}/du_n along, so the derivative of the
+discrete period map (the monodromy M) is exact; M lies in (0, 1) because
+friction is dissipative, and 1 - M is accumulated as -expm1(sum log m_n)
+with m_n - 1 formed without cancellation.  This is Newton's method on the
+whole cyclic system (its Jacobian is cyclic bidiagonal after eliminating the
+stages) with the stage equations always kept solved, which is what keeps it
+convergent through stiff sticking phases.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ._force import force_and_slope, power_density
+from ._kinematics import angle_and_rate
+from ._status import CONVERGED, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED
+
+#: Radau IIA, 2 stages (Butcher tableau).
+RADAU_C = np.array([1.0 / 3.0, 1.0])
+RADAU_A = np.array([[5.0 / 12.0, -1.0 / 12.0], [3.0 / 4.0, 1.0 / 4.0]])
+RADAU_B = np.array([3.0 / 4.0, 1.0 / 4.0])
+ORDER = 3
+
+
+MAX_STAGE_ITERATIONS = 60
+MAX_SHOOTING_ITERATIONS = 40
+
+
+@njit(cache=True)
+def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau, atol):
+    """Solve one Radau IIA step from u_n, starting at the guess (U1, U2).
+
+    Returns (U1, U2, s1, s2, m_minus_1, iterations, ok): the stage values, their
+    sensitivities dU_i/du_n, du_{n+1}/du_n - 1 and whether Newton converged.
+    """
+    a11, a12, a21, a22 = 5.0 / 12.0, -1.0 / 12.0, 0.75, 0.25
+    F1, d1 = force_and_slope(U1, phi1, om1, mu_n, mu_s, p, dtau)
+    F2, d2 = force_and_slope(U2, phi2, om2, mu_n, mu_s, p, dtau)
+    R1 = U1 - u_n - h * kappa * (a11 * F1 + a12 * F2)
+    R2 = U2 - u_n - h * kappa * (a21 * F1 + a22 * F2)
+    ok = False
+    it = 0
+    for it in range(1, MAX_STAGE_ITERATIONS + 1):
+        hd1 = h * kappa * d1
+        hd2 = h * kappa * d2
+        J11 = 1.0 - a11 * hd1
+        J12 = -a12 * hd2
+        J21 = -a21 * hd1
+        J22 = 1.0 - a22 * hd2
+        det = J11 * J22 - J12 * J21
+        x1 = -(J22 * R1 - J12 * R2) / det
+        x2 = -(-J21 * R1 + J11 * R2) / det
+        norm0 = R1 * R1 + R2 * R2
+        lam = 1.0
+        for _ in range(40):
+            T1 = U1 + lam * x1
+            T2 = U2 + lam * x2
+            G1, g1 = force_and_slope(T1, phi1, om1, mu_n, mu_s, p, dtau)
+            G2, g2 = force_and_slope(T2, phi2, om2, mu_n, mu_s, p, dtau)
+            S1 = T1 - u_n - h * kappa * (a11 * G1 + a12 * G2)
+            S2 = T2 - u_n - h * kappa * (a21 * G1 + a22 * G2)
+            if S1 * S1 + S2 * S2 <= (1.0 - 1e-4 * lam) * norm0 or lam < 1e-9:
+                break
+            lam *= 0.5
+        U1, U2, F1, F2, d1, d2, R1, R2 = T1, T2, G1, G2, g1, g2, S1, S2
+        step = max(abs(lam * x1), abs(lam * x2))
+        if not (math.isfinite(U1) and math.isfinite(U2)):
+            break
+        if step <= atol or (R1 == 0.0 and R2 == 0.0):
+            ok = True
+            break
+    # sensitivities at the converged stages: J s = 1, and m - 1 = e2^T J^-1 (h A D 1)
+    hd1 = h * kappa * d1
+    hd2 = h * kappa * d2
+    J11 = 1.0 - a11 * hd1
+    J12 = -a12 * hd2
+    J21 = -a21 * hd1
+    J22 = 1.0 - a22 * hd2
+    det = J11 * J22 - J12 * J21
+    s1 = (J22 - J12) / det
+    s2 = (J11 - J21) / det
+    v1 = a11 * hd1 + a12 * hd2
+    v2 = a21 * hd1 + a22 * hd2
+    m_minus_1 = (-J21 * v1 + J11 * v2) / det
+    return U1, U2, s1, s2, m_minus_1, it, ok
+
+
+@njit(cache=True)
+def _solve_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
+                 u_out, want_series):
+    """Periodic solution for one parameter point on one grid.
+
+    Returns (int_u, int_Pi, u0, status, shooting_iterations, stage_iterations).
+    """
+    N = grid.shape[0] - 1
+    phis = np.empty(2 * N)
+    oms = np.empty(2 * N)
+    hs = np.empty(N)
+    for n in range(N):
+        h = grid[n + 1] - grid[n]
+        hs[n] = h
+        mid = grid[n] + 0.5 * h
+        phis[2 * n], oms[2 * n] = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
+        phis[2 * n + 1], oms[2 * n + 1] = angle_and_rate(code, params, grid[n + 1], mid)
+    stages = np.empty(2 * N)
+    sens = np.empty(2 * N)
+    u_start = np.empty(N)
+    atol_stage = max(1e-5 * rtol, 1e-14) * vscale
+    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
+    status = NOT_PERIODIC
+    stage_its = 0
+    first = True
+    it_out = 0
+    for it_out in range(1, MAX_SHOOTING_ITERATIONS + 1):
+        u = u0
+        log_m = 0.0
+        for n in range(N):
+            if first:
+                U1 = u
+                U2 = u
+            else:  # tangent prediction from the previous sweep
+                du = u - u_start[n]
+                U1 = stages[2 * n] + sens[2 * n] * du
+                U2 = stages[2 * n + 1] + sens[2 * n + 1] * du
+            u_start[n] = u
+            U1, U2, s1, s2, mm1, its, ok = radau_step(
+                u, U1, U2, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
+                kappa, mu_n, mu_s, p, dtau, atol_stage)
+            stage_its += its
+            if not ok and not first:  # the tangent prediction can miss the basin: retry cold
+                U1, U2, s1, s2, mm1, its, ok = radau_step(
+                    u, u, u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
+                    kappa, mu_n, mu_s, p, dtau, atol_stage)
+                stage_its += its
+            if not ok:
+                status = STAGE_SOLVE_FAILED if math.isfinite(U2) else NON_FINITE
+                return math.nan, math.nan, u0, status, it_out, stage_its
+            stages[2 * n] = U1
+            stages[2 * n + 1] = U2
+            sens[2 * n] = s1
+            sens[2 * n + 1] = s2
+            log_m += math.log1p(mm1) if mm1 > -1.0 else -math.inf
+            u = U2
+        first = False
+        g = u - u0
+        one_minus_M = -math.expm1(log_m)
+        if not (math.isfinite(g) and one_minus_M > 0.0):
+            return math.nan, math.nan, u0, NON_FINITE, it_out, stage_its
+        if abs(g) <= tol_fix * one_minus_M:
+            status = CONVERGED
+            break
+        u0 = u0 + g / one_minus_M
+    if status != CONVERGED:
+        return math.nan, math.nan, u0, status, it_out, stage_its
+    # quadrature of the converged sweep with the Radau weights (order 3)
+    int_u = 0.0
+    int_pi = 0.0
+    for n in range(N):
+        U1 = stages[2 * n]
+        U2 = stages[2 * n + 1]
+        int_u += hs[n] * (0.75 * U1 + 0.25 * U2)
+        P1 = power_density(U1, phis[2 * n], oms[2 * n], mu_n, mu_s, p, dtau)
+        P2 = power_density(U2, phis[2 * n + 1], oms[2 * n + 1], mu_n, mu_s, p, dtau)
+        int_pi += hs[n] * (0.75 * P1 + 0.25 * P2)
+        if want_series:
+            u_out[n] = u_start[n]
+    return int_u, int_pi, u0, CONVERGED, it_out, stage_its
+
+
+@njit(cache=True, parallel=True)
+def solve_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
+                 want_series):
+    """Batched ``_solve_point`` over parameter points (one thread per point)."""
+    n, m = grids.shape
+    int_u = np.empty(n)
+    int_pi = np.empty(n)
+    u0_out = np.empty(n)
+    status = np.empty(n, np.int8)
+    its = np.empty(n, np.int64)
+    stage_its = np.empty(n, np.int64)
+    series = np.empty((n, m - 1) if want_series else (n, 0))
+    for i in prange(n):
+        int_u[i], int_pi[i], u0_out[i], status[i], its[i], stage_its[i] = _solve_point(
+            code, params[i], grids[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i], u0[i],
+            vscale[i], rtol, series[i], want_series)
+    return int_u, int_pi, u0_out, status, its, stage_its, series

@@ -1,0 +1,104 @@
+"""Small scenes and helpers shared by the pipeline tests (kept apart from the solver's cases)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+
+#: A small harmonic scene: 2 x 2 x 4 x 4 = 64 points in 8 chunks of 8 points.
+SMALL = """
+[scene]
+name = "small"
+title = "pipeline test scene"
+family = "harmonic"
+
+[axes]
+anisotropy_ratio = { values = [0.0625, 16.0] }
+scaled_period = { log2_range = [0, 1], step = 1 }
+A0 = { range = [0.4, 1.5], num = 4 }
+A1_ratio = { range = [0.2, 0.8], num = 4 }
+
+[fixed]
+p = 0.0
+delta = 1e-5
+
+[solver]
+method = "periodic"
+rtol = {rtol}
+
+[outputs]
+quantities = ["scaled_speed", "scaled_efficiency", "relative_efficiency"]
+diagnostics = ["error_estimate", "iterations"]
+
+[[reductions]]
+name = "best_efficiency"
+quantity = "scaled_efficiency"
+statistic = "absmax"
+over = ["A0", "A1_ratio"]
+report = ["relative_efficiency", "scaled_speed"]
+{polish}
+
+[[reductions]]
+name = "fastest"
+quantity = "scaled_speed"
+statistic = "max"
+over = ["A0", "A1_ratio", "scaled_period"]
+
+[execution]
+points_per_task = 8
+"""
+
+
+def small_scene_text(rtol: float = 1e-3, polish: bool = False) -> str:
+    extra = "polish = true\npolish_max_evaluations = 12" if polish else ""
+    return SMALL.replace("{rtol}", repr(rtol)).replace("{polish}", extra)
+
+
+def write_scene(tmp_path: Path, text: str, name: str = "small.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def cli(*args, env_extra=None, **kw) -> subprocess.CompletedProcess:
+    """Run ``python -m pipeline ...`` in a real subprocess from the repository root."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    env.update(env_extra or {})
+    return subprocess.run([sys.executable, "-m", "pipeline", *map(str, args)], cwd=REPO, env=env,
+                          capture_output=True, text=True, **kw)
+
+
+def read_store(store: Path) -> dict[str, np.ndarray]:
+    """Every array in the store (root arrays and pipeline_state/*), by path."""
+    import zarr
+
+    out = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = zarr.open_group(str(store), mode="r", use_consolidated=False)
+
+        def walk(group, prefix):
+            for name, arr in group.arrays():
+                out[prefix + name] = arr[...]
+            for name, sub in group.groups():
+                walk(sub, prefix + name + "/")
+
+        walk(g, "")
+    return out
+
+
+def assert_stores_equal(a: Path, b: Path) -> None:
+    """Same arrays, same dtypes, same values (NaN equal to NaN)."""
+    va, vb = read_store(a), read_store(b)
+    assert sorted(va) == sorted(vb)
+    for name in va:
+        assert va[name].dtype == vb[name].dtype, name
+        np.testing.assert_array_equal(va[name], vb[name], err_msg=name)

@@ -1,0 +1,137 @@
+"""Scene parsing and validation: errors name file, key and reason; exit code 2; nothing written."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline import SceneError, load_scene, parse_scene
+from pipeline.__main__ import main
+from pipeline._grid import chunk_grid, chunk_region, chunk_shape, iter_chunks
+from pipeline_cases import REPO, cli, small_scene_text, write_scene
+
+SHIPPED = sorted((REPO / "workflows").glob("*.toml"))
+
+
+def _edit(old: str, new: str) -> str:
+    text = small_scene_text()
+    assert old in text, old
+    return text.replace(old, new, 1)
+
+
+# (edit of the small scene, key named in the error, words of the reason)
+BAD = [
+    pytest.param(("[solver]", "[solver]\nspeed = 3"), "solver.speed", "unknown key", id="unknown-key"),
+    pytest.param(("[scene]", "[scene]\ncolour = 'red'"), "scene.colour", "unknown key", id="unknown-key-2"),
+    pytest.param(('A0 = { range = [0.4, 1.5], num = 4 }', 'A0 = { range = [0.4, 1.5], num = "four" }'),
+                 "axes.A0.num", "must be an integer", id="wrong-type"),
+    pytest.param(("rtol = 0.001", 'rtol = "small"'), "solver.rtol", "must be a number", id="wrong-type-2"),
+    pytest.param(('A0 = { range = [0.4, 1.5], num = 4 }', 'A0 = { range = [1.5, 0.4], num = 4 }'),
+                 "axes.A0.range", "reversed range", id="reversed-range"),
+    pytest.param(('A0 = { range = [0.4, 1.5], num = 4 }', 'A0 = { range = [0.4, 0.4], num = 3 }'),
+                 "axes.A0.range", "empty range", id="empty-range"),
+    pytest.param(('A0 = { range = [0.4, 1.5], num = 4 }', 'A0 = { range = [0.4, 1.5], num = 0 }'),
+                 "axes.A0.num", "must be >= 1", id="empty-range-num"),
+    pytest.param(("anisotropy_ratio = { values = [0.0625, 16.0] }", "anisotropy_ratio = { values = [] }"),
+                 "axes.anisotropy_ratio.values", "empty list", id="empty-values"),
+    pytest.param(("anisotropy_ratio = { values = [0.0625, 16.0] }", "anisotropy_ratio = { values = [-1.0, 16.0] }"),
+                 "axes.anisotropy_ratio.values[0]", "outside the physical domain", id="negative-ratio"),
+    pytest.param(("p = 0.0", "p = 2.5"), "fixed.p", "outside the physical domain", id="p-domain"),
+    pytest.param(('A1_ratio = { range = [0.2, 0.8], num = 4 }', 'A1_ratio = { range = [0.2, 1.8], num = 4 }'),
+                 "axes.A1_ratio.range", "outside the physical domain", id="ratio-domain"),
+    pytest.param(("rtol = 0.001", "rtol = 0.0"), "solver.rtol", "must be in (0, 0.1]", id="rtol-domain"),
+    pytest.param(('method = "periodic"', 'method = "euler"'), "solver.method", "must be one of", id="method"),
+    pytest.param(('over = ["A0", "A1_ratio"]', 'over = ["A0", "A2"]'), "reductions[0].over[1]",
+                 "is not one of", id="reduction-axis"),
+    pytest.param(('quantity = "scaled_speed"', 'quantity = "U"'), "reductions[1].quantity",
+                 "not among the scene's outputs", id="reduction-quantity"),
+    pytest.param(("delta = 1e-5", "delta = 0.0"), "fixed.delta", "delta = 0 needs p > 0", id="delta-zero"),
+]
+
+
+@pytest.mark.parametrize("edit, key, reason", BAD)
+def test_bad_scene_error_names_file_key_reason(tmp_path, edit, key, reason):
+    path = write_scene(tmp_path, _edit(*edit), "bad.toml")
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"{path}: {key}: "), msg
+    assert reason in msg, msg
+
+
+def test_missing_family_parameter(tmp_path):
+    path = write_scene(tmp_path, _edit("A1_ratio = { range = [0.2, 0.8], num = 4 }\n", ""), "bad.toml")
+    with pytest.raises(SceneError, match=r"axes\.A1_ratio: missing"):
+        load_scene(path)
+
+
+def test_cli_bad_scene_exit_2_nothing_written(tmp_path, capsys):
+    path = write_scene(tmp_path, _edit("[solver]", "[solver]\nspeed = 3"), "bad.toml")
+    store = tmp_path / "out" / "bad.zarr"
+    assert main(["run", str(path), "--store", str(store)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: {path}: solver.speed: unknown key (allowed: method, rtol)"
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_subprocess_bad_scene_no_traceback(tmp_path):
+    path = write_scene(tmp_path, _edit("p = 0.0", "p = -1"), "bad.toml")
+    proc = cli("run", path, "--store", tmp_path / "x.zarr")
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    assert f"{path}: fixed.p: " in proc.stderr and "outside the physical domain" in proc.stderr
+    assert not (tmp_path / "x.zarr").exists()
+
+
+def test_missing_file(tmp_path):
+    assert main(["run", str(tmp_path / "nope.toml")]) == 2
+
+
+def test_hash_covers_science_not_execution():
+    a = parse_scene(small_scene_text(), "a.toml")
+    b = parse_scene(small_scene_text().replace("points_per_task = 8", "points_per_task = 4\nworkers = 1"), "b.toml")
+    c = parse_scene(small_scene_text(rtol=1e-4), "a.toml")
+    assert a.hash == b.hash
+    assert a.hash != c.hash
+
+
+def test_axis_forms():
+    s = parse_scene(small_scene_text(), "a.toml")
+    np.testing.assert_allclose(s.axis("scaled_period").values, [1.0, 2.0])
+    np.testing.assert_allclose(s.axis("A0").values, np.linspace(0.4, 1.5, 4))
+    text = small_scene_text().replace('A0 = { range = [0.4, 1.5], num = 4 }',
+                                      'A0 = { range = [0, "pi/2"], num = 4, include = "upper" }')
+    s = parse_scene(text, "a.toml")
+    np.testing.assert_allclose(s.axis("A0").values, math.pi / 8 * np.arange(1, 5))
+    text = small_scene_text().replace('A1_ratio = { range = [0.2, 0.8], num = 4 }',
+                                      'A1_ratio = { range = [0, 1], step = 0.25, include = "neither" }')
+    np.testing.assert_allclose(parse_scene(text, "a.toml").axis("A1_ratio").values, [0.25, 0.5, 0.75])
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
+def test_shipped_scenes_are_valid(path):
+    scene = load_scene(path)
+    assert scene.name == path.stem
+    assert scene.n_points > 0
+
+
+def test_shipped_scene_set():
+    names = {p.stem for p in SHIPPED}
+    assert {"harmonic_grid", "harmonic_diagonals", "harmonic_optimum", "duty_cycle", "linear_two_phase",
+            "exponent_sets", "power_law", "quick"} <= names
+
+
+@pytest.mark.parametrize("shape, target", [((3, 3, 24, 24), 576), ((29, 29, 32, 32), 4096), ((7, 5, 3), 10),
+                                           ((5,), 2), ((2, 3), 1000)])
+def test_chunks_tile_the_grid(shape, target):
+    chunks = chunk_shape(shape, target)
+    assert np.prod(chunks) <= max(target, 1) or chunks == tuple([1] * (len(shape) - 1) + [1])
+    seen = np.zeros(shape, dtype=int)
+    for idx in iter_chunks(shape, chunks):
+        seen[chunk_region(idx, shape, chunks)] += 1
+    assert (seen == 1).all()
+    assert len(list(iter_chunks(shape, chunks))) == np.prod(chunk_grid(shape, chunks))
