@@ -56,8 +56,9 @@ def default_store(scene: Scene) -> Path:
 class _Progress:
     """A one-line text progress bar on stderr (a line per 10% when stderr is not a terminal)."""
 
-    def __init__(self, total: int, points_per_chunk: float, label: str, enabled: bool = True, unit: str = "chunks"):
-        self.total, self.ppc, self.label, self.unit = total, points_per_chunk, label, unit
+    def __init__(self, total: int, points_per_chunk: float, label: str, enabled: bool = True, unit: str = "chunks",
+                 rate_unit: str = "solves/s"):
+        self.total, self.ppc, self.label, self.unit, self.rate_unit = total, points_per_chunk, label, unit, rate_unit
         self.done = 0
         self.t0 = time.perf_counter()
         self.enabled = enabled and total > 0
@@ -74,7 +75,7 @@ class _Progress:
         eta = el * (1 - frac) / frac if frac > 0 else float("nan")
         bar = "#" * int(30 * frac)
         msg = (f"{self.label} [{bar:<30}] {100 * frac:5.1f}% {self.done}/{self.total} {self.unit} "
-               f"{rate:,.0f} solves/s  elapsed {el:.0f}s  eta {eta:.0f}s")
+               f"{rate:,.1f} {self.rate_unit}  elapsed {el:.0f}s  eta {eta:.0f}s")
         if self.tty:
             sys.stderr.write("\r" + msg + ("\n" if self.done == self.total else ""))
             sys.stderr.flush()
@@ -125,7 +126,7 @@ def _compute(tasks, sched: _Scheduler, progress: _Progress):
             futures = client.compute(tasks)
             index = {f.key: i for i, f in enumerate(futures)}
             results = [None] * len(futures)
-            for fut in as_completed(futures):
+            for fut in as_completed(futures, loop=client.loop):
                 results[index[fut.key]] = fut.result()
                 progress.update()
             return results
@@ -197,7 +198,7 @@ def _reductions(scene: Scene, store: Path, sched: _Scheduler, progress_enabled: 
                                                            dask_key_name=f"pipeline-polish-{r.name}-{j}")
                      for j, b in enumerate(batches)]
             bar = _Progress(len(tasks), len(cells) / max(1, len(tasks)), f"polish {r.name}", progress_enabled,
-                            unit="tasks")
+                            unit="tasks", rate_unit="optima/s")
             results = _compute(tasks, sched, bar) if tasks else []
             pol = {name: np.full(rshape, fill, dtype=dtype) for name, (dtype, fill, _) in spec.items()
                    if name.startswith(f"{r.name}_polished")}

@@ -11,13 +11,13 @@ from ._force import force_and_slope, power_density
 from ._kinematics import Fourier, Harmonic, PowerLaw, period_grid
 from ._limits import fast_limit_velocity, kinematic_speed, quasi_static_velocity
 from ._physics import Physics, physical_from_scaled, scaled_from_physical
-from ._solve import METHODS, SolveResult, solve_periodic
+from ._solve import METHODS, SolveResult, solve_fixed_grid, solve_periodic
 from ._status import STATUS_REASONS
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Fourier", "Harmonic", "PowerLaw", "Physics", "SolveResult", "STATUS_REASONS", "METHODS",
-    "solve_periodic", "force_and_slope", "power_density", "period_grid", "fast_limit_velocity",
+    "solve_periodic", "solve_fixed_grid", "force_and_slope", "power_density", "period_grid", "fast_limit_velocity",
     "quasi_static_velocity", "kinematic_speed", "physical_from_scaled", "scaled_from_physical",
 ]

@@ -251,7 +251,8 @@ def force_and_slope(u, phi, omega, mu_n, mu_s, p, delta_tau):
     Returns
     -------
     F, dF_du : float
-        The ODE is u' = T^(2-p) F (eq. Newtonu); dF_du <= 0 (friction dissipates).
+        The ODE is u' = T^(2-p) F (eq. Newtonu).  dF_du is mostly negative, but the
+        anisotropic law is not the gradient of a convex dissipation, so it can be > 0.
     """
     S, C, a, b, c, e2 = _setup(u, phi, omega, delta_tau, p)
     m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)

@@ -290,10 +290,10 @@ def period_grid(kinematics, n_steps):
 
 def phase_steps(tau0, n_steps):
     """Steps in the closing phase: proportional to tau0, >= 2 and <= n_steps - 2, and exactly
-    doubling with n_steps (computed at the base level 16 and scaled) so grids nest."""
-    base = 16
+    doubling with n_steps (computed at the base level 8 and scaled) so grids nest."""
+    base = 8
     scale = max(n_steps // base, 1)
     if n_steps % base:
-        raise ValueError("n_steps must be a multiple of 16")
+        raise ValueError("n_steps must be a multiple of 8")
     n_base = np.clip(np.rint(tau0 * base).astype(int), 2, base - 2)
     return n_base * scale

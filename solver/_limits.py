@@ -5,8 +5,9 @@ force zero.  T -> infinity (slow motions): inertia drops out of eq. (Newtonu)
 and u(tau) solves the algebraic equation F(u, tau) = 0 at each tau; then
 u = phi' h(phi) and U -> 0.
 
-Both equations are monotone in u (dF/du < 0), so a safeguarded Newton
-iteration with a bisection bracket always converges.
+Both equations are solved by Newton's method inside a bisection bracket:
+F opposes u once |u| exceeds the largest link speed |dphi/dtau|/4, which
+brackets the root.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ GL4_WEIGHTS = 0.5 * _GL_W
 
 @njit(cache=True)
 def _monotone_root(values_at, lo, hi, tol, args):
-    """Root of a decreasing function g(u) = values_at(u, args) -> (g, g') in [lo, hi]."""
+    """Root of g(u) = values_at(u, args) -> (g, g') with g(lo) > 0 > g(hi): Newton inside bisection."""
     u = 0.5 * (lo + hi)
     for _ in range(200):
         g, dg = values_at(u, args)
@@ -33,7 +34,7 @@ def _monotone_root(values_at, lo, hi, tol, args):
             lo = u
         else:
             hi = u
-        step = -g / dg if dg < 0.0 else math.nan
+        step = -g / dg if dg != 0.0 else math.nan
         new = u + step
         if not (lo < new < hi) or not math.isfinite(new):
             new = 0.5 * (lo + hi)
@@ -62,10 +63,10 @@ def _pointwise_force(u, args):
 
 
 @njit(cache=True, parallel=True)
-def _fast_limit(code, params, grids, mu_n, mu_s, p, dtau):
+def _fast_limit(code, params, grids, mu_n, mu_s, p, dtau, nodes, weights):
     n, m = grids.shape
     out = np.empty(n)
-    nq = GL4_NODES.shape[0]
+    nq = nodes.shape[0]
     for i in prange(n):
         N = m - 1
         phis = np.empty(N * nq)
@@ -76,8 +77,8 @@ def _fast_limit(code, params, grids, mu_n, mu_s, p, dtau):
             mid = grids[i, k] + 0.5 * h
             for q in range(nq):
                 j = k * nq + q
-                phis[j], oms[j] = angle_and_rate(code, params[i], grids[i, k] + GL4_NODES[q] * h, mid)
-                wts[j] = GL4_WEIGHTS[q] * h
+                phis[j], oms[j] = angle_and_rate(code, params[i], grids[i, k] + nodes[q] * h, mid)
+                wts[j] = weights[q] * h
         bound = np.max(np.abs(oms)) + 1e-300  # |u| > max|phi'|/4 makes F oppose u everywhere
         out[i] = _monotone_root(_mean_force, -bound, bound, 1e-15 * bound,
                                 (phis, oms, wts, mu_n[i], mu_s[i], p[i], dtau[i]))
@@ -108,7 +109,7 @@ def fast_limit_velocity(kinematics, physics, n_steps=256):
     code, params = kinematics.kernel_encoding()
     grids = period_grid(kinematics, n_steps)
     return _fast_limit(code, params, grids, physics.mu_n, physics.mu_s, physics.p,
-                       physics.delta_tau)
+                       physics.delta_tau, GL4_NODES, GL4_WEIGHTS)
 
 
 def quasi_static_velocity(kinematics, physics, tau):

@@ -9,12 +9,14 @@ rings.  Radau IIA damps it to 0.  Grid nodes sit at the corners of phi.
 
 Solution of the discrete periodic problem: Newton on the single unknown
 u(0), with the step equations eliminated step by step.  Each step solves the
-2 x 2 stage system by damped Newton (it has a unique solution for any step
-size: the force is monotone in u and Radau IIA is algebraically stable), and
+2 x 2 stage system by damped Newton (a line search on the residual, and a
+cold restart when the predicted start fails), and
 carries the exact derivative du_{n+1}/du_n along, so the derivative of the
-discrete period map (the monodromy M) is exact; M lies in (0, 1) because
-friction is dissipative, and 1 - M is accumulated as -expm1(sum log m_n)
-with m_n - 1 formed without cancellation.  This is Newton's method on the
+discrete period map (the monodromy M) is exact; M is almost always in
+(0, 1) (friction dissipates; the anisotropic law is not monotone everywhere,
+so single steps can amplify), and 1 - M is accumulated as
+-expm1(sum log m_n) with m_n - 1 formed without cancellation.  While M < 1
+the Newton iterate is kept inside a bracket of the fixed point.  This is Newton's method on the
 whole cyclic system (its Jacobian is cyclic bidiagonal after eliminating the
 stages) with the stage equations always kept solved, which is what keeps it
 convergent through stiff sticking phases.
@@ -38,7 +40,7 @@ ORDER = 3
 
 
 MAX_STAGE_ITERATIONS = 60
-MAX_SHOOTING_ITERATIONS = 40
+MAX_SHOOTING_ITERATIONS = 80
 
 
 @njit(cache=True)
@@ -126,9 +128,12 @@ def _solve_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u0, vscale, rto
     stage_its = 0
     first = True
     it_out = 0
+    lo = -math.inf
+    hi = math.inf
     for it_out in range(1, MAX_SHOOTING_ITERATIONS + 1):
         u = u0
         log_m = 0.0
+        sign_m = 1.0
         for n in range(N):
             if first:
                 U1 = u
@@ -154,17 +159,34 @@ def _solve_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u0, vscale, rto
             stages[2 * n + 1] = U2
             sens[2 * n] = s1
             sens[2 * n + 1] = s2
-            log_m += math.log1p(mm1) if mm1 > -1.0 else -math.inf
+            if mm1 <= -1.0:  # a step that reverses perturbations: track the sign of M
+                sign_m = -sign_m
+                log_m += math.log(-1.0 - mm1) if mm1 < -1.0 else -math.inf
+            else:
+                log_m += math.log1p(mm1)
             u = U2
         first = False
         g = u - u0
-        one_minus_M = -math.expm1(log_m)
-        if not (math.isfinite(g) and one_minus_M > 0.0):
+        one_minus_M = -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
+        if not (math.isfinite(g) and one_minus_M != 0.0 and math.isfinite(one_minus_M)):
             return math.nan, math.nan, u0, NON_FINITE, it_out, stage_its
         if abs(g) <= tol_fix * one_minus_M:
             status = CONVERGED
             break
-        u0 = u0 + g / one_minus_M
+        # g(u0) = Phi(u0) - u0 is decreasing: keep a bracket of the fixed point and fall
+        # back to bisection (or a plain period-map step) when Newton leaves it
+        if one_minus_M > 0.0:  # contracting period map: g decreasing
+            if g > 0.0:
+                lo = max(lo, u0)
+            else:
+                hi = min(hi, u0)
+        candidate = u0 + g / one_minus_M
+        if not (lo < candidate < hi):
+            if math.isfinite(lo) and math.isfinite(hi):
+                candidate = 0.5 * (lo + hi)
+            else:
+                candidate = u0 + g
+        u0 = candidate
     if status != CONVERGED:
         return math.nan, math.nan, u0, status, it_out, stage_its
     # quadrature of the converged sweep with the Radau weights (order 3)

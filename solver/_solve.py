@@ -27,6 +27,7 @@ from ._status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
 
 METHODS = ("periodic", "march")
 U_FLOOR_FRACTION = 1e-3
+MARCH_MAX_STEPS = 2 ** 22  # steps per level (periods x steps per period) before giving up
 
 
 @dataclass(frozen=True)
@@ -37,8 +38,8 @@ class _MethodSpec:
 
 
 _SPECS = {
-    "periodic": _MethodSpec(order=_periodic.ORDER, first_steps=8, max_steps_per_period=2 ** 15),
-    "march": _MethodSpec(order=_march.ORDER, first_steps=32, max_steps_per_period=2 ** 17),
+    "periodic": _MethodSpec(order=_periodic.ORDER, first_steps=32, max_steps_per_period=2 ** 17),
+    "march": _MethodSpec(order=_march.ORDER, first_steps=64, max_steps_per_period=2 ** 17),
 }
 
 
@@ -127,6 +128,41 @@ def _estimate(history_u, history_pi, k, u_floor, order):
     return np.maximum(diff(k), diff(k - 1) / 2.0 ** order)
 
 
+def _run_level(method, code, params, grids, physics, u0, vscale, rtol, return_series, index):
+    """One grid level for the points ``index``: (int_u, int_pi, u0, status, iterations, series)."""
+    args = (code, params[index], grids, physics.inertia_factor[index], physics.mu_n[index],
+            physics.mu_s[index], physics.p[index], physics.delta_tau[index], u0[index],
+            np.maximum(vscale[index], 1e-300), float(rtol))
+    if method == "periodic":
+        iu, ip, u0_new, st, its, _stage_its, ser = _periodic.solve_points(*args, return_series)
+    else:
+        iu, ip, u0_new, st, its, ser = _march.march_points(*args, MARCH_MAX_STEPS, return_series)
+    return iu, ip, u0_new, st, its, ser
+
+
+def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e-12):
+    """Period integrals on one grid of ``n_steps`` steps, without refinement.
+
+    For convergence studies (order tests, work-precision).  ``rtol`` only sets the
+    tolerances of the nonlinear iterations (shooting, stage Newton, periodicity).
+
+    Returns
+    -------
+    mean_u, mean_power_density, status : ndarray, shape (n_points,)
+        int_0^1 u dtau, int_0^1 Pi dtau (so U = mean_u / T, P = T^-(p+1) mean_power_density).
+    """
+    n = len(kinematics)
+    if len(physics) == 1 and n > 1:
+        physics = physics.take(np.zeros(n, dtype=int))
+    code, params = kinematics.kernel_encoding()
+    vscale = kinematic_speed(kinematics)
+    u0 = fast_limit_velocity(kinematics, physics) if method == "periodic" else np.zeros(n)
+    grids = period_grid(kinematics, n_steps)
+    iu, ip, _, st, _, _ = _run_level(method, code, params, grids, physics, u0, vscale, rtol,
+                                     False, np.arange(n))
+    return iu, ip, st
+
+
 def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_series=False,
                    max_steps_per_period=None):
     """Periodic steady state u(tau) of eq. (Newtonu) and its mean speed, power and efficiency.
@@ -145,7 +181,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     return_series : bool
         Also return u(tau) on the final grid.
     max_steps_per_period : int, optional
-        Finest grid allowed (default 2^15 for periodic, 2^17 for march).
+        Finest grid allowed (default 2^17).
 
     Returns
     -------
@@ -166,7 +202,6 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     code, params = kinematics.kernel_encoding()
     vscale = kinematic_speed(kinematics)
     u_floor = U_FLOOR_FRACTION * vscale
-    kappa, dtau = physics.inertia_factor, physics.delta_tau
 
     int_u = np.full(n, np.nan)
     int_pi = np.full(n, np.nan)
@@ -197,13 +232,8 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     while active.size and n_steps <= max_steps:
         kin = kinematics.take(active)
         grids = period_grid(kin, n_steps)
-        args = (code, params[active], grids, kappa[active], physics.mu_n[active],
-                physics.mu_s[active], physics.p[active], dtau[active], u0[active],
-                np.maximum(vscale[active], 1e-300), float(rtol))
-        if method == "periodic":
-            iu, ip, u0_new, st, its, _stage_its, ser = _periodic.solve_points(*args, return_series)
-        else:
-            iu, ip, u0_new, st, its, ser = _march.march_points(*args, int(2 ** 22), return_series)
+        iu, ip, u0_new, st, its, ser = _run_level(method, code, params, grids, physics, u0,
+                                                  vscale, rtol, return_series, active)
         iterations[active] += its
         last_status[active] = st
         ok = st == CONVERGED

@@ -1,0 +1,64 @@
+"""Shared registry of solver test cases, parametrised across methods.
+
+Each case is (kinematics, physics, stiff): ``stiff`` marks cases where the
+explicit march cannot be stable within its step budget by design (sticking
+with friction rate ~ T^(2-p) mu / delta_tau); there only ``periodic`` is
+required to converge and the march must report a failure status instead of
+a wrong number.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import solver
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    kinematics: object
+    physics: object
+    stiff: bool = False
+
+
+def _scaled(ratio_log2, scaled_period_log2, p=0.0, delta=1e-5):
+    return solver.Physics.from_scaled(2.0 ** ratio_log2, 2.0 ** scaled_period_log2, p=p, delta=delta)
+
+
+def _harmonic(A0, A1):
+    return solver.Harmonic(A0, A1)
+
+
+def _burst_and_coast():
+    # the paper's figure OptAllParamsMotions (A): tau0 = 0.8, closing down:10, opening up:3
+    return solver.PowerLaw(1.2, 0.35, 0.8, 10.0, False, 3.0, True)
+
+
+def _clapping():
+    # phi passes through 0 and reaches -pi/2 (section "Optimal motions")
+    return solver.Fourier([[0.3, 1.1, 0.0, 0.2]], [[0.0, -0.1, 0.05]])
+
+
+AGREEMENT_CASES = [
+    Case("harmonic_low_ratio", _harmonic(1.3, 0.3), _scaled(-8, 1.5)),
+    Case("harmonic_high_ratio", _harmonic(0.5, 0.45), _scaled(8, 1.5)),
+    Case("harmonic_short_period", _harmonic(1.0, 0.5), _scaled(-4, -3)),
+    Case("harmonic_long_period", _harmonic(1.0, 0.5), _scaled(4, 4), stiff=True),
+    Case("harmonic_isotropic", _harmonic(0.8, 0.6), _scaled(0, 0)),
+    Case("harmonic_p0.5", _harmonic(1.0, 0.6), _scaled(-2, 1, p=0.5)),
+    Case("harmonic_p1", _harmonic(1.0, 0.6), _scaled(3, 1, p=1.0)),
+    Case("harmonic_p1.5", _harmonic(1.0, 0.6), _scaled(-3, 1, p=1.5)),
+    Case("harmonic_delta_1e-8", _harmonic(1.2, 0.3), _scaled(-4, 0, delta=1e-8)),
+    Case("linear_two_phase", solver.PowerLaw(1.0, 0.5, 0.2, 1.0, False, 1.0, False), _scaled(-6, 0)),
+    Case("power_law_corners_p1.5", solver.PowerLaw(1.0, 0.4, 0.3, 3.0, False, 3.0, True), _scaled(2, 1, p=1.5)),
+    Case("burst_and_coast", _burst_and_coast(), _scaled(-8, 1.5), stiff=True),
+    Case("burst_and_coast_delta_1e-8", _burst_and_coast(), _scaled(-8, 1.5, delta=1e-8), stiff=True),
+    Case("clapping_fourier", _clapping(), _scaled(-3, 1)),
+    Case("clapping_fourier_p0.5", _clapping(), _scaled(3, 0.5, p=0.5)),
+]
+
+
+def by_name(name):
+    return next(c for c in AGREEMENT_CASES if c.name == name)

@@ -1,0 +1,208 @@
+"""End-to-end runs of a small scene with the real solver.
+
+Resume after SIGKILL, idempotent rerun, refusal of a changed scene and of a concurrent run,
+a dask.distributed cluster giving the local scheduler's values, labelled xarray access, and the
+stored reductions against a brute-force numpy maximum.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline import StoreBusy, StoreMismatch, load_scene, run_scene
+from pipeline.__main__ import main
+from pipeline._store import lock_path, run_lock
+from pipeline_cases import REPO, assert_stores_equal, cli, read_store, small_scene_text, write_scene
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The small scene run once, uninterrupted, on the synchronous scheduler."""
+    tmp = tmp_path_factory.mktemp("reference")
+    path = write_scene(tmp, small_scene_text(polish=True))
+    scene = load_scene(path)
+    store = tmp / "small.zarr"
+    summary = run_scene(scene, store, scheduler="synchronous", progress=False)
+    return scene, store, summary
+
+
+def _chunk_files(store: Path, array: str) -> set[str]:
+    root = store / array / "c"
+    return {str(p.relative_to(root)) for p in root.rglob("*") if p.is_file() and not p.name.endswith(".partial")} \
+        if root.exists() else set()
+
+
+def test_first_run_computes_everything(reference):
+    scene, store, summary = reference
+    assert summary.computed_points == scene.n_points == 64
+    assert summary.computed_chunks == summary.total_chunks == 8
+    status = read_store(store)["status"]
+    assert summary.failures == np.count_nonzero(status != 0)
+    assert (status != -1).all()
+    assert "64 points" in summary.line() and "solves/s" in summary.line() and "failures" in summary.line()
+
+
+def test_xarray_opens_store_with_labels(reference):
+    xr = pytest.importorskip("xarray")
+    scene, store, _ = reference
+    ds = xr.open_zarr(store)
+    assert ds["scaled_efficiency"].dims == ("anisotropy_ratio", "scaled_period", "A0", "A1_ratio")
+    np.testing.assert_allclose(ds["A0"].values, np.linspace(0.4, 1.5, 4))
+    np.testing.assert_allclose(ds["scaled_period"].values, [1.0, 2.0])
+    assert ds["best_efficiency"].dims == ("anisotropy_ratio", "scaled_period")
+    assert ds["fastest"].dims == ("anisotropy_ratio",)
+    assert ds["status"].attrs["flag_meanings"]["0"].startswith("converged")
+    assert "-1" in ds["status"].attrs["flag_meanings"]
+    prov = ds.attrs["pipeline"]["provenance"]
+    assert prov["scene_hash"] == scene.hash and prov["scene"]["name"] == "small"
+    assert "zarr" in prov["library_versions"] and prov["created"]
+    # Label-based selection works.
+    one = ds["scaled_efficiency"].sel(anisotropy_ratio=16.0, scaled_period=2.0).values
+    assert one.shape == (4, 4)
+    # Outputs the scene did not ask for are not stored.
+    assert "scaled_power" not in ds and "U" not in ds
+
+
+def test_reductions_equal_brute_force_numpy(reference):
+    scene, store, _ = reference
+    v = read_store(store)
+    q = v["scaled_efficiency"]  # (ratio, period, A0, A1_ratio)
+    A0, A1r = v["A0"], v["A1_ratio"]
+    for i in range(2):
+        for j in range(2):
+            block = np.abs(q[i, j])
+            k = np.nanargmax(block)
+            a, b = np.unravel_index(k, block.shape)
+            assert v["best_efficiency"][i, j] == np.nanmax(block)
+            assert v["best_efficiency_signed"][i, j] == q[i, j, a, b]
+            assert v["best_efficiency_A0"][i, j] == A0[a]
+            assert v["best_efficiency_A1_ratio"][i, j] == A1r[b]
+            assert v["best_efficiency_relative_efficiency"][i, j] == v["relative_efficiency"][i, j, a, b]
+            # Polished: never below the grid optimum, inside the axes' ranges.
+            assert v["best_efficiency_polished"][i, j] >= v["best_efficiency"][i, j] * (1 - 1e-3)
+            assert A0.min() <= v["best_efficiency_polished_A0"][i, j] <= A0.max()
+            assert A1r.min() <= v["best_efficiency_polished_A1_ratio"][i, j] <= A1r.max()
+            assert v["best_efficiency_polished_status"][i, j] == 0
+            assert 1 <= v["best_efficiency_polished_evaluations"][i, j] <= 13
+    s = v["scaled_speed"]
+    for i in range(2):
+        assert v["fastest"][i] == np.nanmax(s[i])
+        t, a, b = np.unravel_index(np.nanargmax(s[i]), s[i].shape)
+        assert (v["fastest_scaled_period"][i], v["fastest_A0"][i], v["fastest_A1_ratio"][i]) == \
+            (v["scaled_period"][t], A0[a], A1r[b])
+
+
+def test_idempotent_rerun_computes_nothing(reference, capsys):
+    scene, store, _ = reference
+    before = {p: p.stat().st_mtime_ns for p in store.rglob("*") if p.is_file()}
+    summary = run_scene(scene, store, scheduler="synchronous", progress=False)
+    assert summary.computed_chunks == 0 and summary.computed_points == 0
+    assert not summary.reductions_computed
+    assert "nothing to do" in summary.line()
+    after = {p: p.stat().st_mtime_ns for p in store.rglob("*") if p.is_file()}
+    assert after == before  # not one file rewritten
+
+
+def test_changed_scene_is_refused(reference, tmp_path, capsys):
+    scene, store, _ = reference
+    changed = write_scene(tmp_path, small_scene_text(rtol=5e-4, polish=True), "changed.toml")
+    with pytest.raises(StoreMismatch, match="different scene.*--overwrite"):
+        run_scene(load_scene(changed), store, scheduler="synchronous", progress=False)
+    assert main(["run", str(changed), "--store", str(store), "--no-progress"]) == 3
+    assert "--overwrite" in capsys.readouterr().err
+    assert read_store(store)["status"].shape == (2, 2, 4, 4)  # untouched
+
+
+def test_overwrite_replaces_store(tmp_path):
+    path = write_scene(tmp_path, small_scene_text())
+    store = tmp_path / "s.zarr"
+    run_scene(load_scene(path), store, scheduler="threads", workers=2, progress=False)
+    other = write_scene(tmp_path, small_scene_text(rtol=5e-4), "other.toml")
+    summary = run_scene(load_scene(other), store, scheduler="threads", workers=2, overwrite=True, progress=False)
+    assert summary.computed_chunks == summary.total_chunks
+    from pipeline._run import store_meta
+
+    assert store_meta(store)["provenance"]["scene_hash"] == load_scene(other).hash
+
+
+def test_not_a_zarr_store_is_refused(tmp_path):
+    path = write_scene(tmp_path, small_scene_text())
+    victim = tmp_path / "precious"
+    victim.mkdir()
+    (victim / "notes.txt").write_text("keep me")
+    with pytest.raises(StoreMismatch, match="not a Zarr store"):
+        run_scene(load_scene(path), victim, scheduler="synchronous", overwrite=True, progress=False)
+    assert (victim / "notes.txt").read_text() == "keep me"
+
+
+def test_concurrent_run_is_refused_and_stale_lock_taken_over(tmp_path, capsys):
+    path = write_scene(tmp_path, small_scene_text())
+    store = tmp_path / "s.zarr"
+    with run_lock(store):
+        with pytest.raises(StoreBusy, match=f"pid {os.getpid()}"):
+            run_scene(load_scene(path), store, scheduler="synchronous", progress=False)
+        assert main(["run", str(path), "--store", str(store), "--no-progress"]) == 3
+        assert "another run is using this store" in capsys.readouterr().err
+    assert not store.exists()  # refused before anything was written
+    # A lock file left by a dead process (no flock held) is stale and taken over.
+    lock_path(store).write_text('{"pid": 999999, "host": "gone", "since": "yesterday"}')
+    summary = run_scene(load_scene(path), store, scheduler="synchronous", progress=False)
+    assert summary.computed_chunks == 8
+
+
+def test_sigkill_mid_run_then_resume_matches_uninterrupted(reference, tmp_path):
+    _, ref_store, _ = reference
+    path = write_scene(tmp_path, small_scene_text(polish=True))
+    store = tmp_path / "killed.zarr"
+    args = ("run", path, "--store", store, "--scheduler", "processes", "--workers", "2", "--no-progress")
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+               TWOLINK_PIPELINE_MARKER_DELAY="0.4")
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline", *map(str, args)], cwd=REPO, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    half_written = set()
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None:
+            done = _chunk_files(store, "pipeline_state/chunk_done")
+            data = _chunk_files(store, "status")
+            half_written = data - done
+            if done and half_written:
+                break  # at least one chunk done and one written without its marker: pull the plug
+            time.sleep(0.005)
+        assert proc.poll() is None, f"run ended before it could be killed: {proc.communicate()}"
+        os.killpg(proc.pid, signal.SIGKILL)  # driver and its workers: like a power cut
+    finally:
+        proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+    done_before = _chunk_files(store, "pipeline_state/chunk_done")
+    assert 0 < len(done_before) < 8 and half_written
+    # Same command again: only the unfinished chunks are computed.
+    resumed = cli(*args)
+    assert resumed.returncode == 0, resumed.stderr
+    line = resumed.stdout.strip().splitlines()[-1]
+    assert f"({64 - 8 * len(done_before)} computed now in {8 - len(done_before)}/8 chunks)" in line, line
+    assert not list(store.rglob("*.partial"))
+    assert_stores_equal(store, ref_store)
+    # And once more: nothing to do.
+    again = cli(*args)
+    assert again.returncode == 0 and "nothing to do" in again.stdout
+
+
+def test_distributed_local_cluster_matches_local_scheduler(reference, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    _, ref_store, _ = reference
+    path = write_scene(tmp_path, small_scene_text(polish=True))
+    store = tmp_path / "dist.zarr"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        summary = run_scene(load_scene(path), store, scheduler=cluster.scheduler_address, progress=False)
+    assert summary.computed_chunks == 8
+    assert_stores_equal(store, ref_store)

@@ -1,0 +1,79 @@
+"""The s-integral against a 40-digit reference, at and near the kink, and dF/du against differences."""
+import math
+
+import mpmath as mp
+import numpy as np
+import pytest
+
+from solver import force_and_slope, power_density
+
+mp.mp.dps = 40
+
+
+def reference(u, phi, omega, mu_n, mu_s, p, delta_tau):
+    """F and Pi by adaptive mpmath quadrature split at the point where v_n = 0."""
+    u, phi, omega, mu_n, mu_s, p, dt = map(mp.mpf, (u, phi, omega, mu_n, mu_s, p, delta_tau))
+    S, C = mp.sin(phi), mp.cos(phi)
+    a, b, c = -u * S - omega * S * S / 4, omega, C * (u + omega * S / 4)
+
+    def weight(s):
+        w = a + b * s
+        return w, (w * w + c * c + dt * dt) ** ((p - 1) / 2)
+
+    pts = [mp.mpf(0), mp.mpf(1) / 2]
+    if b != 0 and 0 < -a / b < mp.mpf(1) / 2:
+        pts = [mp.mpf(0), -a / b, mp.mpf(1) / 2]
+    F = 2 * mp.quad(lambda s: (mu_n * S * weight(s)[0] - mu_s * C * c) * weight(s)[1], pts)
+    Pi = 2 * mp.quad(lambda s: (mu_n * weight(s)[0] ** 2 + mu_s * c * c) * weight(s)[1], pts)
+    return float(F), float(Pi)
+
+
+def _kink_inputs(rng, n):
+    """Inputs concentrated where the integrand is hardest: kink inside the link, c ~ 0, tiny omega."""
+    out = []
+    for k in range(n):
+        phi = rng.uniform(-1.0, 4.0)
+        omega = rng.normal() * [1e-8, 1e-3, 1.0, 10.0][k % 4]
+        u = rng.normal() * [1e-9, 1e-4, 1.0][k % 3]
+        if k % 5 == 0:
+            u = -omega * math.sin(phi) / 4  # c = 0: the apex is at rest, kink at s = 0
+        if k % 7 == 0:
+            s_kink = rng.uniform(0, 0.5)  # v_n = 0 at an interior point of the link
+            u = (omega * s_kink - omega * math.sin(phi) ** 2 / 4) / math.sin(phi)
+        out.append((u, phi, omega))
+    return out
+
+
+@pytest.mark.parametrize("p", [0.0, 0.01, 0.5, 1.0, 1.5, 1.9])
+@pytest.mark.parametrize("delta_tau", [1e-2, 1e-5, 1e-9])
+def test_force_and_power_match_high_precision_reference(p, delta_tau):
+    rng = np.random.default_rng(int(p * 100) + int(-math.log10(delta_tau)))
+    for u, phi, omega in _kink_inputs(rng, 12):
+        F, _ = force_and_slope(u, phi, omega, 0.3, 1.7, p, delta_tau)
+        Pi = power_density(u, phi, omega, 0.3, 1.7, p, delta_tau)
+        F_ref, Pi_ref = reference(u, phi, omega, 0.3, 1.7, p, delta_tau)
+        assert abs(F - F_ref) <= 1e-11 * abs(F_ref) + 1e-300, (u, phi, omega)
+        assert abs(Pi - Pi_ref) <= 1e-11 * abs(Pi_ref) + 1e-300, (u, phi, omega)
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.0, 1.5])
+def test_slope_matches_central_differences(p):
+    rng = np.random.default_rng(7)
+    for _ in range(40):
+        u, phi, omega = rng.normal(), rng.uniform(-1, 4), rng.normal() * 3
+        dt = 1e-2
+        h = 1e-6 * max(abs(u), 1.0)
+        fd = (force_and_slope(u + h, phi, omega, 0.4, 1.3, p, dt)[0]
+              - force_and_slope(u - h, phi, omega, 0.4, 1.3, p, dt)[0]) / (2 * h)
+        slope = force_and_slope(u, phi, omega, 0.4, 1.3, p, dt)[1]
+        assert abs(slope - fd) <= 1e-6 * (abs(fd) + 1.0)
+
+
+def test_force_is_continuous_across_the_quadrature_switch():
+    # omega sweeps through the closed-form / Gauss-Legendre switch at fixed u
+    omegas = np.geomspace(1e-7, 1e1, 4001)
+    F = np.array([force_and_slope(0.01, 1.1, om, 0.3, 1.7, 0.0, 1e-5)[0] for om in omegas])
+    jumps = np.abs(np.diff(F)) / (np.abs(F[1:]) + 1e-300)
+    assert np.all(jumps < 2e-2)  # smooth sampling of a smooth curve: no O(1) jump anywhere
+    F_ref = [reference(0.01, 1.1, om, 0.3, 1.7, 0.0, 1e-5)[0] for om in omegas[::400]]
+    np.testing.assert_allclose(F[::400], F_ref, rtol=1e-11)

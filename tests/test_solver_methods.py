@@ -1,0 +1,181 @@
+"""Both periodic solvers: order of accuracy, mutual agreement, the paper's invariances and limits."""
+import numpy as np
+import pytest
+
+import solver
+from cases import AGREEMENT_CASES, Case
+
+METHOD_ORDERS = {"periodic": 3, "march": 2}
+
+
+ORDER_CASES = [
+    Case("harmonic_p1", solver.Harmonic(1.2, 0.3), solver.Physics(1.0, 0.0625, 1.0, 1.0, 0.0)),
+    Case("harmonic_p0", solver.Harmonic(1.2, 0.3), solver.Physics(1.0, 0.0625, 1.0, 0.0, 1e-1)),
+    Case("powerlaw_corners_p0", solver.PowerLaw(1.0, 0.4, 0.3, 3.0, False, 3.0, True),
+         solver.Physics(1.0, 0.25, 1.0, 0.0, 1e-1)),
+    Case("powerlaw_corners_p1.5", solver.PowerLaw(1.0, 0.4, 0.3, 3.0, False, 3.0, True),
+         solver.Physics(1.0, 0.25, 1.0, 1.5, 1e-2)),
+]
+
+
+@pytest.mark.parametrize("method", ["periodic", "march"])
+@pytest.mark.parametrize("case", ORDER_CASES, ids=lambda c: c.name)
+def test_order_of_accuracy(case, method):
+    """Slope of log(error) against log(N) (diffrax-style order test)."""
+    grids = [32, 64, 128, 256] if method == "periodic" else [128, 256, 512, 1024]
+    ref_u, ref_p, st = solver.solve_fixed_grid(case.kinematics, case.physics, grids[-1] * 32, method=method)
+    assert st[0] == 0
+    errors = []
+    for n in grids:
+        mean_u, mean_pi, st = solver.solve_fixed_grid(case.kinematics, case.physics, n, method=method)
+        assert st[0] == 0
+        errors.append(abs(mean_u[0] - ref_u[0]) + abs(mean_pi[0] - ref_p[0]))
+    slope = -np.polyfit(np.log(grids), np.log(errors), 1)[0]
+    assert abs(slope - METHOD_ORDERS[method]) < 0.5, (slope, errors)
+
+
+@pytest.mark.parametrize("case", AGREEMENT_CASES, ids=lambda c: c.name)
+def test_methods_agree_within_rtol(case):
+    rtol = 1e-5
+    a = solver.solve_periodic(case.kinematics, case.physics, method="periodic", rtol=rtol)
+    b = solver.solve_periodic(case.kinematics, case.physics, method="march", rtol=rtol)
+    assert a.converged[0], solver.STATUS_REASONS[int(a.status[0])]
+    if case.stiff and not b.converged[0]:
+        assert np.isnan(b.U[0])  # a failing march says so, never returns a number
+        return
+    assert b.converged[0], solver.STATUS_REASONS[int(b.status[0])]
+    scale_u = max(abs(a.U[0]), solver._solve.U_FLOOR_FRACTION * solver.kinematic_speed(case.kinematics)[0] / case.physics.period[0])
+    # each is within rtol of the truth (estimated), so they agree within 2 rtol
+    assert abs(a.U[0] - b.U[0]) <= 2 * rtol * scale_u
+    assert abs(a.P[0] - b.P[0]) <= 2 * rtol * a.P[0]
+
+
+def test_error_estimate_is_honest_against_a_fine_reference():
+    """The returned estimate bounds the true error (reference: periodic at 1e-9) on every case."""
+    for case in AGREEMENT_CASES:
+        res = solver.solve_periodic(case.kinematics, case.physics, rtol=1e-4)
+        ref = solver.solve_periodic(case.kinematics, case.physics, rtol=1e-7)
+        assert res.converged[0] and ref.converged[0], case.name
+        scale_u = max(abs(ref.U[0]), 1e-3 * solver.kinematic_speed(case.kinematics)[0] / case.physics.period[0])
+        assert abs(res.U[0] - ref.U[0]) <= 1e-4 * scale_u, case.name
+        true_rel_P = abs(res.P[0] - ref.P[0]) / ref.P[0]
+        assert true_rel_P <= 1e-4, case.name
+
+
+def test_reflection_flips_U():
+    """phi -> pi - phi reverses the motion: U -> -U, P unchanged."""
+    A = np.array([[1.1, 0.5, 0.1, -0.05]])
+    B = np.array([[0.0, 0.2, 0.03]])
+    phys = solver.Physics.from_scaled(2.0 ** -3, 1.5)
+    a = solver.solve_periodic(solver.Fourier(A, B), phys, rtol=1e-7)
+    mirrored = np.concatenate([np.pi - A[:, :1], -A[:, 1:]], axis=1)
+    b = solver.solve_periodic(solver.Fourier(mirrored, -B), phys, rtol=1e-7)
+    np.testing.assert_allclose(b.U, -a.U, rtol=1e-6)
+    np.testing.assert_allclose(b.P, a.P, rtol=1e-6)
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.5])
+def test_depends_on_T_and_mu_only_through_T_power_mu(p):
+    """u(tau) depends on (T, mu_n, mu_s) only through T^(2-p) mu_n, T^(2-p) mu_s (delta_tau fixed)."""
+    kin = solver.Harmonic([1.0, 1.0], [0.5, 0.5])
+    T = np.array([1.0, 2.7])
+    factor = T ** (2 - p)
+    phys = solver.Physics(period=T, mu_n=0.3 / factor, mu_s=1.1 / factor, p=p, delta=1e-4 / T)
+    res = solver.solve_periodic(kin, phys, rtol=1e-7)
+    np.testing.assert_allclose(res.mean_u[1], res.mean_u[0], rtol=1e-6)
+    # P = T^-(p+1) int Pi, and Pi is proportional to mu ~ T^-(2-p): P T^3 is invariant
+    np.testing.assert_allclose(res.P[1] * T[1] ** 3, res.P[0] * T[0] ** 3, rtol=1e-6)
+
+
+@pytest.mark.parametrize("p", [0.0, 1.0, 1.5])
+def test_scaled_quantities_depend_only_on_ratio_and_scaled_period(p):
+    kin = solver.Harmonic([1.2] * 3, [0.4] * 3)
+    scales = np.array([0.05, 1.0, 7.0])  # sqrt(mu_n mu_s)
+    T, mu_n, mu_s = solver.physical_from_scaled(2.0 ** -2, 1.7, p, scales)
+    phys = solver.Physics(period=T, mu_n=mu_n, mu_s=mu_s, p=p, delta=1e-6 / T)  # same delta_tau
+    res = solver.solve_periodic(kin, phys, rtol=1e-7)
+    for name in ("scaled_speed", "scaled_power", "scaled_efficiency", "relative_efficiency"):
+        values = getattr(res, name)
+        np.testing.assert_allclose(values, values[1], rtol=1e-5, err_msg=name)
+    ratio, scaled_period = solver.scaled_from_physical(T, mu_n, mu_s, p)
+    np.testing.assert_allclose(ratio, 0.25)
+    np.testing.assert_allclose(scaled_period, 1.7)
+
+
+def test_relative_efficiency_below_one_as_delta_vanishes():
+    rng = np.random.default_rng(3)
+    n = 24
+    kin = solver.PowerLaw(rng.uniform(0.2, 1.5, n), rng.uniform(0.05, 0.6, n), rng.uniform(0.05, 0.95, n),
+                          rng.choice([1.0, 3.0, 10.0], n), rng.random(n) < 0.5,
+                          rng.choice([1.0, 3.0, 10.0], n), rng.random(n) < 0.5)
+    phys = solver.Physics.from_scaled(2.0 ** rng.uniform(-8, 8, n), 2.0 ** rng.uniform(-2, 3, n),
+                                      p=rng.choice([0.0, 0.5, 1.5], n), delta=1e-8)
+    res = solver.solve_periodic(kin, phys, rtol=1e-4)
+    ok = res.converged
+    assert ok.mean() > 0.9
+    assert np.all(np.abs(res.relative_efficiency[ok]) <= 1.0)
+
+
+def test_isotropic_linear_law_does_not_move():
+    kin = solver.Fourier([[0.9, 0.5, 0.1]], [[0.0, 0.3]])
+    res = solver.solve_periodic(kin, solver.Physics(1.3, 0.7, 0.7, p=1.0, delta=0.0), rtol=1e-8)
+    assert res.converged[0]
+    assert abs(res.U[0]) <= 1e-9 * solver.kinematic_speed(kin)[0]
+
+
+def test_slow_limit_is_quasi_static_and_does_not_move():
+    """T -> infinity: u(tau) -> the quasi-static solution, and U -> 0 (U T stays bounded, U T -> 0)."""
+    kin = solver.Harmonic(1.0, 0.5)
+    tau = np.linspace(0, 1, 64, endpoint=False)
+    ratios = []
+    for Ts in (4.0, 16.0, 64.0):
+        phys = solver.Physics.from_scaled(2.0 ** -3, Ts, p=0.5, delta=1e-7 / Ts)
+        res = solver.solve_periodic(kin, phys, rtol=1e-6, return_series=True)
+        u_qs = solver.quasi_static_velocity(kin, phys, res.tau[0])[0]
+        ratios.append(np.max(np.abs(res.u[0] - u_qs)) / np.max(np.abs(u_qs)))
+        assert abs(res.mean_u[0]) < 2 * ratios[-1] * np.max(np.abs(u_qs)) + 1e-12
+    assert ratios[0] > ratios[1] > ratios[2]
+    assert ratios[2] < 0.05
+    u_qs = solver.quasi_static_velocity(kin, phys, tau)[0]
+    assert abs(u_qs.mean()) < 1e-3 * np.abs(u_qs).max()  # the quasi-static motion has U = 0
+
+
+def test_fast_limit_is_constant_velocity_with_zero_mean_force():
+    kin = solver.PowerLaw(1.0, 0.5, 0.25, 1.0, False, 1.0, False)
+    spreads = []
+    for Ts in (2.0 ** -3, 2.0 ** -5, 2.0 ** -7):
+        phys = solver.Physics.from_scaled(2.0 ** -2, Ts, p=0.0, delta=1e-3)
+        res = solver.solve_periodic(kin, phys, rtol=1e-6, return_series=True)
+        u_fast = solver.fast_limit_velocity(kin, phys)[0]
+        spreads.append(np.max(np.abs(res.u[0] - u_fast)) / abs(u_fast))
+    assert spreads[0] > spreads[1] > spreads[2]
+    assert spreads[2] < 1e-2
+
+
+def test_power_is_positive_for_any_moving_motion():
+    rng = np.random.default_rng(5)
+    n = 16
+    A = rng.normal(size=(n, 4)) * 0.5
+    B = rng.normal(size=(n, 3)) * 0.5
+    phys = solver.Physics.from_scaled(2.0 ** rng.uniform(-6, 6, n), 2.0 ** rng.uniform(-2, 2, n),
+                                      p=rng.choice([0.0, 0.5, 1.0, 1.5], n))
+    res = solver.solve_periodic(solver.Fourier(A, B), phys, rtol=1e-4)
+    assert np.all(res.P[res.converged] > 0)
+    assert res.converged.mean() > 0.9
+
+
+def test_constant_angle_is_reported_not_divided_by_zero():
+    res = solver.solve_periodic(solver.Harmonic([1.0, 1.0], [0.0, 0.3]), solver.Physics(1.0, 1.0, 2.0))
+    assert res.status[0] == 7 and res.U[0] == 0 and np.isnan(res.efficiency[0])
+    assert res.converged[1]
+
+
+def test_bad_arguments_name_themselves():
+    with pytest.raises(ValueError, match="mu_n"):
+        solver.Physics(1.0, -1.0, 1.0)
+    with pytest.raises(ValueError, match="p"):
+        solver.Physics(1.0, 1.0, 1.0, p=2.0)
+    with pytest.raises(ValueError, match="duty_cycle"):
+        solver.PowerLaw(1.0, 0.3, 1.2, 1.0, False, 1.0, False)
+    with pytest.raises(ValueError, match="method"):
+        solver.solve_periodic(solver.Harmonic(1, 0.3), solver.Physics(1, 1, 1), method="rk4")
