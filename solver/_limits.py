@@ -25,28 +25,8 @@ GL4_WEIGHTS = 0.5 * _GL_W
 
 
 @njit(cache=True)
-def _monotone_root(values_at, lo, hi, tol, args):
-    """Root of g(u) = values_at(u, args) -> (g, g') with g(lo) > 0 > g(hi): Newton inside bisection."""
-    u = 0.5 * (lo + hi)
-    for _ in range(200):
-        g, dg = values_at(u, args)
-        if g > 0.0:
-            lo = u
-        else:
-            hi = u
-        step = -g / dg if dg != 0.0 else math.nan
-        new = u + step
-        if not (lo < new < hi) or not math.isfinite(new):
-            new = 0.5 * (lo + hi)
-        if abs(new - u) <= tol or hi - lo <= tol:
-            return new
-        u = new
-    return u
-
-
-@njit(cache=True)
-def _mean_force(u, args):
-    phis, oms, wts, mu_n, mu_s, p, dtau = args
+def _weighted_force(u, phis, oms, wts, mu_n, mu_s, p, dtau):
+    """sum_j w_j F(u, tau_j) and its u-derivative."""
     g = 0.0
     dg = 0.0
     for j in range(phis.shape[0]):
@@ -57,9 +37,25 @@ def _mean_force(u, args):
 
 
 @njit(cache=True)
-def _pointwise_force(u, args):
-    phi, om, mu_n, mu_s, p, dtau = args
-    return force_and_slope(u, phi, om, mu_n, mu_s, p, dtau)
+def _force_root(phis, oms, wts, mu_n, mu_s, p, dtau, bound):
+    """Root of the weighted force in [-bound, bound] (g(-bound) > 0 > g(bound)): Newton in bisection."""
+    lo = -bound
+    hi = bound
+    tol = 1e-15 * bound
+    u = 0.0
+    for _ in range(200):
+        g, dg = _weighted_force(u, phis, oms, wts, mu_n, mu_s, p, dtau)
+        if g > 0.0:
+            lo = u
+        else:
+            hi = u
+        new = u - g / dg if dg != 0.0 else math.nan
+        if not (lo < new < hi):
+            new = 0.5 * (lo + hi)
+        if abs(new - u) <= tol or hi - lo <= tol:
+            return new
+        u = new
+    return u
 
 
 @njit(cache=True, parallel=True)
@@ -80,8 +76,7 @@ def _fast_limit(code, params, grids, mu_n, mu_s, p, dtau, nodes, weights):
                 phis[j], oms[j] = angle_and_rate(code, params[i], grids[i, k] + nodes[q] * h, mid)
                 wts[j] = weights[q] * h
         bound = np.max(np.abs(oms)) + 1e-300  # |u| > max|phi'|/4 makes F oppose u everywhere
-        out[i] = _monotone_root(_mean_force, -bound, bound, 1e-15 * bound,
-                                (phis, oms, wts, mu_n[i], mu_s[i], p[i], dtau[i]))
+        out[i] = _force_root(phis, oms, wts, mu_n[i], mu_s[i], p[i], dtau[i], bound)
     return out
 
 
@@ -89,12 +84,12 @@ def _fast_limit(code, params, grids, mu_n, mu_s, p, dtau, nodes, weights):
 def _quasi_static(code, params, tau, mu_n, mu_s, p, dtau):
     n, m = tau.shape
     out = np.empty((n, m))
+    one = np.ones(1)
     for i in prange(n):
         for j in range(m):
             phi, om = angle_and_rate(code, params[i], tau[i, j], tau[i, j])
-            bound = abs(om) + 1e-300
-            out[i, j] = _monotone_root(_pointwise_force, -bound, bound, 1e-15 * bound,
-                                       (phi, om, mu_n[i], mu_s[i], p[i], dtau[i]))
+            out[i, j] = _force_root(np.array([phi]), np.array([om]), one, mu_n[i], mu_s[i], p[i],
+                                    dtau[i], abs(om) + 1e-300)
     return out
 
 

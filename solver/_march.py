@@ -32,17 +32,23 @@ ORDER = 2
 
 @njit(cache=True)
 def heun_step(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
-    """One RK2 step (Butcher tableau HEUN_*): pure function, no state."""
-    k1 = kappa * force_and_slope(u, phi0, om0, mu_n, mu_s, p, dtau)[0]
-    k2 = kappa * force_and_slope(u + h * k1, phi1, om1, mu_n, mu_s, p, dtau)[0]
-    return u + 0.5 * h * (k1 + k2)
+    """One RK2 step (Butcher tableau HEUN_*): pure function, no state.
+
+    Returns (u_{n+1}, du_{n+1}/du_n).
+    """
+    F1, dF1 = force_and_slope(u, phi0, om0, mu_n, mu_s, p, dtau)
+    F2, dF2 = force_and_slope(u + h * kappa * F1, phi1, om1, mu_n, mu_s, p, dtau)
+    m = 1.0 + 0.5 * h * kappa * (dF1 + dF2 * (1.0 + h * kappa * dF1))
+    return u + 0.5 * h * kappa * (F1 + F2), m
 
 
 @njit(cache=True)
-def _march_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
-                 max_steps, u_out, want_series):
-    """Returns (int_u, int_Pi, u0, status, periods)."""
-    N = grid.shape[0] - 1
+def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
+                 max_steps, u_out, step_u, step_pi, step_m):
+    """March on the first N steps of ``grid``; per-step integrals into ``step_u``, ``step_pi``.
+
+    Returns (int_u, int_Pi, u0, status, periods).
+    """
     phis = np.empty(2 * N)
     oms = np.empty(2 * N)
     hs = np.empty(N)
@@ -53,6 +59,7 @@ def _march_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u_init, vscale,
         phis[2 * n], oms[2 * n] = angle_and_rate(code, params, grid[n], mid)
         phis[2 * n + 1], oms[2 * n + 1] = angle_and_rate(code, params, grid[n + 1], mid)
     nodes = np.empty(N + 1)
+    ms = np.empty(N)
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
     bound = 1e3 * vscale + 1.0
     max_periods = max(max_steps // N, 3)
@@ -65,8 +72,8 @@ def _march_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u_init, vscale,
         u_begin = u
         nodes[0] = u
         for n in range(N):
-            u = heun_step(u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
-                          kappa, mu_n, mu_s, p, dtau)
+            u, ms[n] = heun_step(u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1],
+                                 oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
             nodes[n + 1] = u
             if not (abs(u) <= bound):
                 return math.nan, math.nan, u_begin, UNSTABLE if math.isfinite(u) else NON_FINITE, period
@@ -95,27 +102,33 @@ def _march_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u_init, vscale,
     int_pi = 0.0
     for n in range(N):
         h = hs[n]
-        int_u += 0.5 * h * (nodes[n] + nodes[n + 1])
         P0 = power_density(nodes[n], phis[2 * n], oms[2 * n], mu_n, mu_s, p, dtau)
         P1 = power_density(nodes[n + 1], phis[2 * n + 1], oms[2 * n + 1], mu_n, mu_s, p, dtau)
-        int_pi += 0.5 * h * (P0 + P1)
-        if want_series:
-            u_out[n] = nodes[n]
+        step_u[n] = 0.5 * h * (nodes[n] + nodes[n + 1])
+        step_pi[n] = 0.5 * h * (P0 + P1)
+        int_u += step_u[n]
+        int_pi += step_pi[n]
+        u_out[n] = nodes[n]
+        step_m[n] = ms[n]
     return int_u, int_pi, nodes[0], CONVERGED, period
 
 
 @njit(cache=True, parallel=True)
-def march_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
-                 max_steps, want_series):
+def march_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
+                 max_steps):
+    """Batched ``_march_point``; ``grids`` row i valid up to ``n_steps[i]`` steps."""
     n, m = grids.shape
     int_u = np.empty(n)
     int_pi = np.empty(n)
     u0_out = np.empty(n)
     status = np.empty(n, np.int8)
     periods = np.empty(n, np.int64)
-    series = np.empty((n, m - 1) if want_series else (n, 0))
+    step_u = np.full((n, m - 1), np.nan)
+    step_pi = np.full((n, m - 1), np.nan)
+    step_m = np.full((n, m - 1), np.nan)
+    nodes = np.full((n, m - 1), np.nan)
     for i in prange(n):
         int_u[i], int_pi[i], u0_out[i], status[i], periods[i] = _march_point(
-            code, params[i], grids[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i], u_init[i],
-            vscale[i], rtol, max_steps, series[i], want_series)
-    return int_u, int_pi, u0_out, status, periods, series
+            code, params[i], grids[i], n_steps[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
+            u_init[i], vscale[i], rtol, max_steps, nodes[i], step_u[i], step_pi[i], step_m[i])
+    return int_u, int_pi, u0_out, status, periods, step_u, step_pi, step_m, nodes

@@ -103,13 +103,14 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
 
 
 @njit(cache=True)
-def _solve_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
-                 u_out, want_series):
-    """Periodic solution for one parameter point on one grid.
+def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
+                 u_out, step_u, step_pi, step_m):
+    """Periodic solution for one parameter point on the first N steps of ``grid``.
 
+    Writes u at the nodes into ``u_out``, the per-step integrals of u and Pi into
+    ``step_u``, ``step_pi`` and the step derivatives du_{n+1}/du_n into ``step_m``.
     Returns (int_u, int_Pi, u0, status, shooting_iterations, stage_iterations).
     """
-    N = grid.shape[0] - 1
     phis = np.empty(2 * N)
     oms = np.empty(2 * N)
     hs = np.empty(N)
@@ -121,6 +122,7 @@ def _solve_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u0, vscale, rto
         phis[2 * n + 1], oms[2 * n + 1] = angle_and_rate(code, params, grid[n + 1], mid)
     stages = np.empty(2 * N)
     sens = np.empty(2 * N)
+    m_minus_1 = np.empty(N)
     u_start = np.empty(N)
     atol_stage = max(1e-5 * rtol, 1e-14) * vscale
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
@@ -159,6 +161,7 @@ def _solve_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u0, vscale, rto
             stages[2 * n + 1] = U2
             sens[2 * n] = s1
             sens[2 * n + 1] = s2
+            m_minus_1[n] = mm1
             if mm1 <= -1.0:  # a step that reverses perturbations: track the sign of M
                 sign_m = -sign_m
                 log_m += math.log(-1.0 - mm1) if mm1 < -1.0 else -math.inf
@@ -195,19 +198,23 @@ def _solve_point(code, params, grid, kappa, mu_n, mu_s, p, dtau, u0, vscale, rto
     for n in range(N):
         U1 = stages[2 * n]
         U2 = stages[2 * n + 1]
-        int_u += hs[n] * (0.75 * U1 + 0.25 * U2)
         P1 = power_density(U1, phis[2 * n], oms[2 * n], mu_n, mu_s, p, dtau)
         P2 = power_density(U2, phis[2 * n + 1], oms[2 * n + 1], mu_n, mu_s, p, dtau)
-        int_pi += hs[n] * (0.75 * P1 + 0.25 * P2)
-        if want_series:
-            u_out[n] = u_start[n]
+        step_u[n] = hs[n] * (0.75 * U1 + 0.25 * U2)
+        step_pi[n] = hs[n] * (0.75 * P1 + 0.25 * P2)
+        int_u += step_u[n]
+        int_pi += step_pi[n]
+        u_out[n] = u_start[n]
+        step_m[n] = 1.0 + m_minus_1[n]
     return int_u, int_pi, u0, CONVERGED, it_out, stage_its
 
 
 @njit(cache=True, parallel=True)
-def solve_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
-                 want_series):
-    """Batched ``_solve_point`` over parameter points (one thread per point)."""
+def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol):
+    """Batched ``_solve_point`` over parameter points (one thread per point).
+
+    ``grids`` has shape (n, max_steps + 1), row i valid up to ``n_steps[i]`` steps.
+    """
     n, m = grids.shape
     int_u = np.empty(n)
     int_pi = np.empty(n)
@@ -215,9 +222,12 @@ def solve_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, u0, vscale, rt
     status = np.empty(n, np.int8)
     its = np.empty(n, np.int64)
     stage_its = np.empty(n, np.int64)
-    series = np.empty((n, m - 1) if want_series else (n, 0))
+    step_u = np.full((n, m - 1), np.nan)
+    step_pi = np.full((n, m - 1), np.nan)
+    step_m = np.full((n, m - 1), np.nan)
+    nodes = np.full((n, m - 1), np.nan)
     for i in prange(n):
         int_u[i], int_pi[i], u0_out[i], status[i], its[i], stage_its[i] = _solve_point(
-            code, params[i], grids[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i], u0[i],
-            vscale[i], rtol, series[i], want_series)
-    return int_u, int_pi, u0_out, status, its, stage_its, series
+            code, params[i], grids[i], n_steps[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
+            u0[i], vscale[i], rtol, nodes[i], step_u[i], step_pi[i], step_m[i])
+    return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes

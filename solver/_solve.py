@@ -1,10 +1,17 @@
 """``solve_periodic``: the public entry point of the solver layer.
 
-Both methods refine the tau-grid by doubling until an error estimate is
-below ``rtol``.  With Q_k the period integrals on the k-th grid (N_k = N_0 2^k
-steps) and D_k = |Q_k - Q_{k-1}| in the norm below, the error of Q_k is
-estimated as max(D_k, D_{k-1} / 2^order) (see ``_estimate``).  Three
-successful levels are needed before a point can be accepted.
+Error control by local (h-)refinement with per-step Richardson indicators.
+For the current grid G (nodes at the corners of phi) both G and its
+bisection B(G) are solved; for every step j of G, delta_j is the change of
+that step's contribution to the period integrals int u and int Pi between G
+and B(G).  The estimate E = sum_j |delta_j| (in the norm below) bounds the
+error of the coarse solution, so it is conservative for the returned
+B(G) solution.  While E > rtol, the steps with delta_j > 0.5 rtol h_j are
+bisected (error equidistribution), which concentrates steps at the
+stick-slip and velocity-reversal events of Coulomb friction, where the
+solution is not smooth and uniform refinement converges slowly and
+irregularly.  A point is accepted only from the second grid on (a single
+coarse grid can miss a short sticking phase altogether).
 
 Error norm.  For P (always > 0) the error is relative.  U can vanish (for
 example at isotropic friction and p = 1), so its error is measured relative
@@ -27,7 +34,9 @@ from ._status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
 
 METHODS = ("periodic", "march")
 U_FLOOR_FRACTION = 1e-3
-MARCH_MAX_STEPS = 2 ** 22  # steps per level (periods x steps per period) before giving up
+MARCH_MAX_STEPS = 2 ** 22  # steps per solve (periods x steps per period) before giving up
+MAX_BISECTIONS = 4  # per refinement pass and step
+MIN_STEP = 2.0 ** -26
 
 
 @dataclass(frozen=True)
@@ -109,35 +118,79 @@ def _outputs(int_u, int_pi, physics):
     )
 
 
-def _estimate(history_u, history_pi, k, u_floor, order):
-    """Error estimate of level k from levels k-2, k-1, k (arrays over the active points).
+def local_indicators(u_coarse, u_fine, step_derivative, integral_change, h):
+    """Where each step's error originates, not where it is carried to.
 
-    max(D_k, D_{k-1} / 2^order): the last difference bounds the error once the
-    sequence converges at order >= 1, and the previous difference reduced by
-    the method's order guards against a D_k that is small by chance (the
-    sticking and velocity-reversal events of Coulomb friction make the
-    convergence irregular, so a ratio-based extrapolation is not trusted).
+    With e_n = u_fine - u_coarse at the coarse nodes (periodic: e_N = e_0), the
+    error made in step n is e_{n+1} - m_n e_n (m_n = du_{n+1}/du_n of the coarse
+    step); the part of the step's integral change not explained by the node
+    differences is the step's own quadrature error.
     """
-    scale_u = np.maximum(np.abs(history_u[k]), u_floor)
-    scale_p = np.abs(history_pi[k])
-
-    def diff(j):
-        return np.maximum(np.abs(history_u[j] - history_u[j - 1]) / scale_u,
-                          np.abs(history_pi[j] - history_pi[j - 1]) / scale_p)
-
-    return np.maximum(diff(k), diff(k - 1) / 2.0 ** order)
+    e = u_fine - u_coarse
+    e_next = np.roll(e, -1)
+    return (np.abs(e_next - step_derivative * e) * h
+            + np.abs(integral_change - 0.5 * h * (e + e_next)))
 
 
-def _run_level(method, code, params, grids, physics, u0, vscale, rtol, return_series, index):
-    """One grid level for the points ``index``: (int_u, int_pi, u0, status, iterations, series)."""
-    args = (code, params[index], grids, physics.inertia_factor[index], physics.mu_n[index],
-            physics.mu_s[index], physics.p[index], physics.delta_tau[index], u0[index],
-            np.maximum(vscale[index], 1e-300), float(rtol))
+def refinement_levels(indicators, h, rtol):
+    """How many times to bisect each step: enough that its local error, shrinking at
+    least like h^2 (the order at Coulomb stick-slip events), meets its share
+    0.5 rtol h_j of the tolerance; at most MAX_BISECTIONS per pass.  When no step is
+    over its share (the estimate is dominated by propagation), the steps holding
+    half of the total indicator are bisected once (Doerfler marking)."""
+    target = 0.5 * rtol * h
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = indicators / target
+    levels = np.where(ratio > 1.0, np.ceil(0.5 * np.log2(np.maximum(ratio, 1.0))), 0.0)
+    levels = np.clip(np.nan_to_num(levels, nan=1.0, posinf=MAX_BISECTIONS), 0, MAX_BISECTIONS)
+    if levels.max() > 0:
+        return levels.astype(np.int64)
+    order = np.argsort(-indicators)
+    total = indicators.sum()
+    levels = np.zeros(indicators.size, dtype=np.int64)
+    if not np.isfinite(total) or total == 0:
+        levels[:] = 1
+        return levels
+    count = np.searchsorted(np.cumsum(indicators[order]), 0.5 * total) + 1
+    levels[order[:count]] = 1
+    return levels
+
+
+def bisect(grid, levels=None):
+    """Nodes of ``grid`` with step j split into 2^levels[j] equal steps (default: all once)."""
+    if levels is None:
+        levels = np.ones(grid.size - 1, dtype=np.int64)
+    pieces = [grid[:-1]]
+    h = np.diff(grid)
+    for r in range(1, int(levels.max(initial=0)) + 1):
+        sel = levels >= r
+        # the new nodes at this depth: odd multiples of h / 2^r inside the selected steps
+        k = 2 ** (r - 1)
+        offsets = (2 * np.arange(k) + 1) / 2 ** r
+        pieces.append((grid[:-1][sel, None] + h[sel, None] * offsets[None, :]).ravel())
+    return np.sort(np.concatenate(pieces + [grid[-1:]]))
+
+
+def _pad(grids):
+    """Rows of node arrays -> (padded array (n, max_nodes), steps per row)."""
+    n_steps = np.array([g.size - 1 for g in grids], dtype=np.int64)
+    out = np.ones((len(grids), n_steps.max() + 1))
+    for i, g in enumerate(grids):
+        out[i, :g.size] = g
+    return out, n_steps
+
+
+def _run_level(method, code, params, grids, n_steps, physics, u0, vscale, rtol, index):
+    """Solve the points ``index`` on padded ``grids``.
+
+    Returns (int_u, int_pi, u0, status, iterations, step_u, step_pi, step_m, u_nodes).
+    """
+    args = (code, params[index], grids, n_steps, physics.inertia_factor[index],
+            physics.mu_n[index], physics.mu_s[index], physics.p[index],
+            physics.delta_tau[index], u0[index], np.maximum(vscale[index], 1e-300), float(rtol))
     if method == "periodic":
-        iu, ip, u0_new, st, its, _stage_its, ser = _periodic.solve_points(*args, return_series)
-    else:
-        iu, ip, u0_new, st, its, ser = _march.march_points(*args, MARCH_MAX_STEPS, return_series)
-    return iu, ip, u0_new, st, its, ser
+        return _periodic.solve_points(*args)
+    return _march.march_points(*args, MARCH_MAX_STEPS)
 
 
 def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e-12):
@@ -158,8 +211,9 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
     vscale = kinematic_speed(kinematics)
     u0 = fast_limit_velocity(kinematics, physics) if method == "periodic" else np.zeros(n)
     grids = period_grid(kinematics, n_steps)
-    iu, ip, _, st, _, _ = _run_level(method, code, params, grids, physics, u0, vscale, rtol,
-                                     False, np.arange(n))
+    steps = np.full(n, n_steps, dtype=np.int64)
+    iu, ip, _, st, *_ = _run_level(method, code, params, grids, steps, physics, u0, vscale, rtol,
+                                   np.arange(n))
     return iu, ip, st
 
 
@@ -225,42 +279,60 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     else:
         u0 = np.zeros(n)  # from rest
 
-    hist_u, hist_pi = [], []
+    grids = list(period_grid(kinematics, spec.first_steps))
     last_status = np.full(n, CONVERGED, dtype=np.int8)
-    n_steps = spec.first_steps
     level = 0
-    while active.size and n_steps <= max_steps:
-        kin = kinematics.take(active)
-        grids = period_grid(kin, n_steps)
-        iu, ip, u0_new, st, its, ser = _run_level(method, code, params, grids, physics, u0,
-                                                  vscale, rtol, return_series, active)
-        iterations[active] += its
-        last_status[active] = st
-        ok = st == CONVERGED
-        u0[active[ok]] = u0_new[ok]
-        lvl_u = np.full(n, np.nan)
-        lvl_pi = np.full(n, np.nan)
-        lvl_u[active] = np.where(ok, iu, np.nan)
-        lvl_pi[active] = np.where(ok, ip, np.nan)
-        hist_u.append(lvl_u)
-        hist_pi.append(lvl_pi)
-        n_tau[active] = n_steps
-        int_u[active] = lvl_u[active]
-        int_pi[active] = lvl_pi[active]
-        if return_series:
-            for j, i in enumerate(active):
-                series[i] = ser[j]
-                series_tau[i] = grids[j, :-1]
-        if level >= 2:
-            est = _estimate([h[active] for h in hist_u], [h[active] for h in hist_pi], level,
-                            u_floor[active], spec.order)
-            est = np.where(np.isnan(est), np.inf, est)
-            estimate[active] = est
-            done = est <= rtol
-            status[active[done]] = CONVERGED
-            active = active[~done]
+    while active.size:
+        coarse = [grids[i] for i in active]
+        fine = [bisect(g) for g in coarse]
+        padded, steps = _pad(coarse + fine)
+        both = np.concatenate([active, active])
+        iu, ip, u0_new, st, its, step_u, step_pi, step_m, ser = _run_level(
+            method, code, params, padded, steps, physics, u0, vscale, rtol, both)
+        m = active.size
+        iterations[active] += its[:m] + its[m:]
+        ok = (st[:m] == CONVERGED) & (st[m:] == CONVERGED)
+        last_status[active] = np.where(st[m:] != CONVERGED, st[m:], st[:m])
+        fine_ok = st[m:] == CONVERGED
+        u0[active[fine_ok]] = u0_new[m:][fine_ok]
+        int_u[active] = np.where(ok, iu[m:], np.nan)
+        int_pi[active] = np.where(ok, ip[m:], np.nan)
+        n_tau[active] = steps[m:]
+        keep = np.ones(m, dtype=bool)
+        for j, i in enumerate(active):
+            n_coarse = steps[j]
+            h = np.diff(coarse[j])
+            if ok[j]:
+                scale_u = max(abs(iu[m + j]), u_floor[i])
+                scale_p = abs(ip[m + j])
+                d_u = np.abs(step_u[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1)
+                             - step_u[j, :n_coarse]) / scale_u
+                d_p = np.abs(step_pi[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1)
+                             - step_pi[j, :n_coarse]) / scale_p
+                estimate[i] = max(d_u.sum(), d_p.sum())
+                if level >= 1 and estimate[i] <= rtol:
+                    status[i] = CONVERGED
+                    keep[j] = False
+                    if return_series:
+                        series[i] = ser[m + j, :2 * n_coarse].copy()
+                        series_tau[i] = fine[j][:-1]
+                    continue
+                indicators = local_indicators(
+                    ser[j, :n_coarse], ser[m + j, :2 * n_coarse:2], step_m[j, :n_coarse],
+                    step_u[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1) - step_u[j, :n_coarse], h)
+                hot = refinement_levels(indicators / scale_u, h, rtol)
+            else:
+                hot = None  # a failed solve: refine everywhere
+            new = bisect(coarse[j], hot)
+            if new.size - 1 > max_steps or np.min(np.diff(new)) < MIN_STEP:
+                keep[j] = False  # out of budget: TOLERANCE_NOT_REACHED or the kernel's reason
+                if return_series and ok[j]:
+                    series[i] = ser[m + j, :2 * n_coarse].copy()
+                    series_tau[i] = fine[j][:-1]
+                continue
+            grids[i] = new
+        active = active[keep]
         level += 1
-        n_steps *= 2
 
     failed = status != CONVERGED
     # report the kernel's own reason where the last grid failed outright
