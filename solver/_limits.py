@@ -93,7 +93,7 @@ def _quasi_static(code, params, tau, mu_n, mu_s, p, dtau):
     return out
 
 
-def fast_limit_velocity(kinematics, physics, n_steps=256):
+def fast_limit_velocity(kinematics, physics, n_steps=64):
     """T -> 0 limit: the constant u with zero period-averaged force.
 
     Returns
@@ -121,7 +121,7 @@ def quasi_static_velocity(kinematics, physics, tau):
     return _quasi_static(code, params, tau, physics.mu_n, physics.mu_s, physics.p, physics.delta_tau)
 
 
-def kinematic_speed(kinematics, n_samples=2048):
+def kinematic_speed(kinematics, n_samples=512):
     """V = (1/4) int_0^1 |dphi/dtau| dtau: a deformation speed scale (link lengths per period).
 
     Computed as a quarter of the total variation of phi on a corner-aligned grid

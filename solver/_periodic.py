@@ -67,6 +67,13 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
         det = J11 * J22 - J12 * J21
         x1 = -(J22 * R1 - J12 * R2) / det
         x2 = -(-J21 * R1 + J11 * R2) / det
+        if max(abs(x1), abs(x2)) <= atol:
+            # converged: take the step without a line search (at rounding level the
+            # residual cannot decrease, and backtracking would only burn evaluations)
+            U1 += x1
+            U2 += x2
+            ok = True
+            break
         norm0 = R1 * R1 + R2 * R2
         lam = 1.0
         for _ in range(40):
@@ -80,10 +87,9 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
                 break
             lam *= 0.5
         U1, U2, F1, F2, d1, d2, R1, R2 = T1, T2, G1, G2, g1, g2, S1, S2
-        step = max(abs(lam * x1), abs(lam * x2))
         if not (math.isfinite(U1) and math.isfinite(U2)):
             break
-        if step <= atol or (R1 == 0.0 and R2 == 0.0):
+        if max(abs(lam * x1), abs(lam * x2)) <= atol or (R1 == 0.0 and R2 == 0.0):
             ok = True
             break
     # sensitivities at the converged stages: J s = 1, and m - 1 = e2^T J^-1 (h A D 1)
