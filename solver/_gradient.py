@@ -1,0 +1,713 @@
+"""Exact gradients of the discretised periodic problem by the adjoint method.
+
+The discrete problem (one parameter point, a fixed grid tau_0 = 0 < ... < tau_N = 1).
+The unknowns are the Radau IIA stages x_n = (U1_n, U2_n) of every step, U1 at
+t_n + h_n/3 and U2 at t_{n+1}; the method is stiffly accurate, so u_{n+1} = U2_n
+and periodicity closes the cycle, u_0 = U2_{N-1}.  With F_j = F(U_j; phi_j,
+omega_j, delta_tau) (eq. Newtonu) and kappa = T^(2-p) the residuals are
+
+    R_i,n = U_i,n - U2_{n-1} - h_n kappa sum_j a_ij F_j,n        (i = 1, 2; n - 1 mod N)
+
+and the objectives are built from the Radau-weighted period integrals
+
+    I_u = sum_n h_n (3/4 U1_n + 1/4 U2_n),   I_Pi = sum_n h_n (3/4 Pi(U1_n) + 1/4 Pi(U2_n)),
+    U = I_u / T,  P = T^-(p+1) I_Pi,  lambda = sign(U) |U|^(p+1) / P   (eqs. U, powerp, lambdap).
+
+Adjoint.  For I in {I_u, I_Pi}: dI/dtheta = dI/dtheta|_x - l^T dR/dtheta with
+(dR/dx)^T l = (dI/dx)^T.  dR/dx is cyclic block-bidiagonal: the 2 x 2 stage
+Jacobian J_n on the diagonal and -(1, 1)^T e_2^T coupling step n to U2_{n-1}.
+Its transpose gives, with sigma_n = l1_n + l2_n,
+
+    J_n^T l_n = g_n + e_2 sigma_{n+1},     sigma_n = c_n + m_n sigma_{n+1},
+
+where c_n = (J_n^-1 1) . g_n and m_n = (J_n^-1 1)_2 = du_{n+1}/du_n is the same
+step derivative the forward shooting multiplies into the monodromy M.  So the
+adjoint is one backward sweep: sigma_0 = (sum_n (prod_{k<n} m_k) c_n) / (1 - M),
+with 1 - M accumulated as -expm1(sum log m_n) like the forward solve, then
+sigma_n and l_n step by step backward (|m_n| <~ 1, so the backward recursion is
+stable; it is O(N), both right-hand sides at once).
+
+Parameter dependence.  phi and omega at the stages depend on the family's
+parameters; for the power law the grid moves with tau0: every node keeps its
+fraction of its phase (closing [0, tau0], opening [tau0, 1]), so the stage
+fractions x are fixed, phi there does not depend on tau0, omega ~ 1/(phase
+length) does, and so do the step lengths h_n.  T enters through kappa, delta_tau
+= T delta and the prefactors of U and P.
+
+Partial derivatives of F and Pi (``force_partials``).  They are integrals over the
+link of the s-derivatives of the integrands, evaluated by composite 10-point
+Gauss-Legendre.  The integrand is analytic in s except at s* +- i eta, where
+w(s*) = 0 and eta = e / |omega| (e^2 = c^2 + delta_tau^2).  The panels are graded
+geometrically (ratio 1/2) toward the nearest real point s_c of [0, 1/2] down to
+a panel no longer than the distance rho = |s* - s_c + i eta|; every panel then
+sees the singularity outside the Bernstein ellipse of parameter >= 4.6, so each
+panel is exact to ~4.6^-20 ~ 1e-13 of its own size.  Near the kink w is formed
+from the offset s - s_c (see ``_panel``): forming it as -u S + omega (s - S^2/4)
+lost up to 3 digits of dF/du there.  Measured (2700 inputs concentrated on the
+hard cases: kink inside the link, apex at rest, omega from 1e-6 to 10; p in
+{0, 0.5, 1.5}; delta_tau in {1e-2, 1e-5, 1e-9}): F and Pi agree with the closed
+forms of ``force_and_slope`` / ``power_density`` to <= 7e-15 relative, dF/du to
+<= 1e-11.  Against 30-digit mpmath quadrature of the differentiated integrands
+(96 of those inputs, p in {0, 0.5, 1, 1.5}), relative to |ref| + int |integrand|:
+F_u 6e-12, F_phi 2e-14, F_delta 5e-11, Pi and its partials <= 3e-14, F_omega
+<= 1e-13 except at u ~ 0, where F_omega vanishes pointwise (F is homogeneous of
+degree 0 in (u, omega) at p = 0) and the error is ~1e-18 absolute against the
+natural scale mu / |omega|.  The phi, omega, delta_tau derivatives also match
+Richardson-extrapolated central differences of the closed forms to the
+differences' own accuracy (tests/test_gradient.py).  At most 2 x 57 panels (56 halvings: the last panel
+carries < 2^-56 of the link).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ._force import E_FLOOR, force_and_slope, power_density
+from ._kinematics import (FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, angle_and_rate,
+                          period_grid)
+from ._limits import fast_limit_velocity
+from ._periodic import _solve_point, radau_step
+from ._physics import Physics
+from ._status import CONVERGED, STAGE_SOLVE_FAILED
+
+_x10, _w10 = np.polynomial.legendre.leggauss(10)
+GL10_NODES = 0.5 * (_x10 + 1.0)
+GL10_WEIGHTS = 0.5 * _w10
+#: most halvings of a side of the link toward the near-singular point
+MAX_GRADING_LEVELS = 56
+
+OBJECTIVES = ("efficiency", "speed", "power")
+
+
+# ---------------------------------------------------------------------------------------------
+# partial derivatives of the force and the power density
+
+
+@njit(cache=True)
+def _panel(s_c, w_c, lo, hi, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
+    """Add 10-point Gauss-Legendre sums over s in [s_c + lo, s_c + hi] of the integrands to ``acc``.
+
+    w = w_c + omega (s - s_c) is formed from the offset s - s_c, with w_c = w(s_c)
+    (0 at an interior kink): near the kink w is then exact to rounding relative to
+    itself, where -u S + omega (s - S^2/4) would carry an absolute error ~1e-16 |u S|
+    that the peak of width e in w magnifies by 1/e.
+
+    acc: [G, G_u, G_phi, G_omega, G_delta, H, H_u, H_phi, H_omega, H_delta] with
+    G = (mu_n S w - mu_s C c) r^(p-1) (force) and H = (mu_n w^2 + mu_s c^2) r^(p-1) (power).
+    """
+    length = hi - lo
+    c = C * (u + 0.25 * omega * S)
+    c_u = C
+    c_phi = -S * u + 0.25 * omega * (C * C - S * S)
+    c_om = 0.25 * C * S
+    e2 = c * c + dtau * dtau
+    if e2 < E_FLOOR * E_FLOOR:
+        e2 = E_FLOOR * E_FLOOR
+    w_u = -S
+    w_phi = -u * C - 0.5 * omega * S * C
+    for q in range(10):
+        t = lo + length * GL10_NODES[q]
+        wt = length * GL10_WEIGHTS[q]
+        s = s_c + t
+        w = w_c + omega * t
+        w_om = s - 0.25 * S * S
+        r2 = w * w + e2
+        if p == 1.0:
+            g0 = 1.0
+            g1 = 0.0
+        elif p == 0.0:  # Coulomb: a square root instead of a power
+            g0 = 1.0 / math.sqrt(r2)
+            g1 = -g0 / r2
+        else:
+            g0 = r2 ** (0.5 * (p - 1.0))
+            g1 = (p - 1.0) * g0 / r2  # d(r^(p-1)) / d(r^2 / 2)
+        # d(r^2/2) along each variable
+        q_u = w * w_u + c * c_u
+        q_phi = w * w_phi + c * c_phi
+        q_om = w * w_om + c * c_om
+        q_del = dtau
+        N = mu_n * S * w - mu_s * C * c
+        N_u = mu_n * S * w_u - mu_s * C * c_u
+        N_phi = mu_n * (C * w + S * w_phi) - mu_s * (-S * c + C * c_phi)
+        N_om = mu_n * S * w_om - mu_s * C * c_om
+        H = mu_n * w * w + mu_s * c * c
+        H_u = 2.0 * (mu_n * w * w_u + mu_s * c * c_u)
+        H_phi = 2.0 * (mu_n * w * w_phi + mu_s * c * c_phi)
+        H_om = 2.0 * (mu_n * w * w_om + mu_s * c * c_om)
+        acc[0] += wt * N * g0
+        acc[1] += wt * (N_u * g0 + N * g1 * q_u)
+        acc[2] += wt * (N_phi * g0 + N * g1 * q_phi)
+        acc[3] += wt * (N_om * g0 + N * g1 * q_om)
+        acc[4] += wt * (N * g1 * q_del)
+        acc[5] += wt * H * g0
+        acc[6] += wt * (H_u * g0 + H * g1 * q_u)
+        acc[7] += wt * (H_phi * g0 + H * g1 * q_phi)
+        acc[8] += wt * (H_om * g0 + H * g1 * q_om)
+        acc[9] += wt * (H * g1 * q_del)
+
+
+@njit(cache=True)
+def _graded_side(s_c, w_c, end, rho, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
+    """Panels on [s_c, end] (either order), halving toward s_c down to length <= rho."""
+    L = abs(end - s_c)
+    if L == 0.0:
+        return
+    direction = 1.0 if end > s_c else -1.0
+    levels = 0
+    if rho < L:
+        levels = min(int(math.ceil(math.log2(L / rho))), MAX_GRADING_LEVELS)
+    outer = L
+    for _ in range(levels):
+        inner = 0.5 * outer
+        a = direction * inner
+        b = direction * outer
+        _panel(s_c, w_c, min(a, b), max(a, b), u, S, C, omega, dtau, p, mu_n, mu_s, acc)
+        outer = inner
+    b = direction * outer
+    _panel(s_c, w_c, min(0.0, b), max(0.0, b), u, S, C, omega, dtau, p, mu_n, mu_s, acc)
+
+
+@njit(cache=True)
+def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
+    """F, Pi and their partial derivatives in u, phi, omega and delta_tau.
+
+    Parameters as ``force_and_slope``.  Accuracy ~1e-12 relative (module docstring).
+
+    Returns
+    -------
+    ndarray, shape (10,)
+        [F, F_u, F_phi, F_omega, F_delta_tau, Pi, Pi_u, Pi_phi, Pi_omega, Pi_delta_tau];
+        F = 2 int_0^{1/2} f_x ds (eq. Newtonu), Pi the integrand of eq. (powerp).
+    """
+    S = math.sin(phi)
+    C = math.cos(phi)
+    acc = np.zeros(10)
+    c = C * (u + 0.25 * omega * S)
+    e = math.sqrt(c * c + delta_tau * delta_tau)
+    a = -u * S - 0.25 * omega * S * S
+    if omega == 0.0 or p == 1.0:
+        # polynomial or constant in s: one panel is exact
+        _panel(0.0, a, 0.0, 0.5, u, S, C, omega, delta_tau, p, mu_n, mu_s, acc)
+    else:
+        s_star = -a / omega
+        eta = e / abs(omega)
+        s_c = min(max(s_star, 0.0), 0.5)
+        rho = math.hypot(s_star - s_c, eta)
+        if s_c == s_star:
+            w_c = 0.0
+        elif s_c == 0.0:
+            w_c = a
+        else:
+            w_c = a + 0.5 * omega
+        _graded_side(s_c, w_c, 0.5, rho, u, S, C, omega, delta_tau, p, mu_n, mu_s, acc)
+        _graded_side(s_c, w_c, 0.0, rho, u, S, C, omega, delta_tau, p, mu_n, mu_s, acc)
+    for k in range(10):
+        acc[k] *= 2.0
+    return acc
+
+
+# ---------------------------------------------------------------------------------------------
+# parameter derivatives of the kinematics at the stages
+
+
+@njit(cache=True)
+def n_family_parameters(code, params):
+    """Number of free parameters of the encoding.
+
+    Fourier: [A0..AK, B1..BK]; power law: [A0, A1, tau0, gamma_c, gamma_o].
+    """
+    if code == FOURIER:
+        return 2 * int(params[0]) + 1
+    return 5
+
+
+@njit(cache=True)
+def _z_power_log(z, g):
+    """(z^g ln z, z^(g-1) ln z) with the z -> 0 limits 0 (exact for g > 1)."""
+    if z <= 0.0:
+        return 0.0, 0.0
+    lz = math.log(z)
+    return z ** g * lz, z ** (g - 1.0) * lz
+
+
+@njit(cache=True)
+def angle_partials(code, params, t, tau_phase, dphi, domega):
+    """d phi / d theta and d omega / d theta at time ``t`` of a step around ``tau_phase``.
+
+    For the power law the time moves with tau0 (fixed fraction of its phase), so these
+    are total derivatives along the moving grid.  Writes ``dphi``, ``domega`` (n_par,).
+    """
+    if code == FOURIER:
+        K = int(params[0])
+        dphi[0] = 1.0
+        domega[0] = 0.0
+        for k in range(1, K + 1):
+            wk = 2.0 * math.pi * k
+            ca = math.cos(wk * t)
+            sa = math.sin(wk * t)
+            dphi[k] = ca
+            domega[k] = -wk * sa
+            dphi[K + k] = sa
+            domega[K + k] = wk * ca
+        return
+    A1, tau0, gc, cup, go, oup = params[1], params[2], params[3], params[4], params[5], params[6]
+    for k in range(5):
+        dphi[k] = 0.0
+        domega[k] = 0.0
+    dphi[0] = 1.0
+    tt = t - math.floor(tau_phase)
+    tp = tau_phase - math.floor(tau_phase)
+    if tp <= tau0:  # closing: phi falls, phase length tau0
+        x = min(max(tt / tau0, 0.0), 1.0)
+        length, dlength, sign, g, gi, x_case = tau0, 1.0, -1.0, gc, 3, cup < 0.5
+    else:
+        x = min(max((tt - tau0) / (1.0 - tau0), 0.0), 1.0)
+        length, dlength, sign, g, gi, x_case = 1.0 - tau0, -1.0, 1.0, go, 4, oup > 0.5
+    # phi = A0 - s_phi A1 + 2 s_phi A1 z^g,  omega = sign 2 A1 g z^(g-1) / length
+    if x_case:
+        z = x
+        s_phi = sign
+    else:
+        z = 1.0 - x
+        s_phi = -sign
+    zg = z ** g
+    zg1 = z ** (g - 1.0)
+    zgl, zg1l = _z_power_log(z, g)
+    omega = sign * 2.0 * A1 * g * zg1 / length
+    dphi[1] = s_phi * (2.0 * zg - 1.0)
+    dphi[gi] = 2.0 * s_phi * A1 * zgl
+    domega[1] = sign * 2.0 * g * zg1 / length
+    domega[2] = -omega * dlength / length
+    domega[gi] = sign * 2.0 * A1 * (zg1 + g * zg1l) / length
+
+
+@njit(cache=True)
+def step_length_partials(code, params, h, tau_phase, dh):
+    """d h / d theta for a step of length h around ``tau_phase`` (nonzero only for tau0)."""
+    for k in range(dh.shape[0]):
+        dh[k] = 0.0
+    if code == POWER_LAW:
+        tau0 = params[2]
+        tp = tau_phase - math.floor(tau_phase)
+        dh[2] = h / tau0 if tp <= tau0 else -h / (1.0 - tau0)
+
+
+# ---------------------------------------------------------------------------------------------
+# forward solve with the stages kept, and the adjoint sweep
+
+
+@njit(cache=True)
+def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol, stages):
+    """Periodic solution on ``grid`` (N steps); writes the converged stages (2N,).
+
+    Returns (status, u0).  The shooting is the solver's own (``_solve_point``); one
+    more sweep from the converged u(0) records the stages.  ``vscale`` <= 0: computed
+    here from the grid.
+    """
+    if vscale <= 0.0:  # (1/4) int |dphi/dtau| by the Radau rule: a speed scale for the tolerances
+        vscale = 0.0
+        for n in range(N):
+            h = grid[n + 1] - grid[n]
+            mid = grid[n] + 0.5 * h
+            _, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
+            _, om2 = angle_and_rate(code, params, grid[n + 1], mid)
+            vscale += 0.25 * h * (0.75 * abs(om1) + 0.25 * abs(om2))
+        vscale = max(vscale, 1e-300)
+    u_nodes = np.empty(N)
+    scratch = np.empty((3, N))
+    _, _, u0, status, _, _ = _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0,
+                                          vscale, rtol, u_nodes, scratch[0], scratch[1], scratch[2])
+    if status != CONVERGED:
+        return status, u0
+    atol = max(1e-5 * rtol, 1e-14) * vscale
+    u = u0
+    for n in range(N):
+        h = grid[n + 1] - grid[n]
+        mid = grid[n] + 0.5 * h
+        phi1, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
+        phi2, om2 = angle_and_rate(code, params, grid[n + 1], mid)
+        guess2 = u_nodes[(n + 1) % N]
+        U1, U2, _, _, _, _, ok = radau_step(u, (2.0 * u + guess2) / 3.0, guess2, h, phi1, om1,
+                                            phi2, om2, kappa, mu_n, mu_s, p, dtau, atol)
+        if not ok:
+            return STAGE_SOLVE_FAILED, u0
+        stages[2 * n] = U1
+        stages[2 * n + 1] = U2
+        u = U2
+    return CONVERGED, u0
+
+
+@njit(cache=True)
+def _integrals(code, params, grid, N, mu_n, mu_s, p, dtau, stages):
+    """(I_u, I_Pi) with the Radau weights from the stages, Pi by the solver's ``power_density``."""
+    int_u = 0.0
+    int_pi = 0.0
+    for n in range(N):
+        h = grid[n + 1] - grid[n]
+        mid = grid[n] + 0.5 * h
+        phi1, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
+        phi2, om2 = angle_and_rate(code, params, grid[n + 1], mid)
+        U1 = stages[2 * n]
+        U2 = stages[2 * n + 1]
+        int_u += h * (0.75 * U1 + 0.25 * U2)
+        int_pi += h * (0.75 * power_density(U1, phi1, om1, mu_n, mu_s, p, dtau)
+                       + 0.25 * power_density(U2, phi2, om2, mu_n, mu_s, p, dtau))
+    return int_u, int_pi
+
+
+@njit(cache=True)
+def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, grad):
+    """Period integrals and their gradients from the converged stages.
+
+    ``grad`` has shape (2, n_par + 2): rows I_u and I_Pi; columns the family
+    parameters, then kappa, then delta_tau (each held independent of the others).
+    Returns (I_u, I_Pi, 1 - M).
+    """
+    a11, a12, a21, a22 = 5.0 / 12.0, -1.0 / 12.0, 0.75, 0.25
+    b1, b2 = 0.75, 0.25
+    n_par = grad.shape[1] - 2
+    jac = np.empty((N, 4))      # J11, J12, J21, J22
+    sens = np.empty((N, 2))     # J^-1 1 = (dU1/du_n, dU2/du_n)
+    rhs = np.empty((N, 2, 2))   # [step, functional, stage]: dI/dx
+    part = np.empty((N, 2, 10))  # force_partials at the two stages
+    log_m = 0.0
+    sign_m = 1.0
+    for n in range(N):
+        h = grid[n + 1] - grid[n]
+        mid = grid[n] + 0.5 * h
+        phi1, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
+        phi2, om2 = angle_and_rate(code, params, grid[n + 1], mid)
+        U1 = stages[2 * n]
+        U2 = stages[2 * n + 1]
+        part[n, 0] = force_partials(U1, phi1, om1, mu_n, mu_s, p, dtau)
+        part[n, 1] = force_partials(U2, phi2, om2, mu_n, mu_s, p, dtau)
+        # the Jacobian uses the closed-form slope: the derivative of what the residual evaluates
+        _, d1 = force_and_slope(U1, phi1, om1, mu_n, mu_s, p, dtau)
+        _, d2 = force_and_slope(U2, phi2, om2, mu_n, mu_s, p, dtau)
+        hd1 = h * kappa * d1
+        hd2 = h * kappa * d2
+        J11 = 1.0 - a11 * hd1
+        J12 = -a12 * hd2
+        J21 = -a21 * hd1
+        J22 = 1.0 - a22 * hd2
+        det = J11 * J22 - J12 * J21
+        jac[n, 0], jac[n, 1], jac[n, 2], jac[n, 3] = J11, J12, J21, J22
+        sens[n, 0] = (J22 - J12) / det
+        sens[n, 1] = (J11 - J21) / det
+        v1 = a11 * hd1 + a12 * hd2
+        v2 = a21 * hd1 + a22 * hd2
+        mm1 = (-J21 * v1 + J11 * v2) / det  # m_n - 1 without cancellation
+        if mm1 <= -1.0:
+            sign_m = -sign_m
+            log_m += math.log(-1.0 - mm1) if mm1 < -1.0 else -math.inf
+        else:
+            log_m += math.log1p(mm1)
+        rhs[n, 0, 0] = h * b1
+        rhs[n, 0, 1] = h * b2
+        rhs[n, 1, 0] = h * b1 * part[n, 0, 6]
+        rhs[n, 1, 1] = h * b2 * part[n, 1, 6]
+    one_minus_M = -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
+
+    # sigma_0 = A_0 / (1 - M), A_n = c_n + m_n A_{n+1}, A_N = 0
+    sigma0 = np.zeros(2)
+    for f in range(2):
+        A = 0.0
+        for n in range(N - 1, -1, -1):
+            A = sens[n, 0] * rhs[n, f, 0] + sens[n, 1] * rhs[n, f, 1] + sens[n, 1] * A
+        sigma0[f] = A / one_minus_M
+
+    for k in range(grad.shape[1]):
+        grad[0, k] = 0.0
+        grad[1, k] = 0.0
+    dphi1 = np.empty(n_par)
+    dom1 = np.empty(n_par)
+    dphi2 = np.empty(n_par)
+    dom2 = np.empty(n_par)
+    dh = np.empty(n_par)
+    sigma_next = sigma0.copy()
+    for n in range(N - 1, -1, -1):
+        h = grid[n + 1] - grid[n]
+        mid = grid[n] + 0.5 * h
+        angle_partials(code, params, grid[n] + h / 3.0, mid, dphi1, dom1)
+        angle_partials(code, params, grid[n + 1], mid, dphi2, dom2)
+        step_length_partials(code, params, h, mid, dh)
+        J11, J12, J21, J22 = jac[n, 0], jac[n, 1], jac[n, 2], jac[n, 3]
+        det = J11 * J22 - J12 * J21
+        P1 = part[n, 0]
+        P2 = part[n, 1]
+        U1 = stages[2 * n]
+        U2 = stages[2 * n + 1]
+        for f in range(2):
+            r1 = rhs[n, f, 0]
+            r2 = rhs[n, f, 1] + sigma_next[f]
+            l1 = (J22 * r1 - J21 * r2) / det
+            l2 = (-J12 * r1 + J11 * r2) / det
+            sigma_next[f] = l1 + l2
+            q1 = a11 * l1 + a21 * l2  # A^T l
+            q2 = a12 * l1 + a22 * l2
+            qF = q1 * P1[0] + q2 * P2[0]
+            hk = h * kappa
+            # dI/dtheta = dI/dtheta|_x + d(h kappa)/dtheta (q.F) + h kappa sum_j q_j dF_j/dtheta
+            if f == 0:
+                direct_h = b1 * U1 + b2 * U2
+            else:
+                direct_h = b1 * P1[5] + b2 * P2[5]
+            for k in range(n_par):
+                dF1 = P1[2] * dphi1[k] + P1[3] * dom1[k]
+                dF2 = P2[2] * dphi2[k] + P2[3] * dom2[k]
+                g = dh[k] * (direct_h + kappa * qF) + hk * (q1 * dF1 + q2 * dF2)
+                if f == 1:
+                    g += h * (b1 * (P1[7] * dphi1[k] + P1[8] * dom1[k])
+                              + b2 * (P2[7] * dphi2[k] + P2[8] * dom2[k]))
+                grad[f, k] += g
+            grad[f, n_par] += h * qF
+            grad[f, n_par + 1] += hk * (q1 * P1[4] + q2 * P2[4])
+            if f == 1:
+                grad[f, n_par + 1] += h * (b1 * P1[9] + b2 * P2[9])
+    int_u, int_pi = _integrals(code, params, grid, N, mu_n, mu_s, p, dtau, stages)
+    return int_u, int_pi, one_minus_M
+
+
+# ---------------------------------------------------------------------------------------------
+# Python layer: parameter maps, the fixed grid, the objective and its gradient
+
+
+def family_parameters(kinematics):
+    """(names, values) of the continuous parameters of a one-point family, in gradient order."""
+    if isinstance(kinematics, Harmonic):
+        return ["A0", "A1"], np.array([kinematics.A0[0], kinematics.A1[0]])
+    if isinstance(kinematics, Fourier):
+        K = kinematics.max_wavenumber
+        names = [f"A{k}" for k in range(K + 1)] + [f"B{k}" for k in range(1, K + 1)]
+        return names, np.concatenate([kinematics.A[0], kinematics.B[0]])
+    if isinstance(kinematics, PowerLaw):
+        names = ["A0", "A1", "duty_cycle", "closing_exponent", "opening_exponent"]
+        return names, np.array([kinematics.A0[0], kinematics.A1[0], kinematics.duty_cycle[0],
+                                kinematics.closing_exponent[0], kinematics.opening_exponent[0]])
+    raise TypeError(f"kinematics: unsupported family {type(kinematics).__name__}")
+
+
+def with_family_parameters(template, values):
+    """A one-point family like ``template`` with its continuous parameters set to ``values``."""
+    values = np.asarray(values, dtype=float)
+    if isinstance(template, Harmonic):
+        return Harmonic(values[0], values[1])
+    if isinstance(template, Fourier):
+        K = template.max_wavenumber
+        return Fourier(values[None, :K + 1], values[None, K + 1:])
+    if isinstance(template, PowerLaw):
+        return PowerLaw(values[0], values[1], values[2], values[3], template.closing_concave_up,
+                        values[4], template.opening_concave_up)
+    raise TypeError(f"template: unsupported family {type(template).__name__}")
+
+
+@dataclass(frozen=True)
+class FixedGrid:
+    """A grid that is part of the discretisation, fixed while parameters change.
+
+    For the power law the nodes are stored as fractions of their phase (closing
+    [0, tau0], opening [tau0, 1]) and move with tau0; otherwise as times.
+
+    Attributes
+    ----------
+    closing, opening : ndarray
+        Power law: node fractions 0 = xi_0 < ... < xi_m = 1 of each phase.
+        Other families: ``closing`` holds the nodes 0 = tau_0 < ... < tau_N = 1 and
+        ``opening`` is empty.
+    two_phase : bool
+    """
+
+    closing: np.ndarray
+    opening: np.ndarray
+    two_phase: bool
+
+    @classmethod
+    def from_nodes(cls, kinematics, nodes):
+        """From the nodes of ``kinematics`` (one point), e.g. a converged solve's final grid."""
+        nodes = np.asarray(nodes, dtype=float)
+        if nodes[-1] != 1.0:
+            nodes = np.append(nodes, 1.0)
+        if nodes[0] != 0.0 or np.any(np.diff(nodes) <= 0):
+            raise ValueError("nodes: must increase from 0 to 1")
+        if isinstance(kinematics, PowerLaw):
+            tau0 = kinematics.duty_cycle[0]
+            j = int(np.argmin(np.abs(nodes - tau0)))
+            if abs(nodes[j] - tau0) > 1e-14:
+                raise ValueError("nodes: the power law's grid must have a node at tau0")
+            closing = nodes[:j + 1] / tau0
+            opening = (nodes[j:] - tau0) / (1.0 - tau0)
+            closing[-1] = opening[-1] = 1.0
+            opening[0] = 0.0
+            return cls(closing, opening, True)
+        return cls(nodes, np.zeros(0), False)
+
+    @classmethod
+    def uniform(cls, kinematics, n_steps):
+        """``period_grid`` of ``n_steps`` steps (a multiple of 8)."""
+        return cls.from_nodes(kinematics, period_grid(kinematics, n_steps)[0])
+
+    def nodes(self, kinematics):
+        """Node times tau_0 = 0 < ... < tau_N = 1 for ``kinematics`` (one point)."""
+        if not self.two_phase:
+            return self.closing.copy()
+        tau0 = kinematics.duty_cycle[0]
+        return np.concatenate([self.closing * tau0, tau0 + self.opening[1:] * (1.0 - tau0)])
+
+    @property
+    def n_steps(self):
+        return self.closing.size - 1 + max(self.opening.size - 1, 0)
+
+
+def adaptive_grid(kinematics, physics, *, rtol=1e-6, max_steps_per_period=None):
+    """The final grid of ``solve_periodic`` at ``rtol`` (one point) as a ``FixedGrid``."""
+    from ._solve import solve_periodic
+    res = solve_periodic(kinematics, physics, rtol=rtol, return_series=True,
+                         max_steps_per_period=max_steps_per_period)
+    if not res.converged[0]:
+        raise RuntimeError(f"adaptive solve did not converge (status {res.status[0]})")
+    return FixedGrid.from_nodes(kinematics, np.append(res.tau[0], 1.0))
+
+
+@dataclass(frozen=True)
+class GradientResult:
+    """Objective values and exact gradients of the discretised problem (one point).
+
+    names : parameter names, the family's then "period"
+    U, P, efficiency : mean speed, mean power, lambda (eqs. U, powerp, lambdap)
+    grad_U, grad_P, grad_efficiency : ndarray, shape (n_params,)  (same order as names)
+    value, gradient : the selected objective and its gradient
+    status : 0 converged; u0 : u(0) (warm start for the next solve); one_minus_monodromy : 1 - M
+    """
+
+    names: list
+    U: float
+    P: float
+    efficiency: float
+    grad_U: np.ndarray
+    grad_P: np.ndarray
+    grad_efficiency: np.ndarray
+    value: float
+    gradient: np.ndarray
+    status: int
+    u0: float
+    one_minus_monodromy: float
+
+
+def _prepare(kinematics, physics, grid):
+    if len(kinematics) != 1 or len(physics) != 1:
+        raise ValueError("one parameter point at a time (len(kinematics) == len(physics) == 1)")
+    code, params = kinematics.kernel_encoding()
+    nodes = grid.nodes(kinematics)
+    return code, params[0].copy(), nodes
+
+
+def _select(objective, U, P, lam, gU, gP, gL):
+    if objective == "efficiency":
+        return lam, gL
+    if objective == "speed":
+        return U, gU
+    if objective == "power":
+        return P, gP
+    raise ValueError(f"objective: expected one of {OBJECTIVES}, got {objective!r}")
+
+
+def discrete_objective(kinematics, physics, grid, *, objective="efficiency", rtol=1e-13, u0=None):
+    """The objective of the discretised problem without its gradient.
+
+    Returns (value, U, P, efficiency, status, u0).
+    """
+    code, params, nodes = _prepare(kinematics, physics, grid)
+    N = nodes.size - 1
+    if u0 is None:
+        u0 = float(fast_limit_velocity(kinematics, physics)[0])
+    stages = np.empty(2 * N)
+    status, u0 = _forward(code, params, nodes, N, float(physics.inertia_factor[0]),
+                          float(physics.mu_n[0]), float(physics.mu_s[0]), float(physics.p[0]),
+                          float(physics.delta_tau[0]), u0, 0.0, rtol, stages)
+    if status != CONVERGED:
+        return math.nan, math.nan, math.nan, math.nan, int(status), u0
+    int_u, int_pi = _integrals(code, params, nodes, N, float(physics.mu_n[0]),
+                               float(physics.mu_s[0]), float(physics.p[0]),
+                               float(physics.delta_tau[0]), stages)
+    U, P, lam = _physics_outputs(int_u, int_pi, physics)
+    value = {"efficiency": lam, "speed": U, "power": P}[objective]
+    return value, U, P, lam, int(status), u0
+
+
+def _physics_outputs(int_u, int_pi, physics):
+    T = float(physics.period[0])
+    p = float(physics.p[0])
+    U = int_u / T
+    P = int_pi * T ** -(p + 1.0)
+    lam = math.copysign(abs(U) ** (p + 1.0), U) / P
+    return U, P, lam
+
+
+def objective_gradient(kinematics, physics, grid, *, objective="efficiency", rtol=1e-13, u0=None):
+    """Objective of the discretised problem on ``grid`` and its exact gradient (adjoint method).
+
+    Parameters
+    ----------
+    kinematics : Harmonic | Fourier | PowerLaw
+        One parameter point.
+    physics : Physics
+        One point; the gradient includes d/dT (last entry) at fixed mu_n, mu_s, p, delta.
+    grid : FixedGrid
+        The discretisation (moves with tau0 for the power law).
+    objective : {"efficiency", "speed", "power"}
+        lambda (eq. lambdap), U or P.
+    rtol : float
+        Tolerance of the nonlinear iterations (shooting, stage Newton), not of the grid.
+    u0 : float, optional
+        Starting u(0) for the shooting (default: the fast-motion limit).
+
+    Returns
+    -------
+    GradientResult
+    """
+    names, _ = family_parameters(kinematics)
+    code, params, nodes = _prepare(kinematics, physics, grid)
+    N = nodes.size - 1
+    T = float(physics.period[0])
+    p = float(physics.p[0])
+    delta = float(physics.delta[0])
+    kappa = float(physics.inertia_factor[0])
+    dtau = float(physics.delta_tau[0])
+    if u0 is None:
+        u0 = float(fast_limit_velocity(kinematics, physics)[0])
+    stages = np.empty(2 * N)
+    status, u0 = _forward(code, params, nodes, N, kappa, float(physics.mu_n[0]),
+                          float(physics.mu_s[0]), p, dtau, u0, 0.0, rtol, stages)
+    n_out = len(names) + 1
+    if status != CONVERGED:
+        nan = np.full(n_out, np.nan)
+        return GradientResult(names + ["period"], math.nan, math.nan, math.nan, nan, nan, nan,
+                              math.nan, nan, int(status), u0, math.nan)
+    n_par = n_family_parameters(code, params)
+    grad = np.empty((2, n_par + 2))
+    int_u, int_pi, one_minus_M = _adjoint(code, params, nodes, N, kappa, float(physics.mu_n[0]),
+                                          float(physics.mu_s[0]), p, dtau, stages, grad)
+    n_fam = len(names)  # the harmonic encoding carries B1 = 0: drop its column
+    d_int = np.empty((2, n_out))
+    d_int[:, :n_fam] = grad[:, :n_fam]
+    # T enters through kappa = T^(2-p) and delta_tau = T delta
+    d_int[:, n_fam] = grad[:, n_par] * (2.0 - p) * kappa / T + grad[:, n_par + 1] * delta
+    U, P, lam = _physics_outputs(int_u, int_pi, physics)
+    gU = d_int[0] / T
+    gU[n_fam] -= U / T
+    gP = d_int[1] * T ** -(p + 1.0)
+    gP[n_fam] -= (p + 1.0) * P / T
+    # lambda = sign(U) |U|^(p+1) / P
+    gL = lam * ((p + 1.0) * gU / U - gP / P)
+    value, gradient = _select(objective, U, P, lam, gU, gP, gL)
+    return GradientResult(names + ["period"], U, P, lam, gU, gP, gL, value, gradient,
+                          int(status), u0, one_minus_M)
+
+
+def with_period(physics, period):
+    """``physics`` (one point) with the period T replaced."""
+    return Physics(period=period, mu_n=physics.mu_n, mu_s=physics.mu_s, p=physics.p,
+                   delta=physics.delta)

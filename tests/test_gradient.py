@@ -1,0 +1,241 @@
+"""Adjoint gradients of the discretised problem against central differences of the same problem.
+
+The differences are taken on the same FixedGrid (which moves with tau0 for the power
+law), with nonlinear tolerances at rounding level, along random directions, and
+Richardson-extrapolated (steps eps and eps/2) so that their own error (~1e-10) is far
+below the asserted 1e-6.
+"""
+import math
+
+import mpmath as mp
+import numpy as np
+import pytest
+
+import solver
+from solver._gradient import (FixedGrid, adaptive_grid, discrete_objective, family_parameters,
+                              force_partials, objective_gradient, with_family_parameters,
+                              with_period)
+
+MU_N, MU_S = 0.3, 1.7
+
+
+def _hard_inputs(rng, n):
+    """(u, phi, omega): kink inside the link, apex at rest (c = 0), tiny and large omega."""
+    out = []
+    for k in range(n):
+        phi = rng.uniform(-1.0, 4.0)
+        omega = rng.normal() * [1e-6, 1e-2, 1.0, 10.0][k % 4]
+        u = rng.normal() * [1e-6, 1e-2, 1.0][k % 3]
+        if k % 5 == 0:
+            u = -omega * math.sin(phi) / 4 + 1e-7 * rng.normal()  # c ~ 0: kink at s = 0
+        if k % 3 == 1:
+            s_kink = rng.uniform(0.02, 0.48)  # v_n = 0 at an interior point of the link
+            u = (omega * s_kink - omega * math.sin(phi) ** 2 / 4) / math.sin(phi)
+        out.append((u, phi, omega))
+    return out
+
+
+# -- the partial derivatives of F and Pi -------------------------------------------------------
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.0, 1.5])
+@pytest.mark.parametrize("delta_tau", [1e-2, 1e-5, 1e-9])
+def test_force_partials_values_match_closed_forms(p, delta_tau):
+    # F, dF/du and Pi: the graded Gauss-Legendre rule against the closed forms of _force
+    rng = np.random.default_rng(int(10 * p) + int(-math.log10(delta_tau)))
+    for u, phi, omega in _hard_inputs(rng, 60):
+        P = force_partials(u, phi, omega, MU_N, MU_S, p, delta_tau)
+        F, dF = solver.force_and_slope(u, phi, omega, MU_N, MU_S, p, delta_tau)
+        Pi = solver.power_density(u, phi, omega, MU_N, MU_S, p, delta_tau)
+        force_scale = MU_N * abs(math.sin(phi)) + MU_S * abs(math.cos(phi))
+        assert abs(P[0] - F) <= 1e-12 * (abs(F) + force_scale), (u, phi, omega)
+        assert abs(P[1] - dF) <= 1e-11 * abs(dF) + 1e-13 * force_scale, (u, phi, omega)
+        assert abs(P[5] - Pi) <= 1e-12 * abs(Pi) + 1e-300, (u, phi, omega)
+
+
+def _richardson(fun, x, k, step):
+    def central(h):
+        xp, xm = list(x), list(x)
+        xp[k] += h
+        xm[k] -= h
+        return (fun(*xp) - fun(*xm)) / (2 * h)
+    return (4 * central(step / 2) - central(step)) / 3
+
+
+def _force_and_power(u, phi, omega, mu_n, mu_s, p, dtau):
+    return np.array([solver.force_and_slope(u, phi, omega, mu_n, mu_s, p, dtau)[0],
+                     solver.power_density(u, phi, omega, mu_n, mu_s, p, dtau)])
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.5])
+def test_force_partials_match_differences(p):
+    # phi, omega and delta_tau derivatives against differences of force_and_slope / power_density
+    rng = np.random.default_rng(3)
+    dtau = 1e-2
+    for _ in range(40):
+        u, phi, omega = rng.normal(), rng.uniform(-1, 4), 3 * rng.normal()
+        x = [u, phi, omega, MU_N, MU_S, p, dtau]
+        P = force_partials(*x)
+        e = math.hypot(math.cos(phi) * (u + omega * math.sin(phi) / 4), dtau)
+        scale = np.array([MU_N + MU_S, abs(P[5]) + 1e-300])
+        for k, cols in ((1, (2, 7)), (2, (3, 8)), (6, (4, 9))):
+            step = 1e-3 * (dtau if k == 6 else min(e, 1.0))
+            fd = _richardson(_force_and_power, x, k, step)
+            # the differences' own error: truncation ~ (step/e)^4, rounding ~ 1e-16 / step
+            tol = 1e-7 * (np.abs(fd) + scale) + 1e-14 * scale / step
+            assert np.all(np.abs(P[list(cols)] - fd) <= tol), (x, k, P[list(cols)], fd)
+
+
+def _reference_partials(u, phi, omega, mu_n, mu_s, p, dtau, index):
+    """2 int_0^{1/2} of the differentiated integrand by mpmath, split around the kink."""
+    mp.mp.dps = 20
+    u, phi, omega, mu_n, mu_s, p, dtau = map(mp.mpf, (u, phi, omega, mu_n, mu_s, p, dtau))
+    S, C = mp.sin(phi), mp.cos(phi)
+    a = -u * S - omega * S * S / 4
+    c = C * (u + omega * S / 4)
+    if index == 2:  # d/dphi
+        c_v = -S * u + omega * (C * C - S * S) / 4
+        w_v_of = lambda s: -u * C - omega * S * C / 2
+        N_v_of = lambda w, w_v: mu_n * (C * w + S * w_v) - mu_s * (-S * c + C * c_v)
+    else:  # d/domega
+        c_v = C * S / 4
+        w_v_of = lambda s: s - S * S / 4
+        N_v_of = lambda w, w_v: mu_n * S * w_v - mu_s * C * c_v
+
+    def integrand(s):
+        w = a + omega * s
+        w_v = w_v_of(s)
+        r2 = w * w + c * c + dtau * dtau
+        g0 = r2 ** ((p - 1) / 2)
+        g1 = (p - 1) * g0 / r2
+        N = mu_n * S * w - mu_s * C * c
+        return N_v_of(w, w_v) * g0 + N * g1 * (w * w_v + c * c_v)
+
+    pts = [mp.mpf(0), mp.mpf(1) / 2]
+    if omega != 0 and 0 < -a / omega < pts[1]:
+        k = -a / omega
+        eta = mp.sqrt(c * c + dtau * dtau) / abs(omega)
+        inner = [x for x in (k - 10 * eta, k - eta, k, k + eta, k + 10 * eta) if 0 < x < pts[1]]
+        pts = sorted(set(pts + inner))
+    return (float(2 * mp.quad(integrand, pts)),
+            float(2 * mp.quad(lambda s: abs(integrand(s)), pts)))
+
+
+def test_force_partials_match_high_precision_reference():
+    # the near-singular cases: Coulomb friction, tiny delta, kink inside the link
+    rng = np.random.default_rng(11)
+    for u, phi, omega in _hard_inputs(rng, 6):
+        for dtau in (1e-5, 1e-9):
+            P = force_partials(u, phi, omega, MU_N, MU_S, 0.0, dtau)
+            for index in (2, 3):  # F_phi, F_omega
+                ref, size = _reference_partials(u, phi, omega, MU_N, MU_S, 0.0, dtau, index)
+                # relative to the integral of |integrand| (the quantity itself can cancel), and
+                # at u ~ 0 F_omega vanishes pointwise (F is homogeneous of degree 0 in (u, omega)
+                # at p = 0): there against its natural scale mu / |omega|
+                natural = (MU_N + MU_S) * (1.0 if index == 2 else 1.0 / (abs(omega) + abs(u)))
+                assert abs(P[index] - ref) <= 1e-11 * (abs(ref) + size) + 1e-15 * natural, (
+                    u, phi, omega, dtau)
+
+
+# -- gradients of the discretised objective ------------------------------------------------------
+
+
+def _clapping():
+    # phi passes through 0 (min ~ -1.0, max ~ 1.6): the halves clap and reverse
+    return solver.Fourier([[0.3, 1.1, 0.0, 0.2]], [[0.0, -0.1, 0.05]])
+
+
+def _sticking():
+    # closing down:10 / opening up:10 at mu_n/mu_s = 2^-8: long phases with T^2 dF/du ~ 1e6
+    return solver.PowerLaw(1.0, 0.5, 0.3, 10.0, False, 10.0, True)
+
+
+GRADIENT_CASES = {
+    "harmonic": (lambda: solver.Harmonic(1.2, 0.4), -4),
+    "power_law": (lambda: solver.PowerLaw(1.0, 0.5, 0.3, 3.0, False, 2.0, True), 2),
+    "fourier_clapping": (_clapping, -3),
+}
+
+
+def directional_check(kinematics, physics, grid, *, objective="efficiency", seed=0, eps=1e-4):
+    """(adjoint, Richardson central difference) along a random, parameter-scaled direction."""
+    res = objective_gradient(kinematics, physics, grid, objective=objective)
+    assert res.status == 0
+    _, x = family_parameters(kinematics)
+    full = np.append(x, physics.period[0])
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=full.size) * np.maximum(np.abs(full), 0.1)
+    v /= np.linalg.norm(v)
+
+    def J(step):
+        y = full + step * v
+        return discrete_objective(with_family_parameters(kinematics, y[:-1]),
+                                  with_period(physics, y[-1]), grid, objective=objective,
+                                  u0=res.u0)[0]
+
+    d1 = (J(eps) - J(-eps)) / (2 * eps)
+    d2 = (J(eps / 2) - J(-eps / 2)) / eps
+    return float(res.gradient @ v), (4 * d2 - d1) / 3
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.5])
+@pytest.mark.parametrize("case", sorted(GRADIENT_CASES))
+def test_gradient_matches_central_differences(case, p):
+    make, ratio_log2 = GRADIENT_CASES[case]
+    kinematics = make()
+    physics = solver.Physics.from_scaled(2.0 ** ratio_log2, 2.0, p=p)
+    grid = FixedGrid.uniform(kinematics, 64)
+    for seed in range(2):
+        adjoint, fd = directional_check(kinematics, physics, grid, seed=seed)
+        assert abs(adjoint - fd) <= 1e-6 * abs(fd), (adjoint, fd)
+
+
+def test_gradient_sticking_case_on_the_adaptive_grid():
+    kinematics, physics = _sticking(), solver.Physics.from_scaled(2.0 ** -8, 2.0)
+    grid = adaptive_grid(kinematics, physics, rtol=1e-5)  # nonuniform fractions in both phases
+    # it does stick: the friction rate h T^2 dF/du is ~1e6 over a long part of the period
+    tau = grid.nodes(kinematics)[:-1]
+    res = solver.solve_periodic(kinematics, physics, rtol=1e-5, return_series=True)
+    phi, omega = kinematics.angle(tau)[0], kinematics.angle_rate(tau)[0]
+    rate = np.array([solver.force_and_slope(u, a, b, physics.mu_n[0], physics.mu_s[0], 0.0,
+                                            physics.delta_tau[0])[1]
+                     for u, a, b in zip(res.u[0], phi, omega)]) * physics.inertia_factor[0]
+    h = np.diff(grid.nodes(kinematics))
+    assert h[np.abs(rate) > 1e5].sum() > 0.2
+    for seed in range(3):
+        adjoint, fd = directional_check(kinematics, physics, grid, seed=seed)
+        assert abs(adjoint - fd) <= 1e-6 * abs(fd), (adjoint, fd)
+
+
+@pytest.mark.parametrize("objective", ["speed", "power"])
+def test_gradient_of_speed_and_power(objective):
+    kinematics = _clapping()
+    physics = solver.Physics.from_scaled(2.0 ** 3, 1.0, p=0.5)
+    grid = FixedGrid.uniform(kinematics, 64)
+    adjoint, fd = directional_check(kinematics, physics, grid, objective=objective, seed=5)
+    assert abs(adjoint - fd) <= 1e-6 * abs(fd), (adjoint, fd)
+
+
+def test_clapping_case_passes_through_zero():
+    phi = _clapping().angle(np.linspace(0, 1, 1001))[0]
+    assert phi.min() < -0.5 and phi.max() > 0.5
+
+
+def test_fixed_grid_moves_with_duty_cycle():
+    kinematics = _sticking()
+    grid = FixedGrid.uniform(kinematics, 64)
+    nodes = grid.nodes(kinematics)
+    np.testing.assert_allclose(nodes, solver.period_grid(kinematics, 64)[0], rtol=0, atol=1e-15)
+    moved = with_family_parameters(kinematics, [1.0, 0.5, 0.4, 10.0, 10.0])
+    new = grid.nodes(moved)
+    assert new.size == nodes.size and 0.4 in new
+
+
+def test_discrete_objective_matches_the_solver_on_one_grid():
+    # the same discretisation as solve_fixed_grid, so the gradient is of the solver's numbers
+    kinematics, physics = _clapping(), solver.Physics.from_scaled(2.0 ** -3, 2.0)
+    iu, ip, st = solver.solve_fixed_grid(kinematics, physics, 64, rtol=1e-13)
+    res = objective_gradient(kinematics, physics, FixedGrid.uniform(kinematics, 64))
+    assert st[0] == 0
+    np.testing.assert_allclose(res.U, iu[0] / physics.period[0], rtol=1e-11)
+    np.testing.assert_allclose(res.P, ip[0] * physics.period[0] ** -1.0, rtol=1e-11)

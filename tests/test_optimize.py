@@ -1,0 +1,59 @@
+"""optimize_motion: convergence to gtol with counted work, phase fix, bounds, ill-conditioning."""
+import numpy as np
+import pytest
+
+import solver
+from solver._gradient import FixedGrid, objective_gradient
+from solver._optimize import STOP_REASONS, optimize_motion
+
+
+def test_harmonic_converges_to_gtol_with_newton_steps():
+    physics = solver.Physics.from_scaled(2.0 ** -4, 2.0)
+    res = optimize_motion(solver.Harmonic(1.0, 0.5), physics, grid=128)
+    assert res.stop_reason == "gradient_tolerance" and res.converged
+    assert res.gradient_norm < 1e-7
+    assert res.newton_steps >= 1
+    assert res.iterations <= 60 and res.gradient_evaluations <= 150
+    assert res.efficiency < 0 and not res.ill_conditioned
+    # a maximum of |lambda| on this grid: no direction improves it to second order
+    assert abs(res.efficiency) > 0.9
+
+
+def test_fourier_keeps_the_phase_and_beats_its_harmonic_start():
+    physics = solver.Physics.from_scaled(2.0 ** -4, 2.0)
+    A = np.array([[0.6, 0.8, 0.0, 0.0]])
+    start = solver.Fourier(A, np.zeros((1, 3)))
+    grid = FixedGrid.uniform(start, 128)
+    first = objective_gradient(start, physics, grid)
+    res = optimize_motion(start, physics, grid=grid, max_iterations=300)
+    assert res.converged, res.stop_reason
+    assert res.parameters[res.names.index("B1")] == 0.0
+    assert abs(res.efficiency) > abs(first.efficiency)
+    assert res.iterations <= 300
+
+
+def test_power_law_respects_its_box():
+    physics = solver.Physics.from_scaled(2.0 ** -8, 2.0)
+    start = solver.PowerLaw(1.0, 0.5, 0.3, 3.0, False, 3.0, True)
+    res = optimize_motion(start, physics, grid=128)
+    assert res.stop_reason in STOP_REASONS
+    values = dict(zip(res.names, res.parameters))
+    assert 0.0 < values["duty_cycle"] < 1.0
+    assert values["closing_exponent"] >= 1.0 and values["opening_exponent"] >= 1.0
+    assert values["A1"] >= 0.0
+    assert res.converged
+
+
+def test_p_near_two_is_reported_not_chased():
+    # lambda becomes invariant under T as p -> 2: the period runs to its bound, which is reported
+    physics = solver.Physics.from_scaled(2.0 ** -4, 2.0, p=1.99)
+    res = optimize_motion(solver.Harmonic(1.0, 0.5), physics, grid=128, max_iterations=100)
+    assert res.ill_conditioned
+    assert "period" in res.at_bounds
+    assert res.iterations <= 100
+
+
+def test_rejects_bad_start():
+    physics = solver.Physics.from_scaled(1.0, 1.0)
+    with pytest.raises(ValueError):
+        optimize_motion(solver.Harmonic(1.0, 0.5), physics, start=[1.0, 0.5])
