@@ -87,8 +87,12 @@ def test_force_partials_match_differences(p):
 
 
 def _reference_partials(u, phi, omega, mu_n, mu_s, p, dtau, index):
-    """2 int_0^{1/2} of the differentiated integrand by mpmath, split around the kink."""
-    mp.mp.dps = 20
+    """2 int_0^{1/2} of the differentiated integrand by mpmath, split around the kink (20 digits)."""
+    with mp.workdps(20):
+        return _reference_partials_mp(u, phi, omega, mu_n, mu_s, p, dtau, index)
+
+
+def _reference_partials_mp(u, phi, omega, mu_n, mu_s, p, dtau, index):
     u, phi, omega, mu_n, mu_s, p, dtau = map(mp.mpf, (u, phi, omega, mu_n, mu_s, p, dtau))
     S, C = mp.sin(phi), mp.cos(phi)
     a = -u * S - omega * S * S / 4

@@ -7,11 +7,15 @@ import pytest
 
 from solver import force_and_slope, power_density
 
-mp.mp.dps = 40
 
 
 def reference(u, phi, omega, mu_n, mu_s, p, delta_tau):
-    """F and Pi by adaptive mpmath quadrature split at the point where v_n = 0."""
+    """F and Pi by adaptive mpmath quadrature split at the point where v_n = 0 (40 digits)."""
+    with mp.workdps(40):
+        return _reference(u, phi, omega, mu_n, mu_s, p, delta_tau)
+
+
+def _reference(u, phi, omega, mu_n, mu_s, p, delta_tau):
     u, phi, omega, mu_n, mu_s, p, dt = map(mp.mpf, (u, phi, omega, mu_n, mu_s, p, delta_tau))
     S, C = mp.sin(phi), mp.cos(phi)
     a, b, c = -u * S - omega * S * S / 4, omega, C * (u + omega * S / 4)
