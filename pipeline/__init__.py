@@ -10,8 +10,8 @@ The command line is ``python -m pipeline run workflows/<scene>.toml``.
 """
 
 from ._run import RunSummary, default_store, run_scene
-from ._scene import Axis, Execution, Reduction, Scene, SceneError, load_scene, parse_scene
+from ._scene import Axis, Execution, Reduction, Scene, SceneError, Series, load_scene, parse_scene
 from ._store import StoreBusy, StoreMismatch
 
-__all__ = ["Axis", "Execution", "Reduction", "RunSummary", "Scene", "SceneError", "StoreBusy", "StoreMismatch",
+__all__ = ["Axis", "Execution", "Reduction", "RunSummary", "Scene", "SceneError", "Series", "StoreBusy", "StoreMismatch",
            "default_store", "load_scene", "parse_scene", "run_scene"]

@@ -1,4 +1,4 @@
-"""Command line: ``python -m pipeline run SCENE.toml`` and ``python -m pipeline paper``.
+"""Command line: ``python -m pipeline run SCENE.toml``, ``estimate SCENE.toml...`` and ``paper``.
 
 Exit codes: 0 done; 2 bad scene file or arguments (nothing written); 3 store refused (a
 different scene is stored there, it is not a Zarr store, or another run holds it).
@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from ._run import run_scene
+from ._run import Session, run_scene
 from ._scene import SceneError, load_scene
 from ._store import StoreBusy, StoreMismatch
 
@@ -35,7 +35,11 @@ def _parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="compute one scene into its Zarr store (resumes an interrupted run)")
     run.add_argument("scene", help="scene TOML file, e.g. workflows/quick.toml")
-    paper = sub.add_parser("paper", help="run every shipped scene (or only quick) and print the total time")
+    est = sub.add_parser("estimate", help="time a probe of each scene and print its projected run time")
+    est.add_argument("scenes", nargs="+", help="scene TOML files")
+    est.add_argument("--workers", type=int, default=None, help="parallel workers assumed (default: all cores)")
+    est.add_argument("--probe", type=int, default=32, help="points solved per scene (default 32)")
+    paper = sub.add_parser("paper", help="run every shipped scene (or only quick), print the total time, build the report")
     paper.add_argument("--quick", action="store_true", help="only the quick scene")
     paper.add_argument("--out", default="out", help="directory of the stores (default out/)")
     for p in (run, paper):
@@ -49,7 +53,7 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _run_one(path, store, args) -> int:
+def _run_one(path, store, args, session=None) -> int:
     try:
         scene = load_scene(path)
     except SceneError as exc:
@@ -57,11 +61,35 @@ def _run_one(path, store, args) -> int:
         return EXIT_BAD_SCENE
     try:
         summary = run_scene(scene, store, scheduler=args.scheduler, workers=args.workers,
-                            overwrite=args.overwrite, progress=not args.no_progress)
+                            overwrite=args.overwrite, progress=not args.no_progress, session=session)
     except (StoreMismatch, StoreBusy) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
     print(summary.line(), flush=True)
+    return 0
+
+
+def _estimate(args) -> int:
+    import os
+
+    from ._grid import calibrate_points_per_task
+
+    workers = args.workers or os.cpu_count() or 1
+    scenes = []
+    for path in args.scenes:
+        try:
+            scenes.append(load_scene(path))
+        except SceneError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_BAD_SCENE
+    total = 0.0
+    for scene in scenes:
+        _, rate = calibrate_points_per_task(scene, workers, n_probe=args.probe)
+        seconds = scene.n_points / (rate * workers)
+        total += seconds
+        print(f"{scene.name:20s} {scene.n_points:>9d} points  {rate:>9,.0f} solves/s per worker  "
+              f"~{seconds / 60:7.1f} min on {workers} workers (grid only, polishing not included)", flush=True)
+    print(f"{'total':20s} {sum(s.n_points for s in scenes):>9d} points  ~{total / 60:.1f} min", flush=True)
     return 0
 
 
@@ -72,6 +100,8 @@ def main(argv=None) -> int:
         return EXIT_BAD_SCENE
     if args.command == "run":
         return _run_one(args.scene, args.store, args)
+    if args.command == "estimate":
+        return _estimate(args)
     names = ("quick",) if args.quick else PAPER_SCENES
     # Validate every scene before running any, so a bad file costs nothing.
     for name in names:
@@ -81,11 +111,17 @@ def main(argv=None) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_BAD_SCENE
     t0 = time.perf_counter()
-    for name in names:
-        rc = _run_one(WORKFLOWS / f"{name}.toml", Path(args.out) / f"{name}.zarr", args)
-        if rc:
-            return rc
+    # One pool of workers for every scene: each worker imports (and JIT-compiles) the solver once.
+    with Session(args.scheduler or "processes", args.workers) as session:
+        for name in names:
+            rc = _run_one(WORKFLOWS / f"{name}.toml", Path(args.out) / f"{name}.zarr", args, session)
+            if rc:
+                return rc
     print(f"paper: {len(names)} scenes, total wall {time.perf_counter() - t0:.1f} s", flush=True)
+    from reports import build_report  # the report reads every store under --out
+
+    index = build_report(sorted(Path(args.out).glob("*.zarr")), Path(args.out) / "report")
+    print(f"paper: report at {index}", flush=True)
     return 0
 
 

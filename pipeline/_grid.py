@@ -13,7 +13,7 @@ import numpy as np
 from ._scene import Scene
 
 __all__ = [
-    "DEFAULT_POINTS_PER_TASK",
+    "calibrate_points_per_task",
     "chunk_shape",
     "chunk_grid",
     "chunk_region",
@@ -22,9 +22,43 @@ __all__ = [
     "solve_points",
 ]
 
-#: Points per task by family, tuned so a task takes a few seconds with the real solver
-#: at rtol ~ 1e-4 (harmonic ~ 2-5k solves/s per core; power law with sticking slower).
-DEFAULT_POINTS_PER_TASK = {"harmonic": 4096, "powerlaw": 2048}
+#: Wall time aimed at for one task: long enough that scheduling and store overheads are
+#: negligible, short enough that a killed run loses little and the progress bar moves.
+TASK_SECONDS = 4.0
+#: Bounds of the calibrated points per task.
+MIN_POINTS_PER_TASK, MAX_POINTS_PER_TASK = 16, 16384
+
+
+def calibrate_points_per_task(scene: Scene, workers: int, n_probe: int = 16) -> tuple[int, float]:
+    """Points per task so that a task takes about ``TASK_SECONDS``, from a timed probe.
+
+    The probe solves ``n_probe`` points spread evenly over the scene's grid (after one
+    untimed warm-up point, which pays any JIT compilation). Chunking changes no value (the
+    solver treats points independently), only how the work is cut; the chosen layout is
+    stored with the store and reused on resume.
+
+    Returns
+    -------
+    points_per_task : int
+    rate : float  [solves/s on one core]
+    """
+    import time
+
+    n = scene.n_points
+    flat = np.unique(np.linspace(0, n - 1, min(n_probe, n)).round().astype(np.int64))
+    idx = np.unravel_index(flat, scene.shape)
+    params = {a.name: a.array()[i] for a, i in zip(scene.axes, idx)}
+    for k, v in scene.fixed:
+        params[k] = np.full(flat.size, v)
+    warm = {k: v[:1] for k, v in params.items()}
+    solve_points(scene.family, warm, (), method=scene.method, rtol=scene.rtol)
+    t0 = time.perf_counter()
+    solve_points(scene.family, params, (), method=scene.method, rtol=scene.rtol)
+    rate = flat.size / max(time.perf_counter() - t0, 1e-9)
+    target = int(rate * TASK_SECONDS)
+    # At least ~4 tasks per worker, so the last tasks do not leave cores idle for long.
+    target = min(target, -(-n // (4 * max(1, workers))))
+    return int(np.clip(target, MIN_POINTS_PER_TASK, MAX_POINTS_PER_TASK)), rate
 
 
 def chunk_shape(shape: tuple[int, ...], target: int) -> tuple[int, ...]:
@@ -95,20 +129,25 @@ def _kinematics(solver, family: str, params: dict[str, np.ndarray]):
                            np.abs(opening).astype(np.float64), opening > 1)
 
 
-def solve_points(family: str, params: dict[str, np.ndarray], outputs, *, method: str, rtol: float):
+def solve_points(family: str, params: dict[str, np.ndarray], outputs, *, method: str, rtol: float,
+                 series: bool = False):
     """Solve at the points ``params`` (each shape (n,)) and return the requested outputs.
 
     Returns
     -------
     dict of ndarray, shape (n,)
-        One entry per name in ``outputs`` plus ``status`` (int8).
+        One entry per name in ``outputs`` plus ``status`` (int8); with ``series`` also ``u`` and
+        ``tau``, lists of per-point arrays (the solver's final grid, tau in [0, 1)).
     """
     import solver  # imported here so worker processes import it lazily
 
     kin = _kinematics(solver, family, params)
     phys, _ = _physics(solver, params)
-    res = solver.solve_periodic(kin, phys, method=method, rtol=rtol, return_series=False)
+    res = solver.solve_periodic(kin, phys, method=method, rtol=rtol, return_series=series)
     out = {"status": np.asarray(res.status, dtype=np.int8)}
+    if series:
+        out["u"] = [np.asarray(v, dtype=np.float64) for v in res.u]
+        out["tau"] = [np.asarray(v, dtype=np.float64) for v in res.tau]
     for name in outputs:
         if name == "displacement_per_period":
             # T U, the distance per period; scale-free, so equal to scaled_period * scaled_speed.

@@ -11,14 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ._grid import DEFAULT_POINTS_PER_TASK, chunk_grid, chunk_shape
+from ._grid import calibrate_points_per_task, chunk_grid, chunk_shape
 from ._reduce import grid_reduction, objective, polish_cells
 from ._scene import Scene
-from ._store import (ATTRS_KEY, StoreMismatch, create_skeleton, open_existing, read_done, reduction_arrays,
-                     remove_partials, run_lock, set_state)
-from ._tasks import compute_chunk
+from ._store import (ATTRS_KEY, StoreMismatch, create_skeleton, open_existing, read_done, record_run,
+                     reduction_arrays, remove_partials, run_lock, set_state)
+from ._tasks import compute_chunk, compute_series
 
-__all__ = ["RunSummary", "run_scene", "default_store"]
+__all__ = ["RunSummary", "Session", "run_scene", "default_store"]
 
 
 @dataclass(frozen=True)
@@ -35,13 +35,14 @@ class RunSummary:
     wall_seconds: float
     solve_seconds: float
     reductions_computed: bool
+    series_computed: bool = False
 
     @property
     def solves_per_second(self) -> float:
         return self.computed_points / self.solve_seconds if self.solve_seconds > 0 else 0.0
 
     def line(self) -> str:
-        if self.computed_chunks == 0 and not self.reductions_computed:
+        if self.computed_chunks == 0 and not self.reductions_computed and not self.series_computed:
             return (f"{self.scene}: nothing to do, all {self.total_chunks} chunks and reductions already done "
                     f"({self.points} points, {self.failures} failures) in {self.store}")
         return (f"{self.scene}: {self.points} points ({self.computed_points} computed now in "
@@ -111,6 +112,23 @@ class _Scheduler:
 
     def __exit__(self, *exc):
         self.close()
+
+
+class _Borrowed:
+    """A session's scheduler, used without closing it."""
+
+    def __init__(self, sched: _Scheduler):
+        self.sched = sched
+
+    def __enter__(self):
+        return self.sched
+
+    def __exit__(self, *exc):
+        return None
+
+
+#: A scheduler (and its process pool) shared by several runs; use as a context manager.
+Session = _Scheduler
 
 
 def _compute(tasks, sched: _Scheduler, progress: _Progress):
@@ -192,7 +210,10 @@ def _reductions(scene: Scene, store: Path, sched: _Scheduler, progress_enabled: 
                 cells.append({"params": params, "subset": subset, "value": value})
                 where.append(pos)
             # Batches of cells per task, so a task takes seconds.
-            n_tasks = max(1, min(len(cells), 4 * (sched.workers or os.cpu_count() or 1)))
+            # compass batches all cells of a task into each solver call: one task per worker;
+            # the scipy methods call the solver point by point: smaller tasks balance better.
+            per_worker = 1 if r.polish_method == "compass" else 4
+            n_tasks = max(1, min(len(cells), per_worker * (sched.workers or os.cpu_count() or 1)))
             batches = [list(range(i, len(cells), n_tasks)) for i in range(n_tasks)] if cells else []
             tasks = [dask.delayed(polish_cells, pure=False)(scene, r, [cells[i] for i in b],
                                                            dask_key_name=f"pipeline-polish-{r.name}-{j}")
@@ -223,7 +244,7 @@ def _reductions(scene: Scene, store: Path, sched: _Scheduler, progress_enabled: 
 
 def run_scene(scene: Scene, store: str | Path | None = None, *, scheduler: str | None = None,
               workers: int | None = None, overwrite: bool = False, progress: bool = True,
-              echo=print) -> RunSummary:
+              echo=print, session: "Session | None" = None) -> RunSummary:
     """Run ``scene`` into ``store``, resuming whatever an earlier run left undone.
 
     Raises
@@ -232,12 +253,17 @@ def run_scene(scene: Scene, store: str | Path | None = None, *, scheduler: str |
         The store holds a different scene (and ``overwrite`` is false), or is not a Zarr store.
     StoreBusy
         Another run holds the store's lock.
+
+    ``session`` (a :class:`Session`) lets several runs share one pool of worker processes, so
+    each worker imports and JIT-compiles the solver once (``python -m pipeline paper``).
     """
     t_start = time.perf_counter()
     store = Path(store) if store is not None else default_store(scene)
     scheduler = scheduler or scene.execution.scheduler
     workers = workers or scene.execution.workers
-    with run_lock(store), _Scheduler(scheduler, workers) as sched:
+    n_workers = workers or (os.cpu_count() or 1 if scheduler in ("processes", "threads") else 1)
+    own = session is None or session.name != scheduler or session.workers != workers
+    with run_lock(store), (_Scheduler(scheduler, workers) if own else _Borrowed(session)) as sched:
         meta = open_existing(store)
         if meta is not None:
             old = meta["provenance"]["scene_hash"]
@@ -251,7 +277,12 @@ def run_scene(scene: Scene, store: str | Path | None = None, *, scheduler: str |
             elif overwrite:
                 meta = None
         if meta is None:
-            target = scene.execution.points_per_task or DEFAULT_POINTS_PER_TASK[scene.family]
+            target = scene.execution.points_per_task
+            if target is None:
+                target, rate = calibrate_points_per_task(scene, n_workers)
+                if progress:
+                    echo(f"{scene.name}: probe {rate:,.0f} solves/s per worker -> {target} points per task",
+                         file=sys.stderr)
             chunks = chunk_shape(scene.shape, target)
             create_skeleton(store, scene, chunks)
             meta = open_existing(store)
@@ -279,18 +310,32 @@ def run_scene(scene: Scene, store: str | Path | None = None, *, scheduler: str |
             set_state(store, chunks_complete=True, reductions_complete=False)
         elif not meta["state"].get("chunks_complete"):
             set_state(store, chunks_complete=True)
+        series_computed = False
+        if scene.series is not None and not meta["state"].get("series_complete"):
+            task = dask.delayed(compute_series, pure=False)(str(store), scene, dask_key_name="pipeline-series")
+            _compute([task], sched, _Progress(1, len(scene.series.points), f"{scene.name} series", progress))
+            set_state(store, series_complete=True)
+            series_computed = True
         reductions_computed = False
         if scene.reductions and (pending or not meta["state"].get("reductions_complete")):
             _reductions(scene, store, sched, progress)
             reductions_computed = True
-        if pending or reductions_computed or not meta["state"].get("reductions_complete"):
-            set_state(store, reductions_complete=True)
-            _consolidate(store)
         failures = int(np.count_nonzero(_load(store, ["status"])["status"] != 0))
+        if pending or reductions_computed or series_computed or not meta["state"].get("reductions_complete"):
+            set_state(store, reductions_complete=True)
+            import datetime as _dt
+
+            record_run(store, {
+                "finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                "wall_seconds": round(time.perf_counter() - t_start, 3),
+                "solve_seconds": round(solve_seconds, 3), "computed_points": computed_points,
+                "computed_chunks": len(pending), "total_chunks": total_chunks, "failures": failures,
+                "scheduler": scheduler, "workers": n_workers})
+            _consolidate(store)
     return RunSummary(scene=scene.name, store=str(store), points=scene.n_points, computed_points=computed_points,
                       computed_chunks=len(pending), total_chunks=total_chunks, failures=failures,
                       wall_seconds=time.perf_counter() - t_start, solve_seconds=solve_seconds,
-                      reductions_computed=reductions_computed)
+                      reductions_computed=reductions_computed, series_computed=series_computed)
 
 
 def _consolidate(store: Path) -> None:

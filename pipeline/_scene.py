@@ -32,6 +32,7 @@ __all__ = [
     "Reduction",
     "Scene",
     "SceneError",
+    "Series",
     "Subsets",
     "load_scene",
     "parse_scene",
@@ -125,7 +126,7 @@ DIAGNOSTICS: dict[str, str] = {
     "n_tau": "final tau-grid size",
 }
 _STATISTICS = ("max", "min", "absmax")
-_POLISH_METHODS = ("Nelder-Mead", "L-BFGS-B", "Powell")
+_POLISH_METHODS = ("compass", "Nelder-Mead", "L-BFGS-B", "Powell")
 _SCHEDULERS = ("processes", "threads", "synchronous")
 
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -206,7 +207,8 @@ class Reduction:
 
     The result keeps the other axes (plus ``subsets.dim`` when given). With ``polish`` the best
     grid point of every cell is refined by a bounded local optimiser over the continuous axes
-    in ``over``.
+    in ``over``: "compass" (a compass search batched over cells, so each round is one solver
+    call) or one of scipy.optimize.minimize's "Nelder-Mead", "L-BFGS-B", "Powell" per cell.
     """
 
     name: str
@@ -215,10 +217,22 @@ class Reduction:
     over: tuple[str, ...]
     report: tuple[str, ...] = ()
     polish: bool = False
-    polish_method: str = "Nelder-Mead"
+    polish_method: str = "compass"
     polish_rtol: float | None = None
     polish_max_evaluations: int = 200
     subsets: Subsets | None = None
+
+
+@dataclass(frozen=True)
+class Series:
+    """u(tau) stored at a few points, resampled to ``n_tau`` uniform nodes tau_k = k/n_tau.
+
+    ``points`` holds, per point, a value for every axis of the scene (fixed parameters as in
+    ``[fixed]``).
+    """
+
+    n_tau: int
+    points: tuple[tuple[tuple[str, float], ...], ...]
 
 
 @dataclass(frozen=True)
@@ -247,6 +261,7 @@ class Scene:
     quantities: tuple[str, ...]
     diagnostics: tuple[str, ...]
     reductions: tuple[Reduction, ...]
+    series: "Series | None"
     execution: Execution
     science: dict = field(compare=False, repr=False)
     text: str = field(default="", compare=False, repr=False)
@@ -485,7 +500,7 @@ _REDUCTION_KEYS = {
     "over": "axes reduced",
     "report": "other quantities reported at the arg-max",
     "polish": "refine the grid optimum with a local optimiser",
-    "polish_method": "Nelder-Mead, L-BFGS-B or Powell",
+    "polish_method": "compass (batched, default), Nelder-Mead, L-BFGS-B or Powell",
     "polish_rtol": "solver rtol while polishing",
     "polish_max_evaluations": "solver calls per polished optimum",
     "window": "nested windows of one axis",
@@ -505,7 +520,7 @@ def _parse_reduction(ctx: _Ctx, obj, key: str, dims, stored) -> Reduction:
     over = ctx.names(obj["over"], f"{key}.over", dims)
     report = ctx.names(obj.get("report", []), f"{key}.report", stored, nonempty=False)
     polish = ctx.boolean(obj.get("polish", False), f"{key}.polish")
-    method = ctx.string(obj.get("polish_method", "Nelder-Mead"), f"{key}.polish_method", _POLISH_METHODS)
+    method = ctx.string(obj.get("polish_method", "compass"), f"{key}.polish_method", _POLISH_METHODS)
     prtol = None
     if "polish_rtol" in obj:
         prtol = ctx.number(obj["polish_rtol"], f"{key}.polish_rtol")
@@ -559,6 +574,7 @@ _TOP_KEYS = {
     "solver": "method and rtol",
     "outputs": "stored quantities and diagnostics",
     "reductions": "maxima over axes",
+    "series": "u(tau) at a few points",
     "execution": "points_per_task, scheduler, workers, store (not hashed)",
 }
 
@@ -633,11 +649,39 @@ def parse_scene(text: str, file: str = "<scene>") -> Scene:
         raise ctx.err("reductions", "must be an array of tables ([[reductions]])")
     dims = tuple(a.name for a in axes)
     reductions = tuple(_parse_reduction(ctx, r, f"reductions[{i}]", dims, stored) for i, r in enumerate(red_doc))
-    seen = set()
+    seen = set(stored) | set(dims) | {"status"}
     for i, r in enumerate(reductions):
-        if r.name in seen or r.name in stored or r.name in dims:
-            raise ctx.err(f"reductions[{i}].name", f"{r.name!r} clashes with another array name")
-        seen.add(r.name)
+        for array in _reduction_array_names(r):
+            if array in seen:
+                raise ctx.err(f"reductions[{i}].name", f"array {array!r} of {r.name!r} clashes with another array")
+            seen.add(array)
+    subset_dims: dict[str, tuple] = {}
+    for i, r in enumerate(reductions):
+        if r.subsets is None:
+            continue
+        dim, labels = r.subsets.dim, (r.subsets.labels, r.subsets.sets, r.subsets.center)
+        if dim in seen or subset_dims.get(dim, labels) != labels:
+            raise ctx.err(f"reductions[{i}]", f"subset dimension {dim!r} clashes with another array or "
+                                              "with different subsets of another reduction")
+        subset_dims[dim] = labels
+        # Every subset must hold at least one grid point, or its results would be silently NaN.
+        if r.subsets is not None:
+            sub = r.subsets
+            for ax in sub.axes:
+                v = np.asarray(axes[dims.index(ax)].values)
+                for k, label in enumerate(sub.labels):
+                    if sub.kind == "window":
+                        empty = not np.any(np.abs(v - sub.center) <= label + 1e-12)
+                        what = f"window {sub.center:g} +- {label:g} holds no {ax} grid value"
+                        key = f"reductions[{i}].window.halfwidths[{k}]"
+                    else:
+                        empty = not np.any(np.isin(np.abs(v), np.asarray(sub.sets[k])))
+                        what = f"exponent set {list(sub.sets[k])} matches no {ax} grid value"
+                        key = f"reductions[{i}].exponent_sets.sets[{k}]"
+                    if empty:
+                        raise ctx.err(key, what)
+
+    series = _parse_series(ctx, doc["series"], dims, fixed) if "series" in doc else None
 
     ex = ctx.table(doc.get("execution", {}), "execution",
                    {"points_per_task": "", "scheduler": "", "workers": "", "store": ""})
@@ -657,10 +701,50 @@ def parse_scene(text: str, file: str = "<scene>") -> Scene:
         "solver": {"method": method, "rtol": rtol},
         "outputs": {"quantities": list(quantities), "diagnostics": list(diagnostics)},
         "reductions": [_reduction_json(r) for r in reductions],
+        **({"series": {"n_tau": series.n_tau, "points": [dict(p) for p in series.points]}} if series else {}),
     }
     return Scene(path=file, name=name, title=title, figure=figure, family=family, axes=axes,
                  fixed=tuple(sorted(fixed.items())), method=method, rtol=rtol, quantities=quantities,
-                 diagnostics=diagnostics, reductions=reductions, execution=execution, science=science, text=text)
+                 diagnostics=diagnostics, reductions=reductions, series=series, execution=execution, science=science, text=text)
+
+
+_MAX_SERIES_POINTS = 64
+
+
+def _parse_series(ctx: _Ctx, obj, dims, fixed) -> Series:
+    ctx.table(obj, "series", {"points": "tables giving every axis value", "n_tau": "uniform nodes per period"},
+              required=("points",))
+    n_tau = ctx.integer(obj.get("n_tau", 256), "series.n_tau", lo=4)
+    pts = obj["points"]
+    if not isinstance(pts, list) or not pts:
+        raise ctx.err("series.points", "must be a non-empty array of tables")
+    if len(pts) > _MAX_SERIES_POINTS:
+        raise ctx.err("series.points", f"at most {_MAX_SERIES_POINTS} points (series are for a few points)")
+    out = []
+    for i, p in enumerate(pts):
+        key = f"series.points[{i}]"
+        ctx.table(p, key, {d: "" for d in dims}, required=dims)
+        vals = {d: _value(ctx, d, p[d], f"{key}.{d}") for d in dims}
+        a0 = vals.get("A0", fixed.get("A0"))
+        a1r = vals.get("A1_ratio", fixed.get("A1_ratio"))
+        if a0 is not None and a1r is not None and a0 * (1 + a1r) > math.pi + 1e-12:
+            raise ctx.err(f"{key}.A1_ratio", "A0 (1 + A1/A0) exceeds pi: the angle phi would leave [0, pi]")
+        out.append(tuple(vals.items()))
+    return Series(n_tau, tuple(out))
+
+
+def _reduction_array_names(r: Reduction) -> list[str]:
+    """Names of the arrays a reduction writes (see pipeline._store.reduction_arrays)."""
+    names = []
+    for base in [r.name] + ([f"{r.name}_polished"] if r.polish else []):
+        names.append(base)
+        if r.statistic == "absmax":
+            names.append(f"{base}_signed")
+        names += [f"{base}_{a}" for a in r.over]
+        names += [f"{base}_{q}" for q in r.report if q != r.quantity]
+        if base != r.name:
+            names += [f"{base}_status", f"{base}_evaluations"]
+    return names
 
 
 def _reduction_json(r: Reduction) -> dict:

@@ -48,6 +48,8 @@ __all__ = [
 ]
 
 ATTRS_KEY = "pipeline"
+#: Layout version of the store (readers such as reports/ check it).
+FORMAT_VERSION = 1
 STATE_GROUP = "pipeline_state"
 DONE_ARRAY = f"{STATE_GROUP}/chunk_done"
 NOT_COMPUTED = -1
@@ -255,10 +257,11 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
         dims, rshape, arrays = reduction_arrays(scene, r)
         if r.subsets is not None:
             s = r.subsets
-            attrs = {"long_name": ("half-width of the duty-cycle window around " + f"{s.center:g}"
-                                   if s.kind == "window" else "index of the allowed exponent set"),
-                     "sets": [list(x) for x in s.sets]} if s.kind != "window" else \
-                {"long_name": f"half-width of the {s.axes[0]} window centred at {s.center:g}"}
+            if s.kind == "window":
+                attrs = {"long_name": f"half-width of the {s.axes[0]} window centred at {s.center:g}"}
+            else:
+                attrs = {"long_name": f"index of the set of exponents allowed for {', '.join(s.axes)}",
+                         "sets": [list(x) for x in s.sets]}
             if s.dim not in g:
                 _create(g, s.dim, shape=(len(s.labels),), chunks=(len(s.labels),), dtype=np.float64,
                         fill=np.nan, dims=(s.dim,), attrs=attrs)[:] = np.asarray(s.labels)
@@ -266,16 +269,35 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
         for name, (dtype, fill, attrs) in arrays.items():
             _create(g, name, shape=rshape, chunks=rchunks, dtype=dtype, fill=fill, dims=dims,
                     attrs={**attrs, "reduction": r.name})
+    if scene.series is not None:
+        ser = scene.series
+        n = len(ser.points)
+        _create(g, "series_point", shape=(n,), chunks=(n,), dtype=np.int32, fill=-1, dims=("series_point",),
+                attrs={"long_name": "index of a point where u(tau) is stored"})[:] = np.arange(n)
+        _create(g, "series_tau", shape=(ser.n_tau,), chunks=(ser.n_tau,), dtype=np.float64, fill=np.nan,
+                dims=("series_tau",), attrs={"long_name": "scaled time tau = t/T", "units": "1"}
+                )[:] = np.arange(ser.n_tau) / ser.n_tau
+        for d in scene.dims:
+            _create(g, f"series_{d}", shape=(n,), chunks=(n,), dtype=np.float64, fill=np.nan,
+                    dims=("series_point",), attrs=axis_attrs(d))[:] = [dict(p)[d] for p in ser.points]
+        _create(g, "series_u", shape=(n, ser.n_tau), chunks=(n, ser.n_tau), dtype=np.float64, fill=np.nan,
+                dims=("series_point", "series_tau"),
+                attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau"})
+        _create(g, "series_status", shape=(n,), chunks=(n,), dtype=np.int8, fill=NOT_COMPUTED,
+                dims=("series_point",), attrs={"long_name": "solver status of the series points",
+                                               "flag_meanings": status_meanings()})
     grid = tuple(-(-s // c) for s, c in zip(shape, chunks))
     sg = g.create_group(STATE_GROUP)
     _create(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
             dims=tuple(f"chunk_{d}" for d in scene.dims),
             attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
     g.attrs[ATTRS_KEY] = {
+        "format_version": FORMAT_VERSION,
         "provenance": provenance(scene),
         "layout": {"dims": list(scene.dims), "shape": list(shape), "chunks": list(chunks),
                    "chunk_grid": list(grid)},
-        "state": {"skeleton_complete": True, "chunks_complete": False, "reductions_complete": False},
+        "state": {"skeleton_complete": True, "chunks_complete": False, "reductions_complete": False,
+                  "series_complete": scene.series is None},
     }
 
 
@@ -304,6 +326,18 @@ def set_state(store: Path, **state) -> None:
     g = _open_group(store, "r+")
     meta = dict(g.attrs[ATTRS_KEY])
     meta["state"] = {**meta["state"], **state}
+    g.attrs[ATTRS_KEY] = meta
+
+
+def record_run(store: Path, run: dict) -> None:
+    """Record the latest run that computed something (``run``), and accumulate compute time."""
+    g = _open_group(store, "r+")
+    meta = dict(g.attrs[ATTRS_KEY])
+    previous = meta.get("run", {})
+    run = dict(run)
+    run["wall_seconds_all_runs"] = float(previous.get("wall_seconds_all_runs", 0.0)) + float(run["wall_seconds"])
+    run["runs"] = int(previous.get("runs", 0)) + 1
+    meta["run"] = run
     g.attrs[ATTRS_KEY] = meta
 
 

@@ -17,7 +17,7 @@ from ._grid import chunk_region, region_parameters, solve_points
 from ._scene import Scene
 from ._store import mark_done, write_region
 
-__all__ = ["compute_chunk"]
+__all__ = ["compute_chunk", "compute_series"]
 
 
 def compute_chunk(store: str, scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> dict:
@@ -42,3 +42,27 @@ def compute_chunk(store: str, scene: Scene, chunks: tuple[int, ...], index: tupl
     mark_done(store_path, index)  # last: a chunk without its marker is recomputed on resume
     return {"points": int(np.prod(rshape)), "failures": int(np.count_nonzero(values["status"] != 0)),
             "seconds": seconds}
+
+
+def compute_series(store: str, scene: Scene) -> int:
+    """Solve the scene's series points and write u(tau), resampled to uniform nodes tau_k = k/n_tau
+    by periodic linear interpolation of the solver's final grid. Returns the number of failures."""
+    import warnings
+
+    import zarr
+
+    s = scene.series
+    params = {d: np.array([dict(p)[d] for p in s.points], dtype=np.float64) for d in scene.dims}
+    for k, v in scene.fixed:
+        params[k] = np.full(len(s.points), v)
+    out = solve_points(scene.family, params, (), method=scene.method, rtol=scene.rtol, series=True)
+    tau = np.arange(s.n_tau) / s.n_tau
+    u = np.full((len(s.points), s.n_tau), np.nan)
+    for i, (ui, ti) in enumerate(zip(out["u"], out["tau"])):
+        if out["status"][i] == 0 and ui.size:
+            u[i] = np.interp(tau, ti, ui, period=1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        zarr.open_array(store=store, path="series_u", mode="r+")[...] = u
+        zarr.open_array(store=store, path="series_status", mode="r+")[...] = out["status"]
+    return int(np.count_nonzero(out["status"] != 0))

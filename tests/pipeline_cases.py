@@ -51,6 +51,11 @@ quantity = "scaled_speed"
 statistic = "max"
 over = ["A0", "A1_ratio", "scaled_period"]
 
+[series]
+n_tau = 64
+points = [{ anisotropy_ratio = 16.0, scaled_period = 2.0, A0 = 0.4, A1_ratio = 0.8 },
+          { anisotropy_ratio = 0.0625, scaled_period = 1.0, A0 = 1.5, A1_ratio = 0.2 }]
+
 [execution]
 points_per_task = 8
 """

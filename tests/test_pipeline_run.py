@@ -64,11 +64,28 @@ def test_xarray_opens_store_with_labels(reference):
     prov = ds.attrs["pipeline"]["provenance"]
     assert prov["scene_hash"] == scene.hash and prov["scene"]["name"] == "small"
     assert "zarr" in prov["library_versions"] and prov["created"]
+    assert ds.attrs["pipeline"]["format_version"] == 1
+    run = ds.attrs["pipeline"]["run"]
+    assert run["computed_points"] == 64 and run["wall_seconds"] > 0 and run["runs"] == 1
     # Label-based selection works.
     one = ds["scaled_efficiency"].sel(anisotropy_ratio=16.0, scaled_period=2.0).values
     assert one.shape == (4, 4)
     # Outputs the scene did not ask for are not stored.
     assert "scaled_power" not in ds and "U" not in ds
+
+
+def test_series_stored_at_the_requested_points_only(reference):
+    xr = pytest.importorskip("xarray")
+    _, store, _ = reference
+    ds = xr.open_zarr(store)
+    assert ds["series_u"].dims == ("series_point", "series_tau") and ds["series_u"].shape == (2, 64)
+    np.testing.assert_allclose(ds["series_tau"].values, np.arange(64) / 64)
+    assert (ds["series_status"].values == 0).all()
+    # The mean of u over a period is T U: the grid's scaled speed times the scaled period (mu_n mu_s = 1).
+    for k, (i, j, a, b) in enumerate([(1, 1, 0, 3), (0, 0, 3, 0)]):
+        assert ds["series_A0"].values[k] == ds["A0"].values[a]
+        speed = ds["scaled_speed"].values[i, j, a, b] * ds["scaled_period"].values[j]
+        np.testing.assert_allclose(ds["series_u"].values[k].mean(), speed, rtol=2e-2, atol=1e-4)
 
 
 def test_reductions_equal_brute_force_numpy(reference):
@@ -205,4 +222,37 @@ def test_distributed_local_cluster_matches_local_scheduler(reference, tmp_path):
                                   dashboard_address=None) as cluster:
         summary = run_scene(load_scene(path), store, scheduler=cluster.scheduler_address, progress=False)
     assert summary.computed_chunks == 8
+    assert_stores_equal(store, ref_store)
+
+
+def test_default_chunking_is_calibrated_by_a_probe(tmp_path):
+    from pipeline._grid import MAX_POINTS_PER_TASK, MIN_POINTS_PER_TASK, calibrate_points_per_task
+
+    text = small_scene_text().replace("points_per_task = 8\n", "")
+    scene = load_scene(write_scene(tmp_path, text))
+    assert scene.execution.points_per_task is None
+    target, rate = calibrate_points_per_task(scene, workers=2, n_probe=8)
+    assert rate > 0
+    # Small scene: capped so that every worker gets several tasks.
+    assert MIN_POINTS_PER_TASK <= target <= max(MIN_POINTS_PER_TASK, -(-64 // 8)) <= MAX_POINTS_PER_TASK
+    proc = cli("estimate", write_scene(tmp_path, text, "e.toml"), "--probe", "4", "--workers", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "small" in proc.stdout and "total" in proc.stdout
+
+
+def test_run_killed_during_reductions_recomputes_only_reductions(reference, tmp_path):
+    import shutil
+
+    import zarr
+
+    from pipeline._store import set_state
+
+    scene, ref_store, _ = reference
+    store = tmp_path / "copy.zarr"
+    shutil.copytree(ref_store, store)
+    # As left by a run killed after its last chunk but before its reductions were written.
+    set_state(store, reductions_complete=False)
+    zarr.open_array(str(store), path="best_efficiency", mode="r+")[...] = np.nan
+    summary = run_scene(scene, store, scheduler="synchronous", progress=False)
+    assert summary.computed_chunks == 0 and summary.reductions_computed
     assert_stores_equal(store, ref_store)

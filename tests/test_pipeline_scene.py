@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -49,6 +48,10 @@ BAD = [
     pytest.param(('quantity = "scaled_speed"', 'quantity = "U"'), "reductions[1].quantity",
                  "not among the scene's outputs", id="reduction-quantity"),
     pytest.param(("delta = 1e-5", "delta = 0.0"), "fixed.delta", "delta = 0 needs p > 0", id="delta-zero"),
+    pytest.param(("A1_ratio = 0.2 }", "A1_ratio = 0.2, p = 1.0 }"), "series.points[1].p", "unknown key",
+                 id="series-key"),
+    pytest.param(("A0 = 1.5, A1_ratio = 0.2 }", "A0 = 1.5 }"), "series.points[1].A1_ratio", "missing",
+                 id="series-missing"),
 ]
 
 
@@ -135,3 +138,36 @@ def test_chunks_tile_the_grid(shape, target):
         seen[chunk_region(idx, shape, chunks)] += 1
     assert (seen == 1).all()
     assert len(list(iter_chunks(shape, chunks))) == np.prod(chunk_grid(shape, chunks))
+
+
+def test_T2_axes_map_to_the_physical_friction():
+    """T^2 mu_n = a, T^2 mu_s = b (figure EtaA0A1) is mu_n = a, mu_s = b at T = 1."""
+    import solver
+
+    from pipeline._grid import solve_points
+
+    a, b = np.array([16.0, 0.0625]), np.array([1.0, 16.0])
+    A0, A1r = np.array([1.2, 0.5]), np.array([0.25, 0.6])
+    params = {"T2_mu_n": a, "T2_mu_s": b, "A0": A0, "A1_ratio": A1r, "p": np.zeros(2), "delta": np.full(2, 1e-5)}
+    got = solve_points("harmonic", params, ("scaled_efficiency", "relative_efficiency"), method="periodic", rtol=1e-6)
+    ref = solver.solve_periodic(solver.Harmonic(A0=A0, A1=A1r * A0),
+                                solver.Physics(period=np.ones(2), mu_n=a, mu_s=b, p=np.zeros(2), delta=np.full(2, 1e-5)),
+                                rtol=1e-6)
+    np.testing.assert_allclose(got["scaled_efficiency"], ref.scaled_efficiency, rtol=1e-4)
+    np.testing.assert_allclose(got["relative_efficiency"], ref.relative_efficiency, rtol=1e-4)
+
+
+def test_empty_subset_is_an_error(tmp_path):
+    text = (REPO / "workflows" / "duty_cycle.toml").read_text().replace(
+        "halfwidths = [0.0, 0.05,", "halfwidths = [0.0, 0.01, 0.05,")
+    text = text.replace("duty_cycle = { range = [0.05, 0.95], step = 0.025 }",
+                        "duty_cycle = { range = [0.05, 0.95], step = 0.1 }")
+    path = write_scene(tmp_path, text, "d.toml")
+    with pytest.raises(SceneError, match=r"reductions\[0\]\.window\.halfwidths\[0\]: window 0.5 \+- 0 holds no"):
+        load_scene(path)
+
+
+def test_reduction_array_name_clash(tmp_path):
+    text = small_scene_text().replace('name = "fastest"', 'name = "best_efficiency_A0"')
+    with pytest.raises(SceneError, match=r"reductions\[1\]\.name: array 'best_efficiency_A0' .* clashes"):
+        parse_scene(text, "c.toml")
