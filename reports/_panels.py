@@ -1,0 +1,538 @@
+"""Generic panels driven by a store's dimensions.
+
+* ``quantity_maps``: a stored quantity as maps over two axes (A0, A1/A0 when present), faceted
+  over up to two other axes (at most ``MAX_FACET`` values each), the best value over any
+  further axis.
+* ``reduction_figures``: a reduction's maxima and arg-max parameters, grid and polished
+  together: curves against a single kept axis, maps over a kept plane plus curves against its
+  first axis, or curves against the subset dimension faceted over the plane.
+* ``series_figure``: the stored u(tau).
+
+Every function takes a :class:`~reports._read.SceneStore` and returns Plotly figures.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._labels import SIGNED, AxisSpec, axis_spec, format_value, param_label, quantity_label
+
+__all__ = ["quantity_maps", "reduction_figures", "series_figure", "reduction_arrays", "MAX_FACET"]
+
+MAX_FACET = 4
+_PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
+            "#17becf"]
+
+
+def _color(i: int, n: int) -> str:
+    """Colour i of n along a perceptual ramp (for ordered families of curves)."""
+    import plotly.colors as pc
+
+    if n <= 1:
+        return _PALETTE[0]
+    return pc.sample_colorscale("Viridis", [0.9 * i / (n - 1)])[0]
+
+
+def _spec(sd, dim: str) -> AxisSpec:
+    spec = axis_spec(dim, sd.ds[dim].values, sd.spacing(dim), sd.p)
+    sets = sd.ds[dim].attrs.get("sets") if dim == "exponent_set" else None
+    if sets and len(sets) == len(spec.values):
+        # Label each subset by the exponents it allows, as in figure EtaVsMinGamma.
+        text = tuple("{" + ", ".join(f"{g:g}" for g in s) + "}" for s in sets)
+        spec = AxisSpec(spec.name, spec.values, spec.positions, "allowed exponents |γ|", spec.kind, spec.tickvals, text)
+    return spec
+
+
+def _pick(n: int, k: int = MAX_FACET) -> list[int]:
+    """At most k evenly spread indices of range(n), ends included."""
+    if n <= k:
+        return list(range(n))
+    return sorted(set(int(round(x)) for x in np.linspace(0, n - 1, k)))
+
+
+def _best_over(values: np.ndarray, axes: tuple[int, ...], signed: bool, name: str) -> np.ndarray:
+    """The best value over ``axes``: largest |q| (keeping its sign) for signed quantities, else the max."""
+    if not axes:
+        return values
+    v = np.moveaxis(values, axes, tuple(range(values.ndim - len(axes), values.ndim)))
+    flat = v.reshape(v.shape[: values.ndim - len(axes)] + (-1,))
+    if flat.shape[-1] == 0:
+        return flat[..., 0]
+    key = np.abs(flat) if signed else flat
+    key = np.where(np.isnan(key), -np.inf, key)
+    idx = np.argmax(key, axis=-1)
+    out = np.take_along_axis(flat, idx[..., None], axis=-1)[..., 0]
+    return np.where(np.isfinite(np.take_along_axis(key, idx[..., None], axis=-1)[..., 0]), out, np.nan)
+
+
+def _layout(fig, height: int, title: str | None = None):
+    fig.update_layout(height=height, margin={"t": 90 if title else 40, "l": 60, "r": 20, "b": 50},
+                      title={"text": title, "font": {"size": 14}, "x": 0.01, "xanchor": "left", "y": 0.99,
+                             "yanchor": "top"} if title else None,
+                      hoverlabel={"align": "left"})
+    return fig
+
+
+def _round(a: np.ndarray, digits: int = 6) -> np.ndarray:
+    """Round to ``digits`` significant figures: smaller JSON, no visible change."""
+    a = np.asarray(a, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mag = np.where(np.isfinite(a) & (a != 0), np.floor(np.log10(np.abs(np.where(a == 0, 1, a)))), 0)
+        scale = 10.0 ** (digits - 1 - mag)
+        return np.where(np.isfinite(a), np.round(a * scale) / scale, np.nan)
+
+
+# ---------------------------------------------------------------------------
+# Maps of stored quantities
+# ---------------------------------------------------------------------------
+
+
+def _map_axes(dims: list[str], sizes: dict[str, int]) -> tuple[str, str] | None:
+    live = [d for d in dims if sizes[d] > 1]
+    if "A0" in live and "A1_ratio" in live:
+        return "A0", "A1_ratio"
+    if len(live) >= 2:
+        return live[-2], live[-1]
+    return None
+
+
+def quantity_maps(sd, name: str):
+    """Maps of ``name`` over two axes, faceted over up to two others; None when the scene has no plane."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    da = sd.ds[name]
+    dims = list(da.dims)
+    sizes = dict(zip(dims, da.shape))
+    pair = _map_axes(dims, sizes)
+    if pair is None:
+        live = [d for d in dims if sizes[d] > 1]
+        return _quantity_curve(sd, name, live[0]) if live else None
+    xd, yd = pair
+    rest = [d for d in dims if d not in pair and sizes[d] > 1]
+    facets, hidden = rest[:2], rest[2:]
+    signed = name in SIGNED
+    values = np.asarray(da.values, dtype=np.float64)
+    if values.dtype.kind in "iu":
+        values = values.astype(np.float64)
+    if name in ("error_estimate", "iterations", "n_tau"):
+        values = np.where(np.asarray(sd.ds["status"].values) == 0, values, np.nan) if "status" in sd.ds else values
+    # Order: facets..., hidden..., y, x ; singleton dims squeezed.
+    order = facets + hidden + [yd, xd]
+    single = [d for d in dims if sizes[d] == 1]
+    v = np.transpose(values, [dims.index(d) for d in single + order])
+    v = v.reshape(v.shape[len(single):])
+    v = _best_over(v, tuple(range(len(facets), len(facets) + len(hidden))), signed, name)
+    fx = facets[0] if facets else None
+    fy = facets[1] if len(facets) > 1 else None
+    ri = _pick(sizes[fx]) if fx else [0]
+    ci = _pick(sizes[fy]) if fy else [0]
+    if fx and not fy and len(ri) > 3:  # one facet axis: lay it out in a row
+        ci, ri, fy, fx = ri, [0], fx, None
+    xs, ys = _spec(sd, xd), _spec(sd, yd)
+    fixed_text = ", ".join(f"{param_label(d, sd.p)} = {format_value(d, float(sd.ds[d].values[0]))}" for d in single)
+    held = ", ".join(f"{param_label(k, sd.p)} = {format_value(k, v)}" for k, v in sd.fixed.items()
+                     if k not in ("p", "delta"))
+
+    def facet_value(d, i):
+        return float(sd.ds[d].values[i])
+
+    titles = []
+    title_colors = {}
+    for i in ri:
+        for j in ci:
+            parts = []
+            if fx:
+                parts.append(f"{param_label(fx, sd.p)} = {format_value(fx, facet_value(fx, i))}")
+            if fy:
+                parts.append(f"{param_label(fy, sd.p)} = {format_value(fy, facet_value(fy, j))}")
+            text = ", ".join(parts)
+            if {fx, fy} == {"T2_mu_n", "T2_mu_s"}:
+                # Equal-ratio diagonals of the (T^2 mu_n, T^2 mu_s) grid: one colour per mu_n/mu_s.
+                a = facet_value(fx, i) if fx == "T2_mu_n" else facet_value(fy, j)
+                b = facet_value(fy, j) if fy == "T2_mu_s" else facet_value(fx, i)
+                ratio = a / b
+                color = title_colors.setdefault(round(math.log2(ratio), 6), _PALETTE[len(title_colors) % 10])
+                text = (f"<span style='color:{color}'>{text}<br>μ<sub>n</sub>/μ<sub>s</sub> = "
+                        f"{format_value('anisotropy_ratio', ratio)}</span>")
+            titles.append(text)
+    nr, nc = len(ri), len(ci)
+    fig = make_subplots(rows=nr, cols=nc, subplot_titles=titles if (fx or fy) else None, shared_xaxes=True,
+                        shared_yaxes=True, horizontal_spacing=0.04 if nc > 1 else 0.1,
+                        vertical_spacing=min(0.1, 0.3 / max(nr, 1)) if nr > 1 else 0.1)
+    finite = v[np.isfinite(v)]
+    if signed:
+        vmax = float(np.max(np.abs(finite))) if finite.size else 1.0
+        cax = {"colorscale": "RdBu_r", "cmin": -vmax, "cmax": vmax, "cmid": 0.0}
+    else:
+        cax = {"colorscale": "Viridis"}
+    use_contour = sizes[xd] >= 16 and sizes[yd] >= 16 and xs.kind == "linear" and ys.kind == "linear"
+    qlab = quantity_label(name, sd.p)
+    custom = None
+    if xs.kind != "linear" or ys.kind != "linear":
+        gx, gy = np.meshgrid(xs.values, ys.values)
+        custom = np.stack([gx, gy], axis=-1)
+        hx, hy = "%{customdata[0]:.4g}", "%{customdata[1]:.4g}"
+    else:
+        hx, hy = "%{x:.4g}", "%{y:.4g}"
+    for r, i in enumerate(ri):
+        for c, j in enumerate(ci):
+            if fx and fy:
+                z = v[i, j]
+            elif fx:
+                z = v[i]
+            elif fy:
+                z = v[j]
+            else:
+                z = v
+            extra = []
+            if fx:
+                extra.append(f"{param_label(fx, sd.p)} = {format_value(fx, facet_value(fx, i))}")
+            if fy:
+                extra.append(f"{param_label(fy, sd.p)} = {format_value(fy, facet_value(fy, j))}")
+            if hidden:
+                extra.append("best over " + ", ".join(param_label(d, sd.p) for d in hidden))
+            if fixed_text:
+                extra.append(fixed_text)
+            if held:
+                extra.append(held)
+            hover = (f"{xs.title} = {hx}<br>{ys.title} = {hy}<br><b>{qlab} = %{{z:.4g}}</b>"
+                     + "".join(f"<br>{e}" for e in extra) + "<extra></extra>")
+            kw = dict(x=xs.positions, y=ys.positions, z=_round(z), coloraxis="coloraxis", hovertemplate=hover,
+                      customdata=custom, name=qlab)
+            if use_contour:
+                tr = go.Contour(**kw, contours={"coloring": "heatmap", "showlines": True}, line={"width": 0.5},
+                                ncontours=16, connectgaps=False)
+            else:
+                tr = go.Heatmap(**kw)
+            fig.add_trace(tr, row=r + 1, col=c + 1)
+    # One update for every panel, then titles on the outer ones (per-panel updates are slow in plotly.py).
+    fig.update_xaxes(**{k: w for k, w in xs.axis_layout().items() if k != "title"})
+    fig.update_yaxes(**{k: w for k, w in ys.axis_layout().items() if k != "title"})
+    for c in range(nc):
+        fig.update_xaxes(row=nr, col=c + 1, title_text=xs.title)
+    for r in range(nr):
+        fig.update_yaxes(row=r + 1, col=1, title_text=ys.title)
+    fig.update_layout(coloraxis={**cax, "colorbar": {"title": {"text": qlab, "side": "right"}}})
+    title = qlab
+    if hidden:
+        title += " (best over " + ", ".join(param_label(d, sd.p) for d in hidden) + ")"
+    if fx and len(ri) < sizes[fx] or fy and len(ci) < sizes[fy]:
+        title += f"; facets show at most {MAX_FACET} values of each facet axis"
+    if fixed_text:
+        title += f"; {fixed_text}"
+    return _layout(fig, height=max(320, 250 * nr + 80), title=title)
+
+
+def _quantity_curve(sd, name: str, dim: str):
+    """A quantity of a one-axis scene as a curve."""
+    import plotly.graph_objects as go
+
+    xs = _spec(sd, dim)
+    da = sd.ds[name]
+    for d in da.dims:
+        if d != dim:
+            da = da.isel({d: 0})
+    v = np.asarray(da.values, dtype=np.float64)
+    qlab = quantity_label(name, sd.p)
+    fig = go.Figure(go.Scatter(x=xs.positions, y=_round(v), customdata=xs.values, mode="lines+markers", name=qlab,
+                               hovertemplate=f"{xs.title} = %{{customdata:.4g}}<br>{qlab} = %{{y:.5g}}<extra></extra>"))
+    fig.update_xaxes(**xs.axis_layout())
+    fig.update_yaxes(title_text=qlab)
+    return _layout(fig, 340, qlab)
+
+
+# ---------------------------------------------------------------------------
+# Reductions
+# ---------------------------------------------------------------------------
+
+
+def reduction_arrays(sd, red: dict) -> dict[str, dict[str, str]]:
+    """{kind: {role: array name}} for kind "grid" and, when stored, "polished".
+
+    Roles: "value" (the maximum), "signed", one per axis of ``over`` (the arg-max) and one per
+    reported quantity.
+    """
+    name = red["name"]
+    out = {}
+    for kind, base in (("grid", name), ("polished", f"{name}_polished")):
+        if base not in sd.ds:
+            continue
+        roles = {"value": base}
+        if f"{base}_signed" in sd.ds:
+            roles["signed"] = f"{base}_signed"
+        for ax in red.get("over", []):
+            if f"{base}_{ax}" in sd.ds:
+                roles[ax] = f"{base}_{ax}"
+        for q in red.get("report", []):
+            if q != red.get("quantity") and f"{base}_{q}" in sd.ds:
+                roles[q] = f"{base}_{q}"
+        if kind == "polished":
+            for extra in ("status", "evaluations"):
+                if f"{base}_{extra}" in sd.ds:
+                    roles[extra] = f"{base}_{extra}"
+        out[kind] = roles
+    return out
+
+
+def _role_label(sd, red: dict, role: str) -> str:
+    if role == "value":
+        q = quantity_label(red["quantity"], sd.p)
+        return f"max |{q}|" if red.get("statistic") == "absmax" else f"{red.get('statistic', 'max')} {q}"
+    if role == "signed":
+        return f"{quantity_label(red['quantity'], sd.p)} at the optimum"
+    if role in red.get("over", []):
+        return f"arg-max {param_label(role, sd.p)}"
+    return f"{quantity_label(role, sd.p)} at the optimum"
+
+
+def _plot_roles(red: dict, arrays: dict) -> list[str]:
+    roles = ["value"]
+    for kind in ("grid", "polished"):
+        for r in arrays.get(kind, {}):
+            if r not in roles and r not in ("status", "evaluations", "signed"):
+                roles.append(r)
+    return roles
+
+
+def _arg_axis(sd, role: str) -> AxisSpec | None:
+    """Arg-max parameters on power-of-two axes (e.g. the optimal scaled period) keep log2 positions."""
+    if role in sd.ds.coords:
+        sp = _spec(sd, role)
+        if sp.kind in ("log2", "category"):
+            return sp
+    return None
+
+
+def _to_pos(spec: AxisSpec | None, v: np.ndarray) -> np.ndarray:
+    if spec is None:
+        return v
+    if spec.kind == "log2":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(v > 0, np.log2(np.where(v > 0, v, 1.0)), np.nan)
+    # categorical: index of the nearest value
+    idx = np.array([np.argmin(np.abs(spec.values - x)) if np.isfinite(x) else -1 for x in np.ravel(v)])
+    return np.where(idx >= 0, idx, np.nan).reshape(np.shape(v)).astype(np.float64)
+
+
+def _value_axis_layout(spec: AxisSpec | None, title: str) -> dict:
+    if spec is None:
+        return {"title": {"text": title}}
+    d = spec.axis_layout()
+    d["title"] = {"text": title}
+    return d
+
+
+def reduction_figures(sd, red: dict) -> list:
+    """Figures of one reduction: curves or maps depending on how many axes it keeps."""
+    arrays = reduction_arrays(sd, red)
+    if "grid" not in arrays:
+        return []
+    da = sd.ds[arrays["grid"]["value"]]
+    dims = [d for d in da.dims if da.sizes[d] > 1]
+    if len(dims) == 0:
+        return []
+    if len(dims) == 1:
+        return [_curves(sd, red, arrays, dims[0], None, None)]
+    if len(dims) == 2:
+        figs = [_reduction_maps(sd, red, arrays, dims[0], dims[1])]
+        figs.append(_curves(sd, red, arrays, dims[0], dims[1], None))
+        return figs
+    # Three or more kept axes (a plane plus a subset dimension): curves against the last axis,
+    # one line per value of the first, one column per value of the second; any others at index 0.
+    return [_curves(sd, red, arrays, dims[-1], dims[0], dims[1])]
+
+
+def _select(sd, name: str, keep: list[str]) -> np.ndarray:
+    """Array ``name`` with dims ordered as ``keep``; other dims of size 1 squeezed, larger taken at index 0."""
+    da = sd.ds[name]
+    for d in da.dims:
+        if d not in keep:
+            da = da.isel({d: 0})
+    return np.asarray(da.transpose(*keep).values, dtype=np.float64)
+
+
+def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_dim: str | None):
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    roles = _plot_roles(red, arrays)
+    keep = [d for d in (col_dim, line_dim, xdim) if d]
+    xs = _spec(sd, xdim)
+    cols = _pick(sd.ds.sizes[col_dim], 6) if col_dim else [0]
+    lines = list(range(sd.ds.sizes[line_dim])) if line_dim else [0]
+    titles = []
+    for role in roles:
+        for j in cols:
+            t = _role_label(sd, red, role)
+            if col_dim:
+                t += f"<br>{param_label(col_dim, sd.p)} = {format_value(col_dim, float(sd.ds[col_dim].values[j]))}"
+            titles.append(t)
+    fig = make_subplots(rows=len(roles), cols=len(cols), shared_xaxes=True, subplot_titles=titles,
+                        vertical_spacing=min(0.08, 0.5 / len(roles)), horizontal_spacing=0.05)
+    has_polished = "polished" in arrays
+    for r, role in enumerate(roles):
+        vspec = _arg_axis(sd, role)
+        for c, j in enumerate(cols):
+            for li in lines:
+                color = _color(li, len(lines)) if line_dim else "#1f77b4"
+                lname = (f"{param_label(line_dim, sd.p)} = {format_value(line_dim, float(sd.ds[line_dim].values[li]))}"
+                         if line_dim else "")
+                for kind in ("grid", "polished"):
+                    name = arrays.get(kind, {}).get(role)
+                    if name is None:
+                        continue
+                    v = _select(sd, name, keep)
+                    if col_dim:
+                        v = v[j]
+                    if line_dim:
+                        v = v[li]
+                    y = _round(_to_pos(vspec, v))
+                    polished = kind == "polished"
+                    hover = (f"{xs.title} = %{{customdata[0]:.4g}}<br>{_role_label(sd, red, role)} = "
+                             f"%{{customdata[1]:.5g}}<br>{kind} optimum"
+                             + (f"<br>{lname}" if lname else "")
+                             + (f"<br>{param_label(col_dim, sd.p)} = "
+                                f"{format_value(col_dim, float(sd.ds[col_dim].values[j]))}" if col_dim else "")
+                             + _argmax_hover(sd, red, arrays[kind], keep, j if col_dim else None,
+                                             li if line_dim else None, xs.values.size)
+                             + "<extra></extra>")
+                    custom = np.stack([xs.values, _round(v)] + _argmax_custom(sd, red, arrays[kind], keep,
+                                                                               j if col_dim else None,
+                                                                               li if line_dim else None), axis=-1)
+                    legend = (lname + " " if lname else "") + kind
+                    fig.add_trace(go.Scatter(
+                        x=xs.positions, y=y, customdata=custom, hovertemplate=hover,
+                        mode="lines" if polished else ("markers" if has_polished else "lines+markers"),
+                        line={"color": color, "width": 2}, marker={"color": color, "size": 6, "symbol": "circle-open"},
+                        name=legend, legendgroup=legend, showlegend=(r == 0 and c == 0)), row=r + 1, col=c + 1)
+            if vspec is not None:
+                fig.update_yaxes(row=r + 1, col=c + 1, **_value_axis_layout(vspec, ""))
+        short = param_label(role, sd.p) if role in red.get("over", []) else _role_label(sd, red, role)
+        fig.update_yaxes(row=r + 1, col=1, title_text=short, title_standoff=4)
+    fig.update_xaxes(**{k: w for k, w in xs.axis_layout().items() if k != "title"})
+    for c in range(len(cols)):
+        fig.update_xaxes(row=len(roles), col=c + 1, title_text=xs.title)
+    what = f"{red['name']}: {red.get('statistic', 'max')} of {quantity_label(red['quantity'], sd.p)} over " + \
+        ", ".join(param_label(a, sd.p) for a in red.get("over", []))
+    if has_polished:
+        what += " — grid optimum (markers) and polished optimum (lines)"
+    return _layout(fig, height=max(360, 230 * len(roles) + 80), title=what)
+
+
+def _argmax_custom(sd, red, roles, keep, j, li) -> list[np.ndarray]:
+    out = []
+    for ax in red.get("over", []):
+        if ax in roles:
+            v = _select(sd, roles[ax], keep)
+            if j is not None:
+                v = v[j]
+            if li is not None:
+                v = v[li]
+            out.append(_round(v))
+    return out
+
+
+def _argmax_hover(sd, red, roles, keep, j, li, n) -> str:
+    parts, k = [], 2
+    for ax in red.get("over", []):
+        if ax in roles:
+            parts.append(f"<br>{param_label(ax, sd.p)} = %{{customdata[{k}]:.4g}}")
+            k += 1
+    return "".join(parts)
+
+
+def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
+    """The maximum, the arg-max parameters and the reported quantities over the kept plane, one
+    row each (own colour scale), grid and polished optima side by side."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    # The paper draws these planes with mu_n/mu_s across and the scaled period up.
+    xs, ys = _spec(sd, xd), _spec(sd, yd)
+    roles = _plot_roles(red, arrays)
+    kinds = [k for k in ("grid", "polished") if k in arrays]
+    titles = [f"{_role_label(sd, red, role)} — {kind} optimum" for role in roles for kind in kinds]
+    nr = len(roles)
+    vgap = min(0.1, 0.35 / max(nr - 1, 1)) if nr > 1 else 0.1
+    fig = make_subplots(rows=nr, cols=len(kinds), shared_yaxes=True, shared_xaxes=True, horizontal_spacing=0.05,
+                        vertical_spacing=vgap, subplot_titles=titles)
+    gx, gy = np.meshgrid(xs.values, ys.values)
+    row_h = (1 - vgap * (nr - 1)) / nr
+    for r, role in enumerate(roles):
+        vals = {k: _select(sd, arrays[k][role], [yd, xd]) for k in kinds if role in arrays[k]}
+        vspec = _arg_axis(sd, role)
+        allv = np.concatenate([v.ravel() for v in vals.values()])
+        allv = allv[np.isfinite(allv)]
+        label = _role_label(sd, red, role)
+        cname = "coloraxis" if r == 0 else f"coloraxis{r + 1}"
+        for c, kind in enumerate(kinds):
+            if kind not in vals:
+                continue
+            v = vals[kind]
+            extra = [gx, gy, _round(v)]
+            hover = (f"{xs.title} = %{{customdata[0]:.4g}}<br>{ys.title} = %{{customdata[1]:.4g}}<br><b>{label} = "
+                     "%{customdata[2]:.5g}</b>")
+            k = 3
+            for ax in red.get("over", []):
+                if ax in arrays[kind] and ax != role:
+                    extra.append(_round(_select(sd, arrays[kind][ax], [yd, xd])))
+                    hover += f"<br>{param_label(ax, sd.p)} = %{{customdata[{k}]:.4g}}"
+                    k += 1
+            if kind == "polished" and "status" in arrays[kind]:
+                extra.append(_select(sd, arrays[kind]["status"], [yd, xd]))
+                hover += f"<br>polish status = %{{customdata[{k}]:.0f}}"
+            hover += f"<br>{kind} optimum<extra></extra>"
+            z = _to_pos(vspec, v) if vspec is not None else v
+            fig.add_trace(go.Heatmap(x=xs.positions, y=ys.positions, z=_round(z),
+                                     customdata=np.stack(extra, axis=-1), hovertemplate=hover, coloraxis=cname,
+                                     name=kind), row=r + 1, col=c + 1)
+        if (role in SIGNED or role == "signed") and allv.size:
+            vmax = float(np.max(np.abs(allv))) or 1.0
+            cax = {"colorscale": "RdBu_r", "cmin": -vmax, "cmax": vmax}
+        else:
+            cax = {"colorscale": "Viridis"}
+            if allv.size and vspec is None:
+                cax.update(cmin=float(allv.min()), cmax=float(allv.max()))
+        cb = {"title": {"text": label, "side": "right"}, "len": row_h, "y": 1 - r * (row_h + vgap) - row_h / 2,
+              "yanchor": "middle", "thickness": 14}
+        if vspec is not None:
+            cb.update(tickmode="array", tickvals=list(vspec.tickvals), ticktext=list(vspec.ticktext))
+        fig.update_layout({cname: {**cax, "colorbar": cb}})
+        fig.update_yaxes(row=r + 1, col=1, **ys.axis_layout())
+    for c in range(len(kinds)):
+        fig.update_xaxes(row=nr, col=c + 1, **xs.axis_layout())
+        for r in range(nr - 1):
+            fig.update_xaxes(row=r + 1, col=c + 1, **{k: w for k, w in xs.axis_layout().items() if k != "title"})
+    what = f"{red['name']} over the ({xs.title}, {ys.title}) plane"
+    return _layout(fig, height=max(360, 260 * nr + 60), title=what)
+
+
+# ---------------------------------------------------------------------------
+# Series
+# ---------------------------------------------------------------------------
+
+
+def series_figure(sd):
+    """u(tau) at the scene's stored series points."""
+    import plotly.graph_objects as go
+
+    if "series_u" not in sd.ds:
+        return None
+    from ._motion import params_text
+
+    u = np.asarray(sd.ds["series_u"].values, dtype=np.float64)
+    tau = np.asarray(sd.ds["series_tau"].values, dtype=np.float64)
+    status = np.asarray(sd.ds["series_status"].values) if "series_status" in sd.ds else np.zeros(u.shape[0])
+    fig = go.Figure()
+    for i in range(u.shape[0]):
+        params = {d: float(sd.ds[f"series_{d}"].values[i]) for d in sd.dims if f"series_{d}" in sd.ds}
+        text = params_text(params, sd.p, "<br>")
+        fig.add_trace(go.Scatter(x=tau, y=_round(u[i]), mode="lines", name=f"point {i}" +
+                                 ("" if status[i] == 0 else f" (status {int(status[i])})"),
+                                 hovertemplate="τ = %{x:.3f}<br>u = %{y:.4g}<br>" + text + "<extra></extra>"))
+    fig.update_xaxes(title_text="τ = t/T")
+    fig.update_yaxes(title_text="u = T dx<sub>cm</sub>/dt")
+    return _layout(fig, 340, "stored u(τ) at the scene's series points")

@@ -1,0 +1,179 @@
+"""Reading pipeline stores: format check, provenance and the labelled dataset.
+
+A store is read through ``zarr.json`` first (format, group, ``pipeline`` attributes) so a
+foreign or newer store is refused before any array is touched; the arrays are then read with
+``xarray.open_zarr``, which labels them by the ``dimension_names`` the pipeline writes.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["StoreRefused", "SceneStore", "open_scene_store", "shipped_scenes", "SUPPORTED_FORMAT"]
+
+#: Store layout version this report reads. Stores without ``format_version`` in their
+#: ``pipeline`` attributes predate the field and are read as version 1.
+SUPPORTED_FORMAT = 1
+ATTRS_KEY = "pipeline"
+WORKFLOWS = Path(__file__).resolve().parent.parent / "workflows"
+
+
+class StoreRefused(ValueError):
+    """A path that is not a pipeline store this report can read; the message is one line."""
+
+
+@dataclass
+class SceneStore:
+    """One scene's store, loaded into memory.
+
+    Attributes
+    ----------
+    ds : xarray.Dataset
+        Every root array, labelled by its dimension names, loaded as numpy.
+    meta : dict
+        The group's ``pipeline`` attributes (provenance, layout, state).
+    """
+
+    path: Path
+    meta: dict
+    ds: object
+    science: dict = field(default_factory=dict)
+
+    @property
+    def provenance(self) -> dict:
+        return self.meta.get("provenance", {})
+
+    @property
+    def name(self) -> str:
+        return self.provenance.get("scene_name") or self.path.stem
+
+    @property
+    def title(self) -> str:
+        return self.provenance.get("title") or ""
+
+    @property
+    def figure(self) -> str:
+        return self.provenance.get("figure") or ""
+
+    @property
+    def dims(self) -> tuple[str, ...]:
+        return tuple(self.meta.get("layout", {}).get("dims", ()))
+
+    @property
+    def family(self) -> str:
+        return self.science.get("family", "harmonic")
+
+    @property
+    def fixed(self) -> dict[str, float]:
+        return {k: float(v) for k, v in self.science.get("fixed", {}).items()}
+
+    @property
+    def p(self) -> float:
+        """Force-law exponent when fixed (labels depend on it), else 0."""
+        return float(self.fixed.get("p", 0.0))
+
+    @property
+    def rtol(self) -> float:
+        return float(self.science.get("solver", {}).get("rtol", 1e-4))
+
+    @property
+    def method(self) -> str:
+        return self.science.get("solver", {}).get("method", "periodic")
+
+    @property
+    def reductions(self) -> list[dict]:
+        return list(self.science.get("reductions", []))
+
+    @property
+    def quantities(self) -> list[str]:
+        return list(self.science.get("outputs", {}).get("quantities", []))
+
+    @property
+    def state(self) -> dict:
+        return self.meta.get("state", {})
+
+    @property
+    def complete(self) -> bool:
+        s = self.state
+        return bool(s.get("chunks_complete") and s.get("reductions_complete") and s.get("series_complete", True))
+
+    def spacing(self, dim: str) -> str | None:
+        if dim in self.ds.variables:
+            return self.ds[dim].attrs.get("spacing")
+        return None
+
+
+def _refuse(path: Path, why: str) -> StoreRefused:
+    return StoreRefused(f"{path}: {why}")
+
+
+def read_meta(path: Path) -> dict:
+    """The ``pipeline`` attributes of ``path``, after checking it is a store this report reads."""
+    zj = path / "zarr.json"
+    if not path.exists():
+        raise _refuse(path, "no such store")
+    if not zj.is_file():
+        if (path / ".zgroup").is_file() or (path / ".zarray").is_file():
+            raise _refuse(path, "a Zarr format 2 store; this report reads pipeline stores in Zarr format 3 "
+                                f"(store format version {SUPPORTED_FORMAT})")
+        raise _refuse(path, "not a Zarr store (no zarr.json)")
+    try:
+        doc = json.loads(zj.read_text())
+    except (OSError, ValueError) as exc:
+        raise _refuse(path, f"unreadable zarr.json ({exc})") from None
+    if doc.get("zarr_format") != 3 or doc.get("node_type") != "group":
+        raise _refuse(path, f"zarr.json is not a Zarr format 3 group (zarr_format={doc.get('zarr_format')!r}, "
+                            f"node_type={doc.get('node_type')!r})")
+    meta = doc.get("attributes", {}).get(ATTRS_KEY)
+    if not isinstance(meta, dict):
+        raise _refuse(path, f"not a pipeline store (no '{ATTRS_KEY}' attributes)")
+    version = meta.get("format_version", meta.get("layout", {}).get("format_version", 1))
+    if version != SUPPORTED_FORMAT:
+        newer = isinstance(version, (int, float)) and version > SUPPORTED_FORMAT
+        raise _refuse(path, f"store format version {version!r} is {'newer than' if newer else 'different from'} "
+                            f"the version this report reads ({SUPPORTED_FORMAT}); update the reports package "
+                            "or rerun the scene")
+    missing = [k for k in ("provenance", "layout", "state") if not isinstance(meta.get(k), dict)]
+    missing += [f"provenance.{k}" for k in ("scene_hash", "scene") if k not in meta.get("provenance", {})]
+    missing += ["layout.dims"] if "dims" not in meta.get("layout", {}) else []
+    if missing:
+        raise _refuse(path, f"pipeline attributes lack {', '.join(missing)} (a different store format)")
+    return meta
+
+
+def open_scene_store(path) -> SceneStore:
+    """Check and load one store. Raises :class:`StoreRefused` with a one-line message."""
+    import xarray as xr
+
+    path = Path(path)
+    meta = read_meta(path)
+    if not meta["state"].get("skeleton_complete"):
+        raise _refuse(path, "store skeleton incomplete (interrupted before the first task); rerun the scene")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            ds = xr.open_zarr(str(path), consolidated=False, zarr_format=3).load()
+        except Exception as exc:  # an unreadable array is a store we cannot report on
+            raise _refuse(path, f"cannot read arrays ({type(exc).__name__}: {exc})") from None
+    for d in meta["layout"]["dims"]:
+        if d not in ds.coords:
+            raise _refuse(path, f"coordinate array {d!r} missing (a different store format)")
+    return SceneStore(path=path, meta=meta, ds=ds, science=meta["provenance"]["scene"])
+
+
+def shipped_scenes(workflows: Path = WORKFLOWS) -> list[dict]:
+    """Name, title, figure and file of every shipped scene (read from ``workflows/*.toml``)."""
+    out = []
+    for f in sorted(workflows.glob("*.toml")):
+        try:
+            head = tomllib.loads(f.read_text()).get("scene", {})
+        except (OSError, tomllib.TOMLDecodeError):
+            continue
+        if "name" in head:
+            out.append({"name": head["name"], "title": head.get("title", ""), "figure": head.get("figure", ""),
+                        "file": f"workflows/{f.name}"})
+    return out

@@ -1,0 +1,323 @@
+"""Helpers for the report tests: small stores built with the pipeline, and a headless-browser probe."""
+
+from __future__ import annotations
+
+import html
+import json
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+#: A tiny harmonic scene on the (mu_n/mu_s, scaled period) plane: 2 x 2 x 3 x 3 = 36 points,
+#: one polished reduction, error estimates and two series points.
+PLANE = """
+[scene]
+name = "tiny_plane"
+title = "report test: harmonic plane"
+figure = "UEtaMax (test)"
+family = "harmonic"
+
+[axes]
+anisotropy_ratio = { values = [0.0625, 16.0] }
+scaled_period = { log2_range = [0, 1], step = 1 }
+A0 = { range = [0.4, 1.4], num = 3 }
+A1_ratio = { range = [0.3, 0.8], num = 3 }
+
+[fixed]
+p = 0.0
+delta = 1e-5
+
+[solver]
+method = "periodic"
+rtol = 1e-3
+
+[outputs]
+quantities = ["scaled_speed", "scaled_efficiency", "relative_efficiency"]
+diagnostics = ["error_estimate"]
+
+[[reductions]]
+name = "best_efficiency"
+quantity = "scaled_efficiency"
+statistic = "absmax"
+over = ["A0", "A1_ratio"]
+report = ["relative_efficiency"]
+polish = true
+polish_max_evaluations = 6
+
+[series]
+n_tau = 32
+points = [{ anisotropy_ratio = 16.0, scaled_period = 2.0, A0 = 0.4, A1_ratio = 0.8 },
+          { anisotropy_ratio = 0.0625, scaled_period = 1.0, A0 = 1.4, A1_ratio = 0.3 }]
+
+[execution]
+points_per_task = 9
+"""
+
+#: The 3 x 3 (T^2 mu_n, T^2 mu_s) grid of figure EtaA0A1 at a tiny resolution: 9 x 3 x 3 points,
+#: a reduction keeping the whole facet plane, no polishing.
+FACETS = """
+[scene]
+name = "tiny_facets"
+title = "report test: T^2 mu grid"
+figure = "EtaA0A1 (test)"
+family = "harmonic"
+
+[axes]
+T2_mu_n = { values = [0.0625, 1.0, 16.0] }
+T2_mu_s = { values = [0.0625, 1.0, 16.0] }
+A0 = { range = [0.5, 1.3], num = 3 }
+A1_ratio = { range = [0.3, 0.7], num = 3 }
+
+[solver]
+rtol = 1e-3
+
+[outputs]
+quantities = ["scaled_efficiency"]
+
+[[reductions]]
+name = "best_efficiency"
+quantity = "scaled_efficiency"
+statistic = "absmax"
+over = ["A0", "A1_ratio"]
+
+[execution]
+points_per_task = 9
+"""
+
+#: Linear two-phase strokes with a duty-cycle window: a reduction with a subset dimension
+#: (kept: ratio x period x window) and a polished one over the (ratio, period) plane.
+WINDOW = """
+[scene]
+name = "tiny_window"
+title = "report test: duty-cycle windows"
+figure = "EtaVsMint0 (test)"
+family = "powerlaw"
+
+[axes]
+anisotropy_ratio = { values = [0.125, 8.0] }
+scaled_period = { values = [1.0, 2.0] }
+duty_cycle = { range = [0.3, 0.7], step = 0.2 }
+A0 = { range = [0.6, 1.2], num = 2 }
+A1_ratio = { range = [0.4, 0.8], num = 2 }
+
+[fixed]
+closing_shape = "linear"
+opening_shape = "linear"
+
+[solver]
+rtol = 1e-3
+
+[outputs]
+quantities = ["relative_efficiency", "scaled_efficiency"]
+
+[[reductions]]
+name = "windowed"
+quantity = "relative_efficiency"
+statistic = "absmax"
+over = ["A0", "A1_ratio", "duty_cycle"]
+[reductions.window]
+axis = "duty_cycle"
+center = 0.5
+halfwidths = [0.0, 0.2]
+
+[[reductions]]
+name = "best_efficiency"
+quantity = "scaled_efficiency"
+statistic = "absmax"
+over = ["A0", "A1_ratio", "duty_cycle"]
+polish = true
+polish_max_evaluations = 8
+
+[execution]
+points_per_task = 12
+"""
+
+SCENES = {"tiny_plane": PLANE, "tiny_facets": FACETS, "tiny_window": WINDOW}
+
+
+def build_store(tmp: Path, name: str) -> Path:
+    """Run scene ``name`` of :data:`SCENES` with the pipeline (synchronously) into ``tmp/<name>.zarr``."""
+    import pipeline
+
+    path = tmp / f"{name}.toml"
+    path.write_text(SCENES[name])
+    scene = pipeline.load_scene(path)
+    store = tmp / f"{name}.zarr"
+    pipeline.run_scene(scene, store, scheduler="synchronous", progress=False)
+    return store
+
+
+def synthetic_store(store: Path, scene_file: Path) -> Path:
+    """A complete store of a shipped scene at its full resolution, filled with smooth synthetic
+    values instead of solver output (seconds instead of hours): the pipeline's own skeleton and
+    reductions, so the report sees exactly the real layout and sizes."""
+    import warnings
+
+    import numpy as np
+    import zarr
+
+    import pipeline
+    from pipeline import _reduce, _store
+    from pipeline._grid import chunk_shape
+
+    scene = pipeline.load_scene(scene_file)
+    _store.create_skeleton(store, scene, chunk_shape(scene.shape, 4096))
+    mesh = np.meshgrid(*[np.linspace(0.0, 1.0, a.size) for a in scene.axes], indexing="ij", sparse=True)
+    base = sum(np.sin(2.0 + 1.3 * k * m) for k, m in enumerate(mesh, start=1))
+    data = {}
+    for i, q in enumerate(scene.outputs):
+        dtype, _ = _store.output_dtype(q)
+        v = (base * (1 + 0.1 * i)) if dtype.kind == "f" else np.full(scene.shape, 3)
+        if q == "error_estimate":
+            v = 1e-6 * (1.5 + np.sin(base))
+        data[q] = np.broadcast_to(v, scene.shape).astype(dtype)
+    status = np.zeros(scene.shape, dtype=np.int8)
+    status.flat[:: 997] = 6  # a few failures, NaN like the solver's
+    for q in scene.quantities:
+        data[q] = np.where(status == 0, data[q], np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = zarr.open_group(str(store), mode="r+", zarr_format=3)
+        for q, v in data.items():
+            g[q][...] = v
+        g["status"][...] = status
+        for r in scene.reductions:
+            arrays, _ = _reduce.grid_reduction(scene, r, data)
+            for name, v in arrays.items():
+                g[name][...] = v
+                if r.polish:
+                    g[name.replace(r.name, r.name + "_polished", 1)][...] = v
+            if r.polish:
+                g[f"{r.name}_polished_status"][...] = 0
+                g[f"{r.name}_polished_evaluations"][...] = 7
+        if scene.series is not None:
+            tau = np.arange(scene.series.n_tau) / scene.series.n_tau
+            g["series_u"][...] = np.sin(2 * np.pi * tau)[None, :] * np.ones((len(scene.series.points), 1))
+            g["series_status"][...] = 0
+    _store.set_state(store, chunks_complete=True, reductions_complete=True, series_complete=True)
+    return store
+
+
+# ---------------------------------------------------------------------------
+# Headless browser
+# ---------------------------------------------------------------------------
+
+#: Runs before plotly.js: records uncaught errors, rejected promises and console.error calls.
+_HOOK = """<script>
+window.__errors = [];
+window.addEventListener('error', function (e) {
+  window.__errors.push('error: ' + (e.message || (e.target && (e.target.src || e.target.href)) || e.type));
+}, true);
+window.addEventListener('unhandledrejection', function (e) { window.__errors.push('rejection: ' + e.reason); });
+(function () { var ce = console.error; console.error = function () {
+  window.__errors.push('console.error: ' + Array.prototype.join.call(arguments, ' ')); ce.apply(console, arguments); }; })();
+</script>"""
+
+#: Runs after load: per plot div, its traces, data points and animation frames, written into the DOM.
+_PROBE = """<script>
+window.addEventListener('load', function () { setTimeout(function () {
+  var plots = [];
+  document.querySelectorAll('.plotly-graph-div').forEach(function (gd) {
+    // Decoded data (gd.data may still hold base64 typed arrays): count the finite values.
+    var finite = function (a) {
+      if (!a || a.length === undefined) return 0;
+      var n = 0;
+      for (var i = 0; i < a.length; i++) {
+        var v = a[i];
+        if (v !== null && typeof v === 'object' && v.length !== undefined) n += finite(v);
+        else if (typeof v === 'number' && isFinite(v)) n += 1;
+      }
+      return n;
+    };
+    var n = 0, traces = (gd._fullData || []);
+    traces.forEach(function (t) { n += finite(t.z || t.y || []); });
+    plots.push({id: gd.id, traces: traces.length, points: n,
+                rendered: !!gd._fullLayout && !!gd.querySelector('.main-svg'),
+                frames: (gd._transitionData && gd._transitionData._frames) ? gd._transitionData._frames.length : 0,
+                sliders: (gd.layout && gd.layout.sliders) ? gd.layout.sliders.length : 0,
+                buttons: (gd.layout && gd.layout.updatemenus) ? gd.layout.updatemenus.length : 0});
+  });
+  var pre = document.createElement('pre');
+  pre.id = '__probe';
+  pre.textContent = JSON.stringify({plotly: typeof Plotly === 'undefined' ? null : Plotly.version,
+                                    errors: window.__errors, plots: plots});
+  document.body.appendChild(pre);
+}, 500); });
+</script>"""
+
+
+def chromium() -> str | None:
+    for name in ("chromium", "chromium-browser"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+def _split_pages(text: str, parts: int) -> list[str]:
+    """``parts`` copies of the page, scene sections dealt round-robin between them (every section in
+    exactly one copy), so several browsers can render a large report in parallel."""
+    pieces = re.split(r"(<section class='scene'>.*?</section>)", text, flags=re.S)
+    pages = []
+    for k in range(parts):
+        count, keep = 0, []
+        for piece in pieces:
+            if piece.startswith("<section class='scene'>"):
+                if count % parts == k:
+                    keep.append(piece)
+                count += 1
+            else:
+                keep.append(piece)
+        pages.append("".join(keep))
+    return pages
+
+
+def probe(index: Path, timeout: float = 180.0, parts: int | None = None) -> dict:
+    """Open ``index`` (copies with the hooks injected, beside it) in headless chromium and return
+    ``{"plotly": version, "errors": [...], "plots": [{id, traces, points, rendered, frames, ...}]}``.
+
+    The page is split by scene section into ``parts`` pages rendered concurrently (default: one
+    per CPU, at most 4); the results are merged."""
+    text = index.read_text(encoding="utf-8")
+    head = text.index("<head>") + len("<head>")
+    text = text[:head] + _HOOK + text[head:]
+    end = text.rindex("</body>")
+    text = text[:end] + _PROBE + text[end:]
+    parts = parts or max(1, min(4, os.cpu_count() or 1))
+    pages = []
+    for k, body in enumerate(_split_pages(text, parts)):
+        page = index.with_name(f"_probe{k}.html")
+        page.write_text(body, encoding="utf-8")
+        pages.append(page)
+    procs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            for k, page in enumerate(pages):
+                profile = Path(tmp) / f"profile{k}"
+                cmd = [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                       "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                       "--disable-dev-shm-usage", f"--user-data-dir={profile}", "--virtual-time-budget=10000",
+                       "--dump-dom", page.resolve().as_uri()]
+                env = dict(os.environ, HOME=str(profile))
+                procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
+            outs = [p.communicate(timeout=timeout) for p in procs]
+        finally:
+            for p in procs:
+                if p.poll() is None:
+                    p.kill()
+            for page in pages:
+                page.unlink(missing_ok=True)
+    merged = {"plotly": None, "errors": [], "plots": []}
+    for (stdout, stderr), p in zip(outs, procs):
+        m = re.search(r'<pre id="__probe">(.*?)</pre>', stdout, re.S)
+        if not m:
+            raise AssertionError(f"probe not found in the dumped DOM (rc {p.returncode}); stderr tail:\n"
+                                 f"{stderr[-2000:]}")
+        r = json.loads(html.unescape(m.group(1)))
+        merged["plotly"] = merged["plotly"] or r["plotly"]
+        merged["errors"] += r["errors"]
+        merged["plots"] += r["plots"]
+    return merged

@@ -1,0 +1,260 @@
+"""The static report: built from real (tiny) pipeline stores and from full-resolution synthetic
+stores of every shipped scene, then opened in headless chromium.
+
+Browser checks are skipped (with the reason) only when chromium is not installed.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import report_helpers as rh
+
+REPO = Path(__file__).resolve().parent.parent
+SHIPPED = sorted(p.stem for p in (REPO / "workflows").glob("*.toml"))
+MB = 1024 * 1024
+
+
+def _cli(*args, cwd) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([sys.executable, "-m", "reports", *map(str, args)], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """``out/`` holding the three tiny real stores and a synthetic store of every shipped scene;
+    the report built by ``python -m reports build`` with no store arguments (default: out/*.zarr)."""
+    root = tmp_path_factory.mktemp("site")
+    out = root / "out"
+    out.mkdir()
+    for name in rh.SCENES:
+        rh.build_store(out, name)
+    for name in SHIPPED:
+        rh.synthetic_store(out / f"{name}.zarr", REPO / "workflows" / f"{name}.toml")
+    proc = _cli("build", cwd=root)
+    assert proc.returncode == 0, proc.stderr
+    index = out / "report" / "index.html"
+    return {"root": root, "out": out, "index": index, "html": index.read_text(encoding="utf-8"),
+            "stdout": proc.stdout, "stderr": proc.stderr}
+
+
+@pytest.fixture(scope="module")
+def browser(site):
+    if rh.chromium() is None:
+        pytest.skip("chromium not installed (apt-get install -y chromium)")
+    return rh.probe(site["index"])
+
+
+# ---------------------------------------------------------------------------
+# Static structure
+# ---------------------------------------------------------------------------
+
+
+def test_plotly_js_included_once_and_offline(site):
+    html = site["html"]
+    js = site["index"].parent / "plotly.min.js"
+    assert js.is_file() and js.stat().st_size > 1 * MB
+    # Referenced once, relatively; never inlined into the page.
+    assert html.count("<script src=") == 1
+    assert html.count('<script src="plotly.min.js"></script>') == 1
+    assert "plotly.js v" not in html
+    assert len(re.findall(r"Plotly\.newPlot\(", html)) == html.count('class="plotly-graph-div"') > 20
+    # Nothing loaded from the network.
+    assert not re.search(r"""(src|href)=["']?(https?:)?//""", html)
+
+
+def test_one_section_per_scene_with_toc(site):
+    html = site["html"]
+    names = sorted(list(rh.SCENES) + SHIPPED)
+    for name in names:
+        assert f"<a href='#scene-{name}'>" in html, name
+        assert f"<h2 id='scene-{name}'>" in html, name
+    assert "panel failed" not in html, re.findall(r"panel failed[^<]*", html)
+    assert "not yet run" not in html.split("<nav id='toc'>")[1].split("</nav>")[0]
+    assert f"report: {site['index'].relative_to(site['root'])}" in site["stdout"]
+
+
+def test_section_states_provenance_failures_and_errors(site):
+    import pipeline
+
+    html = site["html"]
+    section = html.split("<h2 id='scene-tiny_plane'>")[1].split("<section")[0]
+    scene = pipeline.parse_scene(rh.PLANE)
+    assert scene.hash[:16] in section
+    for key in ("package version", "created (UTC)", "run time", "git commit"):
+        assert f"<th>{key}</th>" in section
+    assert re.search(r"<th>run time</th><td>last run: [0-9.]+ s wall", section)
+    assert "36 points" in section
+    assert "Solver error estimate over the" in section
+    assert "grid and polished maxima side by side" in section
+    # The synthetic stores carry failures with status 6: counted and explained.
+    grid = html.split("<h2 id='scene-harmonic_grid'>")[1].split("<section")[0]
+    n_failed = len(range(0, 9 * 64 * 64, 997))
+    assert f"<b>{n_failed:,} failures</b>" in grid
+    assert "finest grid reached before the error estimate fell below rtol" in grid
+    # Axis labels in the paper's notation, powers of two on log2 axes.
+    assert "μ<sub>n</sub>/μ<sub>s</sub>" in html and "(μ<sub>n</sub>μ<sub>s</sub>)<sup>1/4</sup> T" in html
+    assert "2<sup>-4</sup>" in html and "λ/λ<sub>ub</sub>" in html and "A<sub>1</sub>/A<sub>0</sub>" in html
+
+
+def test_report_of_all_scenes_under_25_mb(site):
+    files = [f for f in site["index"].parent.rglob("*") if f.is_file()]
+    total = sum(f.stat().st_size for f in files)
+    assert total < 25 * MB, f"report is {total / MB:.1f} MB"
+
+
+# ---------------------------------------------------------------------------
+# In the browser
+# ---------------------------------------------------------------------------
+
+
+def test_every_figure_renders_with_data(site, browser):
+    n_divs = site["html"].count('class="plotly-graph-div"')
+    plots = browser["plots"]
+    assert browser["plotly"], "Plotly not defined in the page"
+    assert len(plots) == n_divs
+    bad = [p for p in plots if not (p["rendered"] and p["traces"] > 0 and p["points"] > 0)]
+    assert not bad, bad
+
+
+def test_no_javascript_errors(browser):
+    assert browser["errors"] == []
+
+
+def test_animation_has_frames_and_controls(site, browser):
+    anims = [p for p in browser["plots"] if p["frames"] > 0]
+    # One animation per scene with an optimum (every scene here has a reduction).
+    assert len(anims) == len(rh.SCENES) + len(SHIPPED)
+    for p in anims:
+        assert p["frames"] >= 48 and p["sliders"] == 1 and p["buttons"] == 1
+
+
+# ---------------------------------------------------------------------------
+# Scenes not yet run, refused stores
+# ---------------------------------------------------------------------------
+
+
+def test_scenes_not_run_are_listed(tmp_path):
+    import reports
+
+    index = reports.build_report([tmp_path / "out" / "harmonic_grid.zarr"], tmp_path / "report")
+    html = index.read_text()
+    toc = html.split("<nav id='toc'>")[1].split("</nav>")[0]
+    for name in SHIPPED:
+        assert f"{name} — not yet run" in toc
+    assert f"--store {tmp_path / 'out' / 'harmonic_grid.zarr'}" in html
+
+
+def test_incomplete_store_is_reported_not_fatal(tmp_path):
+    """A store whose run was interrupted before any task: every section still builds."""
+    import pipeline
+    import reports
+    from pipeline import _store
+
+    scene = pipeline.load_scene(REPO / "workflows" / "linear_two_phase.toml")
+    store = tmp_path / "linear_two_phase.zarr"
+    _store.create_skeleton(store, scene, (1, 1, 10, 10, 10))
+    html = reports.build_report([store], tmp_path / "report", list_unrun=False).read_text()
+    assert "This store is incomplete" in html
+    assert "panel failed" not in html
+    assert f"{scene.n_points:,} points; 0 computed" in html
+
+
+def _group(path: Path, attrs: dict | None, zarr_format: int = 3) -> Path:
+    import zarr
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = zarr.open_group(str(path), mode="w", zarr_format=zarr_format)
+        if attrs is not None:
+            g.attrs.update(attrs)
+    return path
+
+
+def test_reads_the_pipelines_format_version():
+    from pipeline import _store
+
+    import reports
+
+    assert reports.SUPPORTED_FORMAT == _store.FORMAT_VERSION
+
+
+@pytest.mark.parametrize("kind, message", [
+    ("newer", "store format version 2 is newer than the version this report reads (1)"),
+    ("foreign", "not a pipeline store"),
+    ("zarr2", "a Zarr format 2 store"),
+    ("not_zarr", "not a Zarr store"),
+])
+def test_refuses_other_formats(tmp_path, kind, message):
+    store = tmp_path / "x.zarr"
+    if kind == "newer":
+        _group(store, {"pipeline": {"format_version": 2, "provenance": {}, "layout": {}, "state": {}}})
+    elif kind == "foreign":
+        _group(store, {"something": 1})
+    elif kind == "zarr2":
+        _group(store, {"pipeline": {}}, zarr_format=2)
+    else:
+        store.mkdir()
+        (store / "data.bin").write_bytes(b"\0")
+    out = tmp_path / "report"
+    proc = _cli("build", store, "--out", out, cwd=tmp_path)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {store}: ") and message in lines[0], proc.stderr
+    assert not out.exists()
+
+
+# ---------------------------------------------------------------------------
+# Motions: the force field and the path agree with the solver
+# ---------------------------------------------------------------------------
+
+
+def test_force_density_integrates_to_the_solvers_force():
+    """2 * int_0^{1/2} f_x(s) ds is the solver's F (eq. Newtonu), for Coulomb and p = 1/2."""
+    import solver
+    from reports._motion import force_density
+
+    rng = np.random.default_rng(3)
+    x, w = np.polynomial.legendre.leggauss(200)
+    s, ws = 0.25 * (x + 1), 0.25 * w
+    for p in (0.0, 0.5):
+        for _ in range(5):
+            u, phi, omega = rng.normal(0, 0.5), rng.uniform(0.2, 2.9), rng.normal(0, 3)
+            mu_n, mu_s, delta_tau = 2.0, 0.5, 1e-2
+            f = force_density([u], [phi], [omega], mu_n, mu_s, p, delta_tau, s)[0]
+            F, _ = solver.force_and_slope(u, phi, omega, mu_n, mu_s, p, delta_tau)
+            assert 2 * np.dot(ws, f) == pytest.approx(F, rel=1e-6, abs=1e-10)
+
+
+def test_motion_reproduces_the_stored_series_and_speed(site):
+    import xarray as xr
+
+    from reports._motion import compute_motion
+
+    store = site["out"] / "tiny_plane.zarr"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = xr.open_zarr(str(store)).load()
+    i = 0
+    params = {d: float(ds[f"series_{d}"].values[i]) for d in ("anisotropy_ratio", "scaled_period", "A0", "A1_ratio")}
+    m = compute_motion("harmonic", {**params, "p": 0.0, "delta": 1e-5}, rtol=1e-3, n_tau=32)
+    np.testing.assert_allclose(m.u, ds["series_u"].values[i], rtol=1e-9, atol=1e-12)
+    # x_cm after one period is T U = scaled period * scaled speed (mu_n mu_s = 1).
+    sel = ds["scaled_speed"].sel(anisotropy_ratio=params["anisotropy_ratio"], scaled_period=params["scaled_period"],
+                                 A0=params["A0"], A1_ratio=params["A1_ratio"])
+    assert m.displacement == pytest.approx(params["scaled_period"] * float(sel), rel=1e-6)
+    # The body's centre of mass: the mean of the two links' points is x_cm.
+    from reports._motion import body_outline
+
+    bx, by = body_outline(m.x_cm, m.phi)
+    np.testing.assert_allclose(0.5 * (bx[:, 0] + bx[:, 1]), m.x_cm)
+    np.testing.assert_allclose(by[:, 0], -by[:, 2])
