@@ -69,7 +69,7 @@ from ._force import E_FLOOR, force_and_slope, power_density
 from ._kinematics import (FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, angle_and_rate,
                           period_grid)
 from ._limits import fast_limit_velocity
-from ._periodic import _solve_point, radau_step
+from ._periodic import _solve_point, radau_step, stage_jacobian
 from ._physics import Physics
 from ._status import CONVERGED, STAGE_SOLVE_FAILED
 
@@ -389,11 +389,7 @@ def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, grad):
         _, d2 = force_and_slope(U2, phi2, om2, mu_n, mu_s, p, dtau)
         hd1 = h * kappa * d1
         hd2 = h * kappa * d2
-        J11 = 1.0 - a11 * hd1
-        J12 = -a12 * hd2
-        J21 = -a21 * hd1
-        J22 = 1.0 - a22 * hd2
-        det = J11 * J22 - J12 * J21
+        J11, J12, J21, J22, det = stage_jacobian(hd1, hd2)
         jac[n, 0], jac[n, 1], jac[n, 2], jac[n, 3] = J11, J12, J21, J22
         sens[n, 0] = (J22 - J12) / det
         sens[n, 1] = (J11 - J21) / det

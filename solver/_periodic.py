@@ -44,6 +44,16 @@ MAX_SHOOTING_ITERATIONS = 80
 
 
 @njit(cache=True)
+def stage_jacobian(hd1, hd2):
+    """I - h A diag(kappa dF/du at the stages) for RADAU_A; returns (J11, J12, J21, J22, det)."""
+    J11 = 1.0 - (5.0 / 12.0) * hd1
+    J12 = (1.0 / 12.0) * hd2
+    J21 = -0.75 * hd1
+    J22 = 1.0 - 0.25 * hd2
+    return J11, J12, J21, J22, J11 * J22 - J12 * J21
+
+
+@njit(cache=True)
 def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau, atol):
     """Solve one Radau IIA step from u_n, starting at the guess (U1, U2).
 
@@ -58,13 +68,7 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
     ok = False
     it = 0
     for it in range(1, MAX_STAGE_ITERATIONS + 1):
-        hd1 = h * kappa * d1
-        hd2 = h * kappa * d2
-        J11 = 1.0 - a11 * hd1
-        J12 = -a12 * hd2
-        J21 = -a21 * hd1
-        J22 = 1.0 - a22 * hd2
-        det = J11 * J22 - J12 * J21
+        J11, J12, J21, J22, det = stage_jacobian(h * kappa * d1, h * kappa * d2)
         x1 = -(J22 * R1 - J12 * R2) / det
         x2 = -(-J21 * R1 + J11 * R2) / det
         if max(abs(x1), abs(x2)) <= atol:
@@ -95,11 +99,7 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
     # sensitivities at the converged stages: J s = 1, and m - 1 = e2^T J^-1 (h A D 1)
     hd1 = h * kappa * d1
     hd2 = h * kappa * d2
-    J11 = 1.0 - a11 * hd1
-    J12 = -a12 * hd2
-    J21 = -a21 * hd1
-    J22 = 1.0 - a22 * hd2
-    det = J11 * J22 - J12 * J21
+    J11, J12, J21, J22, det = stage_jacobian(hd1, hd2)
     s1 = (J22 - J12) / det
     s2 = (J11 - J21) / det
     v1 = a11 * hd1 + a12 * hd2
