@@ -171,3 +171,17 @@ def test_reduction_array_name_clash(tmp_path):
     text = small_scene_text().replace('name = "fastest"', 'name = "best_efficiency_A0"')
     with pytest.raises(SceneError, match=r"reductions\[1\]\.name: array 'best_efficiency_A0' .* clashes"):
         parse_scene(text, "c.toml")
+
+
+def test_quick_variants_are_smaller_versions_of_every_shipped_scene():
+    from pathlib import Path
+
+    from pipeline.__main__ import PAPER_SCENES, WORKFLOWS, quick_variant
+    from pipeline._scene import load_scene
+
+    for name in PAPER_SCENES:
+        full = load_scene(WORKFLOWS / f"{name}.toml")
+        quick = quick_variant(Path(WORKFLOWS / f"{name}.toml"))
+        assert quick.dims == full.dims
+        assert quick.n_points < full.n_points
+        assert quick.hash != full.hash  # its stores can never be mistaken for the full ones
