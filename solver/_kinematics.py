@@ -24,7 +24,8 @@ FOURIER = 0
 POWER_LAW = 1
 
 
-def _as_points(name, value, n=None):
+def _as_points(name, value):
+    """``value`` as a finite 1-D float array over parameter points; errors name the argument."""
     arr = np.atleast_1d(np.asarray(value, dtype=float))
     if arr.ndim != 1:
         raise ValueError(f"{name}: expected a scalar or a 1-D array, got shape {arr.shape}")

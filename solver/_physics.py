@@ -5,14 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-def _points(name, value):
-    arr = np.atleast_1d(np.asarray(value, dtype=float))
-    if arr.ndim != 1:
-        raise ValueError(f"{name}: expected a scalar or a 1-D array, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: must be finite (got NaN or inf)")
-    return arr
+from ._kinematics import _as_points as _points
 
 
 @dataclass(frozen=True)
