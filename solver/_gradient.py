@@ -310,10 +310,7 @@ def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol
     if vscale <= 0.0:  # (1/4) int |dphi/dtau| by the Radau rule: a speed scale for the tolerances
         vscale = 0.0
         for n in range(N):
-            h = grid[n + 1] - grid[n]
-            mid = grid[n] + 0.5 * h
-            _, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
-            _, om2 = angle_and_rate(code, params, grid[n + 1], mid)
+            h, _, om1, _, om2 = _stage_kinematics(code, params, grid, n)
             vscale += 0.25 * h * (0.75 * abs(om1) + 0.25 * abs(om2))
         vscale = max(vscale, 1e-300)
     u_nodes = np.empty(N)
@@ -325,10 +322,7 @@ def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol
     atol = max(1e-5 * rtol, 1e-14) * vscale
     u = u0
     for n in range(N):
-        h = grid[n + 1] - grid[n]
-        mid = grid[n] + 0.5 * h
-        phi1, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
-        phi2, om2 = angle_and_rate(code, params, grid[n + 1], mid)
+        h, phi1, om1, phi2, om2 = _stage_kinematics(code, params, grid, n)
         guess2 = u_nodes[(n + 1) % N]
         U1, U2, _, _, _, _, ok = radau_step(u, (2.0 * u + guess2) / 3.0, guess2, h, phi1, om1,
                                             phi2, om2, kappa, mu_n, mu_s, p, dtau, atol)
@@ -341,15 +335,22 @@ def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol
 
 
 @njit(cache=True)
+def _stage_kinematics(code, params, grid, n):
+    """Step n's length and (phi, dphi/dtau) at its Radau stage times t_n + h/3 and t_{n+1}."""
+    h = grid[n + 1] - grid[n]
+    mid = grid[n] + 0.5 * h
+    phi1, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
+    phi2, om2 = angle_and_rate(code, params, grid[n + 1], mid)
+    return h, phi1, om1, phi2, om2
+
+
+@njit(cache=True)
 def _integrals(code, params, grid, N, mu_n, mu_s, p, dtau, stages):
     """(I_u, I_Pi) with the Radau weights from the stages, Pi by the solver's ``power_density``."""
     int_u = 0.0
     int_pi = 0.0
     for n in range(N):
-        h = grid[n + 1] - grid[n]
-        mid = grid[n] + 0.5 * h
-        phi1, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
-        phi2, om2 = angle_and_rate(code, params, grid[n + 1], mid)
+        h, phi1, om1, phi2, om2 = _stage_kinematics(code, params, grid, n)
         U1 = stages[2 * n]
         U2 = stages[2 * n + 1]
         int_u += h * (0.75 * U1 + 0.25 * U2)
@@ -376,10 +377,7 @@ def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, grad):
     log_m = 0.0
     sign_m = 1.0
     for n in range(N):
-        h = grid[n + 1] - grid[n]
-        mid = grid[n] + 0.5 * h
-        phi1, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
-        phi2, om2 = angle_and_rate(code, params, grid[n + 1], mid)
+        h, phi1, om1, phi2, om2 = _stage_kinematics(code, params, grid, n)
         U1 = stages[2 * n]
         U2 = stages[2 * n + 1]
         part[n, 0] = force_partials(U1, phi1, om1, mu_n, mu_s, p, dtau)
