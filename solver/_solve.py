@@ -27,6 +27,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from . import _march, _periodic
+from ._events import event_times, place_events
 from ._kinematics import period_grid
 from ._limits import fast_limit_velocity, kinematic_speed
 from ._physics import Physics
@@ -37,6 +38,8 @@ U_FLOOR_FRACTION = 1e-3
 MARCH_MAX_STEPS = 2 ** 22  # steps per solve (periods x steps per period) before giving up
 MAX_BISECTIONS = 4  # per refinement pass and step
 MIN_STEP = 2.0 ** -26
+#: an event this close to a node is taken to be on it (keeps steps above MIN_STEP)
+EVENT_GAP = 4 * MIN_STEP
 
 
 @dataclass(frozen=True)
@@ -280,6 +283,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         u0 = np.zeros(n)  # from rest
 
     grids = list(period_grid(kinematics, spec.first_steps))
+    corners = kinematics.corners()
     last_status = np.full(n, CONVERGED, dtype=np.int8)
     level = 0
     while active.size:
@@ -298,6 +302,9 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         int_u[active] = np.where(ok, iu[m:], np.nan)
         int_pi[active] = np.where(ok, ip[m:], np.nan)
         n_tau[active] = steps[m:]
+        found = event_times(code, params[active], padded[m:], steps[m:], ser[m:],
+                            physics.inertia_factor[active], physics.mu_n[active],
+                            physics.mu_s[active], physics.p[active], physics.delta_tau[active])
         keep = np.ones(m, dtype=bool)
         for j, i in enumerate(active):
             n_coarse = steps[j]
@@ -322,9 +329,11 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                     step_u[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1) - step_u[j, :n_coarse], h)
                 hot = refinement_levels(indicators / scale_u, h, rtol)
             else:
-                hot = None  # a failed solve: refine everywhere
-            new = bisect(coarse[j], hot)
-            if new.size - 1 > max_steps or np.min(np.diff(new)) < MIN_STEP:
+                hot = np.ones(n_coarse, dtype=np.int64)  # a failed solve: refine everywhere
+            # never below MIN_STEP: tiny steps at events are fine, bisecting them is not
+            hot = np.minimum(hot, np.floor(np.log2(h / MIN_STEP))).astype(np.int64)
+            new = place_events(bisect(coarse[j], hot), found[j], corners[i], EVENT_GAP)
+            if new.size - 1 > max_steps or not hot.any():
                 keep[j] = False  # out of budget: TOLERANCE_NOT_REACHED or the kernel's reason
                 if return_series and ok[j]:
                     series[i] = ser[m + j, :2 * n_coarse].copy()
