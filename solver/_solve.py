@@ -162,16 +162,16 @@ def refinement_levels(indicators, h, rtol):
 def bisect(grid, levels=None):
     """Nodes of ``grid`` with step j split into 2^levels[j] equal steps (default: all once)."""
     if levels is None:
-        levels = np.ones(grid.size - 1, dtype=np.int64)
-    pieces = [grid[:-1]]
-    h = np.diff(grid)
-    for r in range(1, int(levels.max(initial=0)) + 1):
-        sel = levels >= r
-        # the new nodes at this depth: odd multiples of h / 2^r inside the selected steps
-        k = 2 ** (r - 1)
-        offsets = (2 * np.arange(k) + 1) / 2 ** r
-        pieces.append((grid[:-1][sel, None] + h[sel, None] * offsets[None, :]).ravel())
-    return np.sort(np.concatenate(pieces + [grid[-1:]]))
+        out = np.empty(2 * grid.size - 1)
+        out[0::2] = grid
+        out[1::2] = 0.5 * (grid[:-1] + grid[1:])
+        return out
+    pieces = 2 ** levels
+    start = np.repeat(grid[:-1], pieces)
+    step = np.repeat(np.diff(grid) / pieces, pieces)
+    # k-th sub-node of each step: k = position within its run of repeats
+    k = np.arange(start.size) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    return np.append(start + k * step, grid[-1])
 
 
 def _pad(grids):
