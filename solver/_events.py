@@ -191,5 +191,15 @@ def place_events(grid, events, protected, min_gap):
         else:
             inserted.append(e)
     if inserted:
-        grid = np.sort(np.concatenate([grid, inserted]))
+        # events from different functions can nearly coincide: one node for them
+        inserted = np.asarray(inserted)
+        keep = np.concatenate([[True], np.diff(inserted) > min_gap])
+        grid = np.sort(np.concatenate([grid, inserted[keep]]))
+        steps = np.diff(grid)
+        if steps.min() <= min_gap:  # an inserted node next to a moved one: drop one
+            tiny = np.flatnonzero(steps <= min_gap)
+            fixed = np.isin(grid, protected)
+            fixed[[0, -1]] = True
+            drop = np.where(fixed[tiny + 1], tiny, tiny + 1)
+            grid = np.delete(grid, drop[~fixed[drop]])
     return grid

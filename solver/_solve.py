@@ -331,7 +331,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
             else:
                 hot = np.ones(n_coarse, dtype=np.int64)  # a failed solve: refine everywhere
             # never below MIN_STEP: tiny steps at events are fine, bisecting them is not
-            hot = np.minimum(hot, np.floor(np.log2(h / MIN_STEP))).astype(np.int64)
+            hot = np.clip(hot, 0, np.floor(np.log2(h / MIN_STEP))).astype(np.int64)
             new = place_events(bisect(coarse[j], hot), found[j], corners[i], EVENT_GAP)
             if new.size - 1 > max_steps or not hot.any():
                 keep[j] = False  # out of budget: TOLERANCE_NOT_REACHED or the kernel's reason

@@ -62,3 +62,13 @@ def test_corner_events_keep_the_estimate_honest(name):
     kin, phys = BLIND_SPOT_CASES[name]
     for rtol, err in _true_errors(kin, phys, [1e-4, 1e-5, 1e-6]):
         assert err[0] <= 2 * rtol, (rtol, err[0] / rtol)
+
+
+def test_place_events_never_leaves_a_step_below_the_gap():
+    """Nearly coincident events (two event functions vanishing together) give one node."""
+    grid = np.linspace(0.0, 1.0, 9)
+    gap = 1e-7
+    out = place_events(grid, np.array([0.3, 0.3 + 0.5 * gap, 0.251, 0.25 + 0.1 * gap]),
+                       np.array([0.0, 0.5]), gap)
+    assert np.all(np.diff(out) > gap)
+    assert out[0] == 0.0 and out[-1] == 1.0 and 0.5 in out
