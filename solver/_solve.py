@@ -11,7 +11,10 @@ bisected (error equidistribution), which concentrates steps at the
 stick-slip and velocity-reversal events of Coulomb friction, where the
 solution is not smooth and uniform refinement converges slowly and
 irregularly.  A point is accepted only from the second grid on (a single
-coarse grid can miss a short sticking phase altogether).
+coarse grid can miss a short sticking phase altogether).  The corners of F
+along the solution are nodes of every grid after the first (``_events``):
+the comparison of a grid with its bisection is blind to a corner that both
+sample on the same side.
 
 Error norm.  For P (always > 0) the error is relative.  U can vanish (for
 example at isotropic friction and p = 1), so its error is measured relative
