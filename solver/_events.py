@@ -162,6 +162,7 @@ def event_times(code, params, grids, n_steps, u_nodes, kappa, mu_n, mu_s, p, dta
     return out
 
 
+@njit(cache=True)
 def place_events(grid, events, protected, min_gap):
     """``grid`` with a node on every event.
 
@@ -169,37 +170,47 @@ def place_events(grid, events, protected, min_gap):
     of the event's step and is not ``protected`` (a corner of phi, or an end of
     the period); otherwise a node is inserted, unless one is within ``min_gap``
     already.  Moving rather than inserting keeps the grid from collecting nodes as
-    an event drifts by small amounts from pass to pass.
+    an event drifts by small amounts from pass to pass.  Events closer than
+    ``min_gap`` to each other give one node.
     """
-    events = np.unique(events[np.isfinite(events)])
-    if not events.size:
-        return grid
-    grid = grid.copy()
-    inserted = []
-    for e in events:
-        pos = int(np.searchsorted(grid, e))
-        if pos == 0 or pos >= grid.size:
+    ev = np.sort(events[np.isfinite(events)])
+    out = grid.copy()
+    if ev.size == 0:
+        return out
+    fixed = np.zeros(out.size, dtype=np.bool_)
+    fixed[0] = True
+    fixed[-1] = True
+    for j in range(out.size):
+        for c in protected:
+            if out[j] == c:
+                fixed[j] = True
+    inserted = np.empty(ev.size)
+    count = 0
+    for e in ev:
+        pos = np.searchsorted(out, e)
+        if pos == 0 or pos >= out.size:
             continue
-        left, right = grid[pos - 1], grid[pos]
+        left = out[pos - 1]
+        right = out[pos]
         near = pos - 1 if e - left <= right - e else pos
-        gap = abs(e - grid[near])
-        if gap <= min_gap:
+        gap = abs(e - out[near])
+        if gap <= min_gap or (count > 0 and e - inserted[count - 1] <= min_gap):
             continue
-        movable = 0 < near < grid.size - 1 and not np.any(protected == grid[near])
-        if gap <= 0.25 * (right - left) and movable:
-            grid[near] = e
+        if gap <= 0.25 * (right - left) and not fixed[near]:
+            out[near] = e
         else:
-            inserted.append(e)
-    if inserted:
-        # events from different functions can nearly coincide: one node for them
-        inserted = np.asarray(inserted)
-        keep = np.concatenate([[True], np.diff(inserted) > min_gap])
-        grid = np.sort(np.concatenate([grid, inserted[keep]]))
-        steps = np.diff(grid)
-        if steps.min() <= min_gap:  # an inserted node next to a moved one: drop one
-            tiny = np.flatnonzero(steps <= min_gap)
-            fixed = np.isin(grid, protected)
-            fixed[[0, -1]] = True
-            drop = np.where(fixed[tiny + 1], tiny, tiny + 1)
-            grid = np.delete(grid, drop[~fixed[drop]])
-    return grid
+            inserted[count] = e
+            count += 1
+    if count == 0:
+        return out
+    merged = np.sort(np.concatenate((out, inserted[:count])))
+    # an inserted node next to a moved one: drop the movable one of the pair
+    keep = np.ones(merged.size, dtype=np.bool_)
+    for j in range(merged.size - 1):
+        if merged[j + 1] - merged[j] <= min_gap:
+            drop = j + 1
+            if j + 1 == merged.size - 1 or np.any(protected == merged[j + 1]):
+                drop = j
+            if drop > 0:
+                keep[drop] = False
+    return merged[keep]
