@@ -43,6 +43,9 @@ BASELINE_FAILED = 1
 CHECK_MARCH, CHECK_FIXED = 0, 1
 #: ``used_method`` when no method (nor the fallback) converged.
 NO_ANSWER = -1
+#: Timing of one solve: the fastest of up to 3 calls while they take under 0.5 s in total.
+TIMING_REPEATS = 3
+TIMING_BUDGET = 0.5
 _WARM = False
 
 
@@ -93,7 +96,8 @@ def study_arrays(scene: StudyScene) -> dict[str, tuple[tuple[str, ...], np.dtype
         "iterations": (sol, i4, 0, {"long_name": "shooting iterations (periodic) or periods marched (march)"}),
         "n_tau": (sol, i4, 0, {"long_name": "steps per period of the final grid"}),
         "seconds": (sol, f8, nan, {"long_name": "wall time of this single-point solve (after JIT warm-up; "
-                                               "shared machine)", "units": "s"}),
+                                               "fastest of up to 3 calls within 0.5 s; shared machine)",
+                                   "units": "s"}),
         "error_U": (sol, f8, nan, {"long_name": err_u}),
         "error_P": (sol, f8, nan, {"long_name": err_p}),
         "true_error": (sol, f8, nan, {"long_name": "max(error_U, error_P): the true error in the solver norm"}),
@@ -266,13 +270,27 @@ def _warm_up(methods) -> None:
     _WARM = True
 
 
+def _best_time(solve):
+    """(result, seconds) of ``solve()``: the fastest of up to TIMING_REPEATS calls while their total
+    stays under TIMING_BUDGET seconds.  The machine is shared, so the minimum, as in ``timeit``,
+    is the least disturbed measurement; a solve longer than the budget is timed once."""
+    best, result, spent = math.inf, None, 0.0
+    for _ in range(TIMING_REPEATS):
+        t0 = time.perf_counter()
+        result = solve()
+        dt = time.perf_counter() - t0
+        best, spent = min(best, dt), spent + dt
+        if spent > TIMING_BUDGET:
+            break
+    return result, best
+
+
 def _timed_solve(case, method, rtol, max_steps):
     import solver
 
     kin, phys = case.kinematics(), case.physics()
-    t0 = time.perf_counter()
-    r = solver.solve_periodic(kin, phys, method=method, rtol=rtol, max_steps_per_period=max_steps)
-    return r, time.perf_counter() - t0
+    return _best_time(lambda: solver.solve_periodic(kin, phys, method=method, rtol=rtol,
+                                                    max_steps_per_period=max_steps))
 
 
 def _fixed(case, method, n_steps):
@@ -280,9 +298,7 @@ def _fixed(case, method, n_steps):
     import solver
 
     kin, phys = case.kinematics(), case.physics()
-    t0 = time.perf_counter()
-    iu, ip, st = solver.solve_fixed_grid(kin, phys, n_steps, method=method)
-    seconds = time.perf_counter() - t0
+    (iu, ip, st), seconds = _best_time(lambda: solver.solve_fixed_grid(kin, phys, n_steps, method=method))
     T, p = phys.period[0], phys.p[0]
     ok = st[0] == 0
     return (iu[0] / T if ok else math.nan, ip[0] * T ** -(p + 1.0) if ok else math.nan, int(st[0]), seconds)

@@ -118,6 +118,12 @@ def honesty_section(records, title="Honest tolerances") -> str:
     table = (f"<table><tr><th>scene</th><th>point</th><th>method</th><th>rtol</th><th>estimate</th>"
              f"<th>true error</th><th>true error / rtol</th><th>reference check</th></tr>{rows}</table>"
              if rows else "<p>No exceptions: every judged solve is within its rtol.</p>")
+    unverified = sorted({(r["scene"], r["label"], r["check_difference"]) for r in records
+                         if r["status"] == 0 and not r["trusted"]})
+    if unverified:
+        items = "".join(f"<li>{_esc(sc)}: {_esc(lb)} (cross-check difference {_fmt(d)})</li>"
+                        for sc, lb, d in unverified)
+        table += f"<details><summary>Points whose reference is not verified finely enough</summary><ul>{items}</ul></details>"
     return (f"<h3>{_esc(title)}</h3><p>Of {s['solves']} solves, {s['converged']} converged; "
             f"{s['judged']} of these are judged against a reference whose cross-check difference is at most "
             f"{REFERENCE_SHARE:g} rtol ({s['unverified']} converged solves have a reference not verified that "
@@ -201,10 +207,11 @@ def accuracy_orders(sd, quantity: str) -> dict:
             fixed = (fitted_order(_v(sd, "n_steps"), _v(sd, f"fixed_error_{quantity}")[i, a], floor[i])
                      if "n_steps" in sd.ds else math.nan)
             adaptive = fitted_order(_v(sd, "seconds")[i, a], _v(sd, f"error_{quantity}")[i, a], floor[i])
-            out[i, m] = (fixed, adaptive)
+            per_step = fitted_order(_v(sd, "n_tau")[i, a], _v(sd, f"error_{quantity}")[i, a], floor[i])
+            out[i, m] = (fixed, adaptive, per_step)
         if "baseline_tol" in sd.ds:
             out[i, "baseline"] = (math.nan, fitted_order(_v(sd, "baseline_seconds")[i],
-                                                         _v(sd, f"baseline_error_{quantity}")[i], floor[i]))
+                                                         _v(sd, f"baseline_error_{quantity}")[i], floor[i]), math.nan)
     return out
 
 
@@ -223,9 +230,9 @@ def work_precision_figure(sd, quantity: str):
     for i in range(n):
         r, c = i // cols + 1, i % cols + 1
         for a, m in enumerate(methods):
-            fixed_order, adaptive_order = orders[i, m]
+            fixed_order, _, step_order = orders[i, m]
             _curve(fig, r, c, _v(sd, "seconds")[i, a], _v(sd, f"error_{quantity}")[i, a], f"{m} (rtol)",
-                   _COLORS[m], "solid", f"{adaptive_order:.1f}",
+                   _COLORS[m], "solid", f"n_tau^-{step_order:.1f}",
                    [f"{m} rtol {t:.0e}: status {s}, estimate {e:.2g}" for t, s, e in
                     zip(rtols, _v(sd, "status")[i, a], _v(sd, "error_estimate")[i, a])], i == 0)
             if "n_steps" in sd.ds:
@@ -253,15 +260,18 @@ def _order_table(sd) -> str:
     methods = _labels(sd, "method")
     ou, op = accuracy_orders(sd, "U"), accuracy_orders(sd, "P")
     cols = [m for m in methods] + (["baseline"] if "baseline_tol" in sd.ds else [])
-    head = "".join(f"<th>{_esc(m)}: N-slope U / P</th><th>{_esc(m)}: time-slope U / P</th>" for m in cols)
+    head = "".join(f"<th>{_esc(m)}: N-slope U / P</th><th>{_esc(m)}: n_tau-slope U / P</th>"
+                   f"<th>{_esc(m)}: time-slope U / P</th>" for m in cols)
     rows = ""
     for i in range(sd.ds.sizes["point"]):
-        cells = "".join(f"<td class='num'>{_fmt(ou[i, m][0], 2)} / {_fmt(op[i, m][0], 2)}</td>"
-                        f"<td class='num'>{_fmt(ou[i, m][1], 2)} / {_fmt(op[i, m][1], 2)}</td>" for m in cols)
+        cells = "".join(f"<td class='num'>{_fmt(ou[i, m][k], 2)} / {_fmt(op[i, m][k], 2)}</td>"
+                        for m in cols for k in range(3))
         rows += f"<tr><td>{_esc(point_label(sd, i))}</td>{cells}</tr>"
     return ("<p class='note'>Observed orders: N-slope = −d log(error)/d log N on the fixed uniform grids "
-            "(<code>solve_fixed_grid</code>); time-slope = −d log(error)/d log(seconds) over the tolerances "
-            "(a work-precision slope; higher is cheaper accuracy). Least squares over the points above the "
+            "(<code>solve_fixed_grid</code>; printed at the dotted curves); n_tau-slope = the same against the "
+            "final adaptive grid size over the tolerances (printed at the solid curves); time-slope = "
+            "−d log(error)/d log(seconds) over the tolerances (a work-precision slope: higher is cheaper "
+            "accuracy; noisy where a solve takes milliseconds). Least squares over the points above the "
             f"reference's cross-check difference; n/a with fewer than 3.</p><table><tr><th>case</th>{head}</tr>"
             f"{rows}</table>")
 
@@ -329,13 +339,16 @@ def _sweep_maps(sd, j: int):
                                f"{int(_v(sd, 'n_tau')[i, a, b])}, {_v(sd, 'seconds')[i, a, b]:.3g} s<br>U "
                                f"{_fmt(_v(sd, 'U')[i, a, b], 6)}, P {_fmt(_v(sd, 'P')[i, a, b], 6)}{kept}")
             for c, (k, scale, zmin, zmax, bar_x) in enumerate((
-                    ("status", status_scale, 0, n_codes - 1, 0.27), ("ratio", "RdBu_r", -3, 3, 0.63),
-                    ("time", "Viridis", -2, 1, 1.0)), start=1):
+                    ("status", status_scale, 0, n_codes - 1, 0.285), ("ratio", "RdBu_r", -3, 3, 0.645),
+                    ("time", "Viridis", -2, 1, 1.005)), start=1):
                 fig.add_trace(go.Heatmap(z=grids[k], x=xlab, y=ylab, colorscale=scale, zmin=zmin, zmax=zmax,
                                          hovertext=hover, hoverinfo="text", xgap=1, ygap=1,
-                                         showscale=row == 1, colorbar={"x": bar_x, "len": 0.25, "y": 1.0,
-                                                                       "yanchor": "top", "thickness": 10}),
+                                         showscale=row == 1, colorbar={"x": bar_x, "len": 0.9 / len(row_names),
+                                                                       "y": 1.0, "yanchor": "top", "thickness": 8,
+                                                                       "tickfont": {"size": 9}}),
                               row=row, col=c)
+                if c > 1:
+                    fig.update_yaxes(showticklabels=False, row=row, col=c)
     fig.update_xaxes(type="category", title_text=parameter, title_font={"size": 10})
     fig.update_layout(height=260 * len(row_names) + 80, margin={"t": 80, "l": 130, "r": 40, "b": 40},
                       title={"text": f"Sweep of {parameter}: status (0 green = converged), true error / rtol "
