@@ -96,7 +96,7 @@ def study_arrays(scene: StudyScene) -> dict[str, tuple[tuple[str, ...], np.dtype
         "iterations": (sol, i4, 0, {"long_name": "shooting iterations (periodic) or periods marched (march)"}),
         "n_tau": (sol, i4, 0, {"long_name": "steps per period of the final grid"}),
         "seconds": (sol, f8, nan, {"long_name": "wall time of this single-point solve (after JIT warm-up; "
-                                               "fastest of up to 3 calls within 0.5 s; shared machine)",
+                                               "one numba thread; fastest of up to 3 calls within 0.5 s; shared machine)",
                                    "units": "s"}),
         "error_U": (sol, f8, nan, {"long_name": err_u}),
         "error_P": (sol, f8, nan, {"long_name": err_p}),
@@ -415,13 +415,23 @@ def _baselines(scene, case, ref, T, vscale):
 
 def compute_study_chunk(store: str, scene: StudyScene, points_per_chunk: int, index: int) -> dict:
     """Solve the points of chunk ``index``, write whole chunks of every result array, then mark it done."""
-    _warm_up(scene.methods)
+    import numba
+
     store_path = Path(store)
     lo, hi = index * points_per_chunk, min((index + 1) * points_per_chunk, scene.n_points)
     vscale = point_parameters_vscale(scene, lo, hi)
-    t0 = time.perf_counter()
-    rows = [_solve_point(scene, scene.points[i], vscale[i - lo]) for i in range(lo, hi)]
-    seconds = time.perf_counter() - t0
+    # One numba thread per solve: a single point gains nothing from the solver's prange over
+    # points, and on a loaded machine launching the parallel region costs ~50 ms per call,
+    # which would swamp the timings (the workers give the parallelism).
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        _warm_up(scene.methods)
+        t0 = time.perf_counter()
+        rows = [_solve_point(scene, scene.points[i], vscale[i - lo]) for i in range(lo, hi)]
+        seconds = time.perf_counter() - t0
+    finally:
+        numba.set_num_threads(threads)
     spec = study_arrays(scene)
     groups: dict[tuple, dict] = {}
     for name, (adims, dtype, _, _) in spec.items():

@@ -22,9 +22,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ._scene import Execution, SceneError, _Ctx, _shape_value, _tname, scene_hash
+from ._scene import Execution, _Ctx, _shape_value, _tname, scene_hash
 
-__all__ = ["STUDY_KINDS", "StudyCase", "StudyPoint", "StudyScene", "parse_study"]
+__all__ = ["STUDY_KINDS", "StudyCase", "StudyPoint", "StudyScene", "Sweep", "is_study", "parse_study"]
 
 STUDY_KINDS = ("accuracy", "stiffness")
 FAMILIES = ("harmonic", "powerlaw", "fourier")
@@ -433,5 +433,3 @@ def is_study(doc) -> bool:
     head = doc.get("scene") if isinstance(doc, dict) else None
     return isinstance(head, dict) and head.get("kind", "grid") != "grid"
 
-
-__all__ += ["is_study", "Sweep", "SceneError"]

@@ -123,7 +123,8 @@ def honesty_section(records, title="Honest tolerances") -> str:
     if unverified:
         items = "".join(f"<li>{_esc(sc)}: {_esc(lb)} (cross-check difference {_fmt(d)})</li>"
                         for sc, lb, d in unverified)
-        table += f"<details><summary>Points whose reference is not verified finely enough</summary><ul>{items}</ul></details>"
+        table += ("<details><summary>Points whose reference is not verified finely enough</summary>"
+                  f"<ul>{items}</ul></details>")
     return (f"<h3>{_esc(title)}</h3><p>Of {s['solves']} solves, {s['converged']} converged; "
             f"{s['judged']} of these are judged against a reference whose cross-check difference is at most "
             f"{REFERENCE_SHARE:g} rtol ({s['unverified']} converged solves have a reference not verified that "
@@ -159,7 +160,8 @@ def _reference_table(sd) -> str:
 def _timing_note(sd) -> str:
     run = sd.meta.get("run", {})
     return (f"<p class='note'>Times are the wall time of one single-point solve measured inside the task "
-            f"(<code>time.perf_counter</code>, after numba warm-up) on a machine shared with other work "
+            f"(<code>time.perf_counter</code>, after numba warm-up, one numba thread, the fastest of up to 3 "
+            f"calls within 0.5 s) on a machine shared with other work "
             f"({run.get('workers', '?')} workers); the whole run took {run.get('wall_seconds', float('nan')):.1f} s "
             f"wall. Errors are in the solver's norm: U relative to max(|U T|, 1e-3 V), P relative.</p>")
 
@@ -231,8 +233,8 @@ def work_precision_figure(sd, quantity: str):
         r, c = i // cols + 1, i % cols + 1
         for a, m in enumerate(methods):
             fixed_order, _, step_order = orders[i, m]
-            _curve(fig, r, c, _v(sd, "seconds")[i, a], _v(sd, f"error_{quantity}")[i, a], f"{m} (rtol)",
-                   _COLORS[m], "solid", f"n_tau^-{step_order:.1f}",
+            _curve(fig, r, c, _v(sd, "seconds")[i, a], _v(sd, f"error_{quantity}")[i, a], f"{m} (rtol; order vs n_tau)",
+                   _COLORS[m], "solid", f"{step_order:.1f}",
                    [f"{m} rtol {t:.0e}: status {s}, estimate {e:.2g}" for t, s, e in
                     zip(rtols, _v(sd, "status")[i, a], _v(sd, "error_estimate")[i, a])], i == 0)
             if "n_steps" in sd.ds:
@@ -251,7 +253,7 @@ def work_precision_figure(sd, quantity: str):
     fig.update_layout(height=300 * rows + 80, title={"text": f"Work-precision: error in {quantity} (solver norm) "
                                                              "against wall time per solve; number at each curve: "
                                                              "observed order", "font": {"size": 14}},
-                      legend={"orientation": "h", "y": -0.05}, margin={"t": 80, "l": 60, "r": 40, "b": 60})
+                      legend={"orientation": "h", "y": -0.05}, margin={"t": 80, "l": 60, "r": 60, "b": 60})
     fig.update_annotations(font_size=11)
     return fig
 
@@ -285,7 +287,8 @@ def _accuracy_body(site, sd) -> list[str]:
                      f"{sd.science.get('baseline', {}).get('cap_seconds')} s); it takes harmonic motions only, "
                      "so the other cases have no baseline curve.</p>")
     for q in ("U", "P"):
-        parts.append(site.guarded(f"{sd.name} work-precision {q}", lambda q=q: site.figure(work_precision_figure(sd, q))))
+        parts.append(site.guarded(f"{sd.name} work-precision {q}",
+                                  lambda q=q: site.figure(work_precision_figure(sd, q))))
     parts.append(site.guarded(f"{sd.name} orders", lambda: _order_table(sd)))
     return parts
 
@@ -419,16 +422,15 @@ def _fallback_text(sd) -> str:
 
 
 def _failures_by_sweep(sd) -> str:
-    st, methods, sweeps = _v(sd, "status"), _labels(sd, "method"), _labels(sd, "sweep")
+    st, methods = _v(sd, "status"), _labels(sd, "method")
     meanings = sd.ds["status"].attrs.get("flag_meanings", {})
     rows = ""
     for i in np.argwhere(st > 0):
         p, a, b = i
         rows += (f"<tr><td>{_esc(point_label(sd, p))}</td><td>{_esc(methods[a])}</td>"
                  f"<td class='num'>{_v(sd, 'rtol')[b]:.0e}</td><td>{int(st[p, a, b])}: "
-                 f"{_esc(meanings.get(str(int(st[p, a, b])), '?'))}</td><td class='num'>{_v(sd, 'seconds')[p, a, b]:.2g}"
-                 "</td></tr>")
-    del sweeps
+                 f"{_esc(meanings.get(str(int(st[p, a, b])), '?'))}</td>"
+                 f"<td class='num'>{_v(sd, 'seconds')[p, a, b]:.2g}</td></tr>")
     return (f"<details><summary>Every failed solve ({int(np.count_nonzero(st > 0))})</summary><table><tr>"
             f"<th>point</th><th>method</th><th>rtol</th><th>status</th><th>seconds</th></tr>{rows}</table></details>")
 
@@ -498,4 +500,5 @@ def combined_honesty(stores) -> tuple[str, str, str] | None:
     records = [r for sd in studies for r in honesty_records(sd)]
     names = ", ".join(sd.name for sd in studies)
     body = honesty_section(records, f"Honest tolerances over every study ({names})")
-    return "honest-tolerances", f"Honest tolerances ({names})", f"<h2 id='honest-tolerances'>Honest tolerances</h2>{body}"
+    head = "<h2 id='honest-tolerances'>Honest tolerances</h2>"
+    return "honest-tolerances", f"Honest tolerances ({names})", head + body
