@@ -95,8 +95,8 @@ def study_arrays(scene: StudyScene) -> dict[str, tuple[tuple[str, ...], np.dtype
         "error_estimate": (sol, f8, nan, {"long_name": "solver error estimate (claims true_error <= rtol)"}),
         "iterations": (sol, i4, 0, {"long_name": "shooting iterations (periodic) or periods marched (march)"}),
         "n_tau": (sol, i4, 0, {"long_name": "steps per period of the final grid"}),
-        "seconds": (sol, f8, nan, {"long_name": "wall time of this single-point solve (after JIT warm-up; "
-                                               "one numba thread; fastest of up to 3 calls within 0.5 s; shared machine)",
+        "seconds": (sol, f8, nan, {"long_name": "wall time of this single-point solve (after JIT warm-up; one "
+                                               "numba thread; fastest of up to 3 calls within 0.5 s; shared machine)",
                                    "units": "s"}),
         "error_U": (sol, f8, nan, {"long_name": err_u}),
         "error_P": (sol, f8, nan, {"long_name": err_p}),
