@@ -170,6 +170,12 @@ class StudyScene:
         return len(self.points)
 
     @property
+    def n_solves(self) -> int:
+        """Solves of a run (without the references): the size ``paper --quick`` reduces."""
+        per_point = len(self.methods) * (len(self.rtols) + len(self.fixed_steps)) + len(self.baseline_tolerances)
+        return self.n_points * per_point
+
+    @property
     def reference_rtol(self) -> float:
         return self.rtol_factor * min(self.rtols)
 
