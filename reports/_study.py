@@ -298,6 +298,14 @@ def _accuracy_body(site, sd) -> list[str]:
 # ---------------------------------------------------------------------------
 
 
+def _value_label(parameter: str, v: float) -> str:
+    """Powers of two as 2^k for the friction parameters, else 3 significant digits."""
+    k = math.log2(v) if v > 0 else math.nan
+    if parameter in ("anisotropy_ratio", "scaled_period") and abs(k - round(k)) < 1e-9:
+        return f"2^{int(round(k))}"
+    return f"{v:.3g}"
+
+
 def _sweep_maps(sd, j: int):
     """Maps motion x swept value of status, log10(true error / rtol) and log10(seconds)."""
     import plotly.graph_objects as go
@@ -316,7 +324,7 @@ def _sweep_maps(sd, j: int):
                                                                 "log10(seconds)")]
     fig = make_subplots(rows=len(row_names), cols=3, subplot_titles=titles, horizontal_spacing=0.08,
                         vertical_spacing=0.25 / len(row_names))
-    xlab = [f"{v:.3g}" for v in xs]
+    xlab = [_value_label(parameter, v) for v in xs]
     ylab = [motions_all[m] for m in motion_idx]
     n_codes = len(_STATUS_COLORS)
     status_scale = [[k / (n_codes - 1), c] for k, c in enumerate(_STATUS_COLORS)]
@@ -352,7 +360,9 @@ def _sweep_maps(sd, j: int):
                               row=row, col=c)
                 if c > 1:
                     fig.update_yaxes(showticklabels=False, row=row, col=c)
-    fig.update_xaxes(type="category", title_text=parameter, title_font={"size": 10})
+    fig.update_xaxes(type="category", tickangle=0, tickfont={"size": 9})
+    for c in (1, 2, 3):
+        fig.update_xaxes(title_text=parameter, title_font={"size": 10}, row=len(row_names), col=c)
     fig.update_layout(height=260 * len(row_names) + 80, margin={"t": 80, "l": 130, "r": 40, "b": 40},
                       title={"text": f"Sweep of {parameter}: status (0 green = converged), true error / rtol "
                                      "(red above rtol) and time per solve", "font": {"size": 14}})
