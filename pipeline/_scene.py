@@ -586,9 +586,13 @@ def parse_scene(text: str, file: str = "<scene>") -> Scene:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ctx.err("(toml)", f"not valid TOML: {exc}") from None
+    from ._study_scene import is_study, parse_study  # imported here: it imports this module
+
+    if is_study(doc):  # [scene] kind = "accuracy" | "stiffness": a study scene, not a grid
+        return parse_study(doc, text, file)
     ctx.table(doc, "", _TOP_KEYS, required=("scene", "axes", "solver", "outputs"))
 
-    head = ctx.table(doc["scene"], "scene", {"name": "", "title": "", "figure": "", "family": ""},
+    head = ctx.table(doc["scene"], "scene", {"name": "", "title": "", "figure": "", "family": "", "kind": ""},
                      required=("name", "family"))
     name = ctx.string(head["name"], "scene.name")
     if not _NAME_RE.match(name):

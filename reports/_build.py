@@ -48,6 +48,11 @@ def build_report(stores, out, *, list_unrun: bool = True) -> Path:
     site = SiteBuilder(Path(out))
     for sd in loaded:
         site.add_scene(sd)
+    from ._study import combined_honesty  # over every study store together (issue 6)
+
+    honesty = combined_honesty(loaded)
+    if honesty is not None:
+        site.sections.append(honesty)
     have = {sd.name for sd in loaded}
     shipped = {e["name"]: e for e in shipped_scenes()}
     for p in missing:

@@ -108,6 +108,11 @@ class SiteBuilder:
 
     # -- sections ----------------------------------------------------------
     def add_scene(self, sd: SceneStore) -> None:
+        if sd.meta.get("kind", "grid") != "grid":  # accuracy / stiffness studies: reports._study
+            from ._study import study_section
+
+            self.sections.append(study_section(self, sd))
+            return
         anchor = f"scene-{sd.name}"
         if any(a == anchor for a, _, _ in self.sections):  # the same scene in two stores
             anchor = f"scene-{sd.name}-{len(self.sections)}"

@@ -164,6 +164,8 @@ def synthetic_store(store: Path, scene_file: Path) -> Path:
     from pipeline._grid import chunk_shape
 
     scene = pipeline.load_scene(scene_file)
+    if getattr(scene, "kind", "grid") != "grid":
+        return synthetic_study_store(store, scene)
     _store.create_skeleton(store, scene, chunk_shape(scene.shape, 4096))
     mesh = np.meshgrid(*[np.linspace(0.0, 1.0, a.size) for a in scene.axes], indexing="ij", sparse=True)
     base = sum(np.sin(2.0 + 1.3 * k * m) for k, m in enumerate(mesh, start=1))
@@ -198,6 +200,43 @@ def synthetic_store(store: Path, scene_file: Path) -> Path:
             g["series_u"][...] = np.sin(2 * np.pi * tau)[None, :] * np.ones((len(scene.series.points), 1))
             g["series_status"][...] = 0
     _store.set_state(store, chunks_complete=True, reductions_complete=True, series_complete=True)
+    return store
+
+
+def synthetic_study_store(store: Path, scene) -> Path:
+    """A complete study store (accuracy, stiffness) of ``scene`` with synthetic values: the
+    pipeline's own skeleton, errors decreasing with rtol and grid size, a few failures."""
+    import warnings
+
+    import numpy as np
+    import zarr
+
+    from pipeline import _store, _study
+
+    _study.create_study_skeleton(store, scene, 64)
+    rng = np.random.default_rng(0)
+    spec = _study.study_arrays(scene)
+    dims = _study._dims(scene)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = zarr.open_group(str(store), mode="r+", zarr_format=3)
+        for name, (adims, dtype, _, _) in spec.items():
+            shape = tuple(dims[d] for d in adims)
+            if name.endswith("status"):
+                v = np.zeros(shape)
+                if name == "status":
+                    v.flat[::7] = 6
+            elif name in ("check_method", "used_method"):
+                v = np.zeros(shape)
+            elif dtype.kind == "i":
+                v = np.full(shape, 3)
+            else:
+                level = np.arange(shape[-1])[(None,) * (len(shape) - 1)] if len(shape) > 1 else 0
+                v = 10.0 ** (-2.0 - level - rng.random(shape))
+            g[name][...] = v.astype(dtype)
+    mark = zarr.open_array(store=str(store), path="pipeline_state/chunk_done", mode="r+")
+    mark[...] = 1
+    _store.set_state(store, chunks_complete=True)
     return store
 
 

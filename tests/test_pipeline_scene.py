@@ -183,5 +183,6 @@ def test_quick_variants_are_smaller_versions_of_every_shipped_scene():
         full = load_scene(WORKFLOWS / f"{name}.toml")
         quick = quick_variant(Path(WORKFLOWS / f"{name}.toml"))
         assert quick.dims == full.dims
-        assert quick.n_points < full.n_points
+        # study scenes (issue 6) keep their cases and solve each fewer times
+        assert getattr(quick, "n_solves", quick.n_points) < getattr(full, "n_solves", full.n_points)
         assert quick.hash != full.hash  # its stores can never be mistaken for the full ones

@@ -1,0 +1,332 @@
+"""Study scenes (issue 6): parsing, store, fallback, observed order, honest tolerances, report.
+
+The default tests run a tiny stiffness-kind scene end to end (synchronous scheduler, a few
+seconds); the honest-tolerance check over the whole agreement registry is ``slow``.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+
+import numpy as np
+import pytest
+
+import solver
+from cases import AGREEMENT_CASES, by_name
+from pipeline import SceneError, StoreMismatch, load_scene, parse_scene, run_scene
+from pipeline.__main__ import main, quick_variant
+from pipeline._study import NO_ANSWER, _fallback, solver_norm_errors
+from pipeline_cases import REPO, write_scene
+from reports._read import open_scene_store
+from reports._study import fitted_order, honesty_records, honesty_summary
+
+WORKFLOWS = REPO / "workflows"
+
+#: Two cheap, non-stiff motions; a delta sweep of two values; both methods at two tolerances.
+TINY = """
+[scene]
+kind = "stiffness"
+name = "tiny_study"
+
+[solver]
+methods = ["periodic", "march"]
+rtols = [1e-3, 1e-6]
+fallback = "periodic"
+
+[reference]
+check_steps = 32768
+
+[base]
+anisotropy_ratio = "2^-3"
+scaled_period = 1.0
+
+[[motions]]
+name = "harmonic"
+family = "harmonic"
+A0 = 1.0
+A1 = 0.5
+
+[[motions]]
+name = "burst"
+family = "powerlaw"
+A0 = 1.2
+A1 = 0.35
+duty_cycle = 0.8
+closing_shape = "down:10"
+opening_shape = "up:3"
+
+[[sweeps]]
+parameter = "delta"
+values = [1e-3, 1e-7]
+
+[[sweeps]]
+parameter = "exponent"
+values = [3.0]
+
+[execution]
+points_per_task = 2
+"""
+
+
+def _edit(old, new, text=TINY):
+    assert old in text, old
+    return text.replace(old, new, 1)
+
+
+# ---------------------------------------------------------------------------
+# Scenes
+# ---------------------------------------------------------------------------
+
+
+def test_shipped_study_scenes_and_quick_variants_parse():
+    for name in ("accuracy", "stiffness"):
+        full, quick = load_scene(WORKFLOWS / f"{name}.toml"), quick_variant(WORKFLOWS / f"{name}.toml")
+        assert full.kind == quick.kind == name
+        assert 0 < quick.n_points <= full.n_points and quick.hash != full.hash
+
+
+def test_stiffness_points_are_every_applicable_motion_times_every_value():
+    doc = tomllib.loads((WORKFLOWS / "stiffness.toml").read_text())
+    powerlaw_only = {"exponent", "duty_cycle"}
+    families = [m["family"] for m in doc["motions"]]
+    expected = 0
+    for sw in doc["sweeps"]:
+        if "values" in sw:
+            n_values = len(sw["values"])
+        else:
+            (a, b), = [v for k, v in sw.items() if k.endswith("range")]
+            n_values = int(abs(b - a) / sw["step"] + 1e-9) + 1
+        n_motions = sum(f == "powerlaw" for f in families) if sw["parameter"] in powerlaw_only else len(families)
+        expected += n_values * n_motions
+    assert load_scene(WORKFLOWS / "stiffness.toml").n_points == expected
+
+
+def test_accuracy_cases_are_the_registry_cases():
+    """The scene file repeats tests/cases.py's parameters: same kinematics and physics."""
+    scene = load_scene(WORKFLOWS / "accuracy.toml")
+    for case in scene.motions:
+        ref = by_name(case.name)
+        code, params = case.kinematics().kernel_encoding()
+        ref_code, ref_params = ref.kinematics.kernel_encoding()
+        assert code == ref_code
+        np.testing.assert_allclose(params, ref_params, rtol=1e-14, err_msg=case.name)
+        for attr in ("mu_n", "mu_s", "period", "p", "delta_tau"):
+            np.testing.assert_allclose(getattr(case.physics(), attr), getattr(ref.physics, attr), rtol=1e-14,
+                                       err_msg=f"{case.name}: {attr}")
+
+
+def test_the_accuracy_case_set_covers_the_issue():
+    scene = load_scene(WORKFLOWS / "accuracy.toml")
+    families = {m.family for m in scene.motions}
+    assert families == {"harmonic", "powerlaw", "fourier"}
+    assert {0.0, 0.5, 1.5} <= {m.p for m in scene.motions}
+    assert {2.0 ** -8, 2.0 ** 8} <= {m.anisotropy_ratio for m in scene.motions}
+    assert any(m.family == "powerlaw" and abs(m.value("closing_shape")) == 10 for m in scene.motions)
+
+
+BAD = [
+    pytest.param(('kind = "stiffness"', 'kind = "precision"'), "scene.kind", "must be one of", id="unknown-kind"),
+    pytest.param(("[solver]", "[solver]\nspeed = 3"), "solver.speed", "unknown key", id="unknown-key"),
+    pytest.param(("rtols = [1e-3, 1e-6]", "rtols = [1e-3, 0.5]"), "solver.rtols", "(0, 0.1]", id="rtol-range"),
+    pytest.param(('fallback = "periodic"', 'fallback = "lsoda"'), "solver.fallback", "must be one of",
+                 id="fallback"),
+    pytest.param(('parameter = "delta"', 'parameter = "colour"'), "sweeps[0].parameter", "must be one of",
+                 id="sweep-parameter"),
+    pytest.param(("values = [1e-3, 1e-7]", "values = [1e-3, -1.0]"), "sweeps[0].values", "outside the domain",
+                 id="sweep-domain"),
+    pytest.param(('closing_shape = "down:10"', 'closing_shape = "sideways:10"'), "motions[1].closing_shape",
+                 "up:g", id="shape"),
+    pytest.param(("duty_cycle = 0.8", "duty_cycle = 1.5"), "motions[1].duty_cycle", "(0, 1)", id="duty"),
+    pytest.param(("A1 = 0.5", "A1 = 0.5\nB = [0.1]"), "motions[0].B", "not a parameter of family", id="family-key"),
+    pytest.param(('anisotropy_ratio = "2^-3"\n', ""), "motions[0].anisotropy_ratio", "missing", id="missing"),
+    pytest.param(("[[sweeps]]\nparameter = \"exponent\"\nvalues = [3.0]\n", "[cases]\nx = 1\n"), "cases",
+                 "not used by a 'stiffness' scene", id="wrong-table"),
+]
+
+
+@pytest.mark.parametrize("edit,key,words", BAD)
+def test_bad_study_scene_names_the_key(edit, key, words):
+    with pytest.raises(SceneError) as info:
+        parse_scene(_edit(*edit), "bad.toml")
+    assert info.value.key == key and words in info.value.reason, str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_bad_study_scene_exits_2_and_writes_nothing(tmp_path, capsys):
+    path = write_scene(tmp_path, _edit('fallback = "periodic"', 'fallback = "lsoda"'), "bad.toml")
+    store = tmp_path / "bad.zarr"
+    assert main(["run", str(path), "--store", str(store), "--scheduler", "synchronous"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "solver.fallback" in err[0]
+    assert not store.exists()
+
+
+# ---------------------------------------------------------------------------
+# Small reductions against brute force
+# ---------------------------------------------------------------------------
+
+
+def test_fitted_order_recovers_a_power_law_and_ignores_the_floor():
+    rng = np.random.default_rng(1)
+    n = 2.0 ** np.arange(4, 12)
+    for k in (1.0, 2.0, 3.0):
+        e = 5.0 * n ** -k * np.exp(0.01 * rng.standard_normal(n.size))
+        assert abs(fitted_order(n, e) - k) < 0.05
+        floored = np.maximum(e, 1e-9)  # a reference floor must not flatten the fit
+        assert abs(fitted_order(n, floored, floor=1.1e-9) - k) < 0.05
+    assert math.isnan(fitted_order(n[:2], n[:2] ** -2.0))
+
+
+def test_honesty_summary_matches_a_brute_force_count():
+    rng = np.random.default_rng(2)
+    records = [{"status": int(rng.choice([0, 0, 0, 5])), "trusted": bool(rng.random() < 0.9),
+                "true_error": float(10 ** rng.uniform(-9, -3)), "rtol": 1e-5} for _ in range(400)]
+    for r in records:
+        r["ratio"] = r["true_error"] / r["rtol"]
+    s = honesty_summary(records)
+    judged = [r for r in records if r["status"] == 0 and r["trusted"]]
+    assert s["judged"] == len(judged)
+    assert s["within"] == sum(r["true_error"] <= r["rtol"] for r in judged)
+    assert s["within10"] == sum(r["true_error"] <= 10 * r["rtol"] for r in judged)
+    assert [r["ratio"] for r in s["exceptions"]] == sorted((r["ratio"] for r in judged if r["ratio"] > 1),
+                                                            reverse=True)
+
+
+def test_fallback_keeps_own_answer_else_the_fallback_method_else_none():
+    scene = parse_scene(TINY, "tiny.toml")  # methods (periodic, march), fallback periodic
+    status = np.array([[0, 0], [5, 0]])  # march failed at the first rtol only
+    v = {"status": status, "U": np.array([[1.0, 2.0], [np.nan, 4.0]]), "P": np.ones((2, 2)),
+         "true_error": np.array([[1e-4, 1e-7], [np.nan, 1e-7]])}
+    out = _fallback(scene, v)
+    np.testing.assert_array_equal(out["used_method"], [[0, 0], [0, 1]])
+    np.testing.assert_array_equal(out["U_used"], [[1.0, 2.0], [1.0, 4.0]])
+    v["status"] = np.array([[6, 0], [5, 0]])  # neither converged at the first rtol
+    out = _fallback(scene, v)
+    assert out["used_method"][0, 0] == out["used_method"][1, 0] == NO_ANSWER
+    assert np.isnan(out["U_used"][:, 0]).all()
+
+
+def test_solver_norm_errors_use_the_u_floor():
+    e_u, e_p = solver_norm_errors([1e-9], [2.0], [0.0], [1.0], period=2.0, vscale=1.0)
+    # U_ref = 0: the error is relative to 1e-3 V, not to |U_ref|
+    np.testing.assert_allclose(e_u, 2e-9 / 1e-3)
+    np.testing.assert_allclose(e_p, 1.0)
+
+
+# ---------------------------------------------------------------------------
+# End to end on the tiny scene
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("study")
+    scene = parse_scene(TINY, str(tmp / "tiny.toml"))
+    store = tmp / "tiny.zarr"
+    summary = run_scene(scene, store, scheduler="synchronous", progress=False)
+    return scene, store, summary
+
+
+def test_tiny_study_store_is_labelled_and_complete(tiny):
+    xr = pytest.importorskip("xarray")
+    scene, store, summary = tiny
+    assert summary.computed_points == scene.n_points == 5  # 2 motions x 2 deltas + 1 power law x 1 exponent
+    ds = xr.open_zarr(store)
+    assert ds["true_error"].dims == ("point", "method", "rtol")
+    assert ds["method"].attrs["labels"] == ["periodic", "march"]
+    np.testing.assert_allclose(ds["rtol"].values, [1e-3, 1e-6])
+    assert (ds["status"].values >= 0).all() and (ds["ref_status"].values == 0).all()
+    np.testing.assert_allclose(sorted(set(ds["delta"].values[ds["sweep"].values == 0])), [1e-7, 1e-3])
+    # the stored true error is the brute-force max of the two solver-norm errors
+    U, P = ds["U"].values, ds["P"].values
+    T, V = ds["period"].values[:, None, None], ds["kinematic_speed"].values[:, None, None]
+    U_ref, P_ref = ds["U_ref"].values[:, None, None], ds["P_ref"].values[:, None, None]
+    brute = np.maximum(np.abs(U - U_ref) * T / np.maximum(np.abs(U_ref) * T, 1e-3 * V), np.abs(P - P_ref) / P_ref)
+    np.testing.assert_allclose(ds["true_error"].values, brute, rtol=1e-12)
+    assert (ds["seconds"].values > 0).all()
+
+
+def test_tiny_study_rerun_resume_and_refusal(tiny):
+    import zarr
+
+    scene, store, _ = tiny
+    again = run_scene(scene, store, scheduler="synchronous", progress=False)
+    assert again.computed_points == 0
+    before = open_scene_store(store).ds["U_ref"].values.copy()
+    zarr.open_array(store=str(store), path="pipeline_state/chunk_done", mode="r+")[1] = 0  # as if killed
+    resumed = run_scene(scene, store, scheduler="synchronous", progress=False)
+    assert resumed.computed_chunks == 1 and resumed.computed_points == 2
+    np.testing.assert_allclose(open_scene_store(store).ds["U_ref"].values, before, rtol=1e-12)
+    other = parse_scene(_edit("values = [1e-3, 1e-7]", "values = [1e-3, 1e-8]"), "other.toml")
+    with pytest.raises(StoreMismatch):
+        run_scene(other, store, scheduler="synchronous", progress=False)
+
+
+def test_tiny_study_tolerances_are_honest(tiny):
+    """The issue's targets on a small sample: >= 99 % within rtol, all within 10 rtol."""
+    _, store, _ = tiny
+    s = honesty_summary(honesty_records(open_scene_store(store)))
+    assert s["judged"] >= 10
+    assert s["fraction_within"] >= 0.99, s["exceptions"]
+    assert s["fraction_within10"] == 1.0, s["exceptions"]
+
+
+def test_tiny_study_report_has_its_sections(tiny, tmp_path):
+    from reports import build_report
+
+    _, store, _ = tiny
+    index = build_report([store], tmp_path / "report", list_unrun=False)
+    text = index.read_text()
+    assert "panel failed" not in text
+    for words in ("Sweep of delta", "U and P against δ", "Honest tolerances over every study", "log10(seconds)"):
+        assert words in text, words
+
+
+# ---------------------------------------------------------------------------
+# Slow: the registry at three tolerances
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["periodic", "march"])
+def test_registry_tolerances_are_honest(method):
+    """Every agreement case, rtol 1e-3, 1e-5, 1e-7, against periodic at 1e-10 cross-checked
+    by a uniform 2^17-step grid: >= 99 % within rtol, all within 10 rtol (stiff march cases
+    may fail, but not converge to a wrong answer)."""
+    ratios = []
+    for case in AGREEMENT_CASES:
+        ref = solver.solve_periodic(case.kinematics, case.physics, rtol=1e-10)
+        iu, ip, st = solver.solve_fixed_grid(case.kinematics, case.physics, 2 ** 17)
+        T, p = case.physics.period, case.physics.p
+        V = solver.kinematic_speed(case.kinematics)
+        check = max(*solver_norm_errors(iu / T, ip * T ** -(p + 1), ref.U, ref.P, T, V))
+        for rtol in (1e-3, 1e-5, 1e-7):
+            if not check <= 0.1 * rtol:
+                continue
+            r = solver.solve_periodic(case.kinematics, case.physics, method=method, rtol=rtol)
+            if r.status[0] != 0:
+                assert case.stiff or method == "march", f"{case.name} {method} {rtol}: status {r.status[0]}"
+                continue
+            ratios.append((max(*solver_norm_errors(r.U, r.P, ref.U, ref.P, T, V))[0] / rtol, case.name, rtol))
+    ratios = sorted(ratios, reverse=True)
+    assert len(ratios) >= 20
+    assert sum(x <= 1 for x, *_ in ratios) >= 0.99 * len(ratios), ratios[:5]
+    assert ratios[0][0] <= 10, ratios[:5]
+
+
+# ---------------------------------------------------------------------------
+# Known dishonest estimate (found by the stiffness study; the solver is not changed here)
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.xfail(strict=True, reason="solver bug: march reports convergence (status 0, estimate < rtol) with "
+                                       "U wrong by a factor ~5 on burst-and-coast at mu_n/mu_s = 64")
+def test_march_is_honest_on_burst_and_coast_at_high_anisotropy():
+    kin = solver.PowerLaw(1.2, 0.35, 0.8, 10.0, False, 3.0, True)
+    phys = solver.Physics.from_scaled(64.0, 2.0, p=0.0, delta=1e-5)
+    ref = solver.solve_periodic(kin, phys, method="periodic", rtol=1e-9)
+    r = solver.solve_periodic(kin, phys, method="march", rtol=1e-4)
+    V = solver.kinematic_speed(kin)
+    error = max(*solver_norm_errors(r.U, r.P, ref.U, ref.P, phys.period, V))[0]
+    assert r.status[0] != 0 or error <= 10 * 1e-4, f"status 0, estimate {r.error_estimate[0]:.2g}, true {error:.2g}"
