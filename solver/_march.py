@@ -42,12 +42,27 @@ def heun_step(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
     return u + 0.5 * h * kappa * (F1 + F2), m
 
 
+#: a Heun step jumps across the steep part of F (a sticking band of width ~delta_tau)
+#: when its stage forces have opposite signs and (F2 - F1) / F1 is below this (a
+#: linear F gives 1 + (F2 - F1) / F1 = 1 + z, z = h T^(2-p) dF/du; chatter sits at -2)
+JUMP_LIMIT = -1.5
+
+
+@njit(cache=True)
+def step_jumps(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
+    """Whether a Heun step from u jumps across a sticking band instead of resolving it."""
+    F1, _ = force_and_slope(u, phi0, om0, mu_n, mu_s, p, dtau)
+    F2, _ = force_and_slope(u + h * kappa * F1, phi1, om1, mu_n, mu_s, p, dtau)
+    return F1 * F2 < 0.0 and (F2 - F1) / F1 < JUMP_LIMIT
+
+
 @njit(cache=True)
 def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
-                 max_steps, u_out, step_u, step_pi, step_m):
+                 max_steps, u_out, step_u, step_pi, step_m, step_stiff):
     """March on the first N steps of ``grid``; per-step integrals into ``step_u``, ``step_pi``.
 
-    Returns (int_u, int_Pi, u0, status, periods).
+    ``step_stiff[n]`` flags the steps of the last period that chatter through a
+    sticking phase (consecutive ``step_jumps``).  Returns (int_u, int_Pi, u0, status, periods).
     """
     phis = np.empty(2 * N)
     oms = np.empty(2 * N)
@@ -110,6 +125,19 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
         int_pi += step_pi[n]
         u_out[n] = nodes[n]
         step_m[n] = ms[n]
+        step_stiff[n] = step_jumps(nodes[n], h, phis[2 * n], oms[2 * n], phis[2 * n + 1],
+                                   oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
+    # one jump is a velocity reversal or a stop inside a step (the error indicators see
+    # it); consecutive jumps are chatter through a sticking phase: the explicit method
+    # stalls at |u| ~ h T^(2-p) mu instead of ~delta_tau, an O(h) error whose sign does
+    # not change with h, so the comparison with the bisection does not reliably see it
+    first = step_stiff[0]
+    prev = step_stiff[N - 1]
+    for n in range(N):
+        cur = step_stiff[n]
+        nxt = step_stiff[n + 1] if n + 1 < N else first
+        step_stiff[n] = cur and (prev or nxt)
+        prev = cur
     return int_u, int_pi, nodes[0], CONVERGED, period
 
 
@@ -127,8 +155,10 @@ def march_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u_ini
     step_pi = np.full((n, m - 1), np.nan)
     step_m = np.full((n, m - 1), np.nan)
     nodes = np.full((n, m - 1), np.nan)
+    stiff = np.zeros((n, m - 1), dtype=np.bool_)
     for i in prange(n):
         int_u[i], int_pi[i], u0_out[i], status[i], periods[i] = _march_point(
             code, params[i], grids[i], n_steps[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
-            u_init[i], vscale[i], rtol, max_steps, nodes[i], step_u[i], step_pi[i], step_m[i])
-    return int_u, int_pi, u0_out, status, periods, step_u, step_pi, step_m, nodes
+            u_init[i], vscale[i], rtol, max_steps, nodes[i], step_u[i], step_pi[i], step_m[i],
+            stiff[i])
+    return int_u, int_pi, u0_out, status, periods, step_u, step_pi, step_m, nodes, stiff

@@ -43,6 +43,12 @@ MAX_BISECTIONS = 4  # per refinement pass and step
 MIN_STEP = 2.0 ** -26
 #: an event this close to a node is taken to be on it (keeps steps above MIN_STEP)
 EVENT_GAP = 4 * MIN_STEP
+#: the march gives up on chatter when resolving it would need this many times its budget
+HOPELESS = 8
+#: ... or when it still chatters after this many passes that refined the chattering steps
+MAX_CHATTER_PASSES = 3
+#: chatter matters when u stalled in it carries this share of rtol of int u
+CHATTER_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -188,16 +194,29 @@ def _pad(grids):
     return out, n_steps
 
 
+def _steps_to_resolve(kinematics, physics, i, tau, h):
+    """Steps an explicit method needs on the intervals [tau, tau + h) to resolve sticking:
+    h T^(2-p) |dF/du| each, with the slope of F across the band of a link at rest,
+    2 (mu_n sin^2 phi + mu_s cos^2 phi) int_0^(1/2) r^(p-1) ds, r ~ delta_tau."""
+    phi = kinematics.take([i]).angle(tau + 0.5 * h)[0]
+    dtau = max(physics.delta_tau[i], 1e-300)
+    slope = (physics.mu_n[i] * np.sin(phi) ** 2 + physics.mu_s[i] * np.cos(phi) ** 2) \
+        * dtau ** (physics.p[i] - 1.0)
+    return float(np.sum(h * physics.inertia_factor[i] * slope))
+
+
 def _run_level(method, code, params, grids, n_steps, physics, u0, vscale, rtol, index):
     """Solve the points ``index`` on padded ``grids``.
 
-    Returns (int_u, int_pi, u0, status, iterations, step_u, step_pi, step_m, u_nodes).
+    Returns (int_u, int_pi, u0, status, iterations, step_u, step_pi, step_m, u_nodes,
+    step_stiff); step_stiff (march only, else None) flags the steps that do not resolve
+    the friction's time scale (chatter, ``_march.step_jumps``).
     """
     args = (code, params[index], grids, n_steps, physics.inertia_factor[index],
             physics.mu_n[index], physics.mu_s[index], physics.p[index],
             physics.delta_tau[index], u0[index], np.maximum(vscale[index], 1e-300), float(rtol))
     if method == "periodic":
-        return _periodic.solve_points(*args)
+        return _periodic.solve_points(*args) + (None,)
     return _march.march_points(*args, MARCH_MAX_STEPS)
 
 
@@ -289,6 +308,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
 
     grids = list(period_grid(kinematics, spec.first_steps))
     corners = kinematics.corners()
+    chatter_passes = np.zeros(n, dtype=np.int64)
     last_status = np.full(n, CONVERGED, dtype=np.int8)
     level = 0
     while active.size:
@@ -296,7 +316,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         fine = [bisect(g) for g in coarse]
         padded, steps = _pad(coarse + fine)
         both = np.concatenate([active, active])
-        iu, ip, u0_new, st, its, step_u, step_pi, step_m, ser = _run_level(
+        iu, ip, u0_new, st, its, step_u, step_pi, step_m, ser, stiff = _run_level(
             method, code, params, padded, steps, physics, u0, vscale, rtol, both)
         m = active.size
         iterations[active] += its[:m] + its[m:]
@@ -322,7 +342,19 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                 d_p = np.abs(step_pi[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1)
                              - step_pi[j, :n_coarse]) / scale_p
                 estimate[i] = max(d_u.sum(), d_p.sum())
-                if level >= 1 and estimate[i] <= rtol:
+                unresolved = None
+                if stiff is not None:
+                    unresolved = stiff[j, :n_coarse] | stiff[m + j, :2 * n_coarse].reshape(
+                        n_coarse, 2).any(1)
+                    # a short chatter (a brief stop at a turning point) costs nothing
+                    # measurable: only chatter carrying more than CHATTER_SHARE rtol of
+                    # the period integral of u counts
+                    mass = np.sum(np.abs(ser[j, :n_coarse][unresolved]) * h[unresolved])
+                    if mass > CHATTER_SHARE * rtol * scale_u:
+                        last_status[i] = UNSTABLE
+                    else:
+                        unresolved = None
+                if level >= 1 and estimate[i] <= rtol and unresolved is None:
                     status[i] = CONVERGED
                     keep[j] = False
                     if return_series:
@@ -333,6 +365,14 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                     ser[j, :n_coarse], ser[m + j, :2 * n_coarse:2], step_m[j, :n_coarse],
                     step_u[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1) - step_u[j, :n_coarse], h)
                 hot = refinement_levels(indicators / scale_u, h, rtol, spec.order)
+                if unresolved is not None:  # explicit steps too long for stiff friction
+                    hot[unresolved] = MAX_BISECTIONS
+                    chatter_passes[i] += 1
+                    if chatter_passes[i] > MAX_CHATTER_PASSES or _steps_to_resolve(
+                            kinematics, physics, i, coarse[j][:-1][unresolved],
+                            h[unresolved]) > HOPELESS * max_steps:
+                        keep[j] = False  # cannot resolve sticking within the budget: UNSTABLE
+                        continue
             else:
                 hot = np.ones(n_coarse, dtype=np.int64)  # a failed solve: refine everywhere
             # never below MIN_STEP: tiny steps at events are fine, bisecting them is not

@@ -320,8 +320,6 @@ def test_registry_tolerances_are_honest(method):
 # ---------------------------------------------------------------------------
 
 
-@pytest.mark.xfail(strict=True, reason="solver bug: march reports convergence (status 0, estimate < rtol) with "
-                                       "U wrong by a factor ~5 on burst-and-coast at mu_n/mu_s = 64")
 def test_march_is_honest_on_burst_and_coast_at_high_anisotropy():
     kin = solver.PowerLaw(1.2, 0.35, 0.8, 10.0, False, 3.0, True)
     phys = solver.Physics.from_scaled(64.0, 2.0, p=0.0, delta=1e-5)
