@@ -21,7 +21,7 @@ EXIT_REFUSED = 3
 
 #: Shipped scenes in the order ``paper`` runs them.
 PAPER_SCENES = ("quick", "harmonic_grid", "harmonic_diagonals", "harmonic_optimum", "duty_cycle",
-                "linear_two_phase", "exponent_sets", "power_law")
+                "linear_two_phase", "exponent_sets", "power_law", "fourier_optima", "force_laws")
 WORKFLOWS = Path(__file__).resolve().parent.parent / "workflows"
 
 
@@ -62,7 +62,9 @@ def quick_variant(path) -> "Scene":
     text = Path(path).read_text(encoding="utf-8")
     text = re.sub(r"\bnum\s*=\s*(\d+)", lambda m: f"num = {max(4, int(m.group(1)) // 4)}", text)
     text = re.sub(r"\bstep\s*=\s*([0-9.]+)", lambda m: f"step = {2 * float(m.group(1))!r}", text)
-    return parse_scene(text, f"{path} (quick variant)")
+    scene = parse_scene(text, f"{path} (quick variant)")
+    # a scene kind may reduce further (optima: its [quick] table)
+    return scene.quick_variant() if hasattr(scene, "quick_variant") else scene
 
 
 def _run_one(path, store, args, session=None) -> int:

@@ -257,6 +257,11 @@ def run_scene(scene: Scene, store: str | Path | None = None, *, scheduler: str |
     ``session`` (a :class:`Session`) lets several runs share one pool of worker processes, so
     each worker imports and JIT-compiles the solver once (``python -m pipeline paper``).
     """
+    if getattr(scene, "kind", "grid") == "optima":
+        from ._optima import run_optima_scene
+
+        return run_optima_scene(scene, store, scheduler=scheduler, workers=workers,
+                                overwrite=overwrite, progress=progress, echo=echo, session=session)
     t_start = time.perf_counter()
     store = Path(store) if store is not None else default_store(scene)
     scheduler = scheduler or scene.execution.scheduler

@@ -387,7 +387,8 @@ def _variables(template, physics, start, period_range=(1e-3, 1e4)):
 def optimize_motion(family_template, physics_template, start=None, *, objective="efficiency",
                     gtol=1e-7, max_iterations=200, grid=None, grid_rtol=1e-6, grid_rounds=3,
                     max_step=0.5, newton_switch=1e-3, max_condition=1e12,
-                    period_range=(1e-3, 1e4), ill_condition_threshold=1e6, power=None):
+                    period_range=(1e-3, 1e4), ill_condition_threshold=1e6, power=None,
+                    direction=None):
     """Maximise |lambda| (or |U|, or |U| at fixed P) over a family's parameters and the period.
 
     Parameters
@@ -429,6 +430,10 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         Hessian at its end: ill-conditioned above this condition number.
     power : float, optional
         The fixed mean power of "speed_at_power" (default: P at the start).
+    direction : {None, -1, +1}
+        Sign of U sought: None keeps the sign at the start (maximise |objective| in its
+        basin); -1 minimises the objective as the paper does ("by minimizing lambda, the
+        algorithm chooses motions with U < 0"), so a start moving forwards crosses U = 0.
 
     Returns
     -------
@@ -466,6 +471,8 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
             if probe.status != 0:
                 break
             sign = 1.0 if probe.value >= 0 else -1.0
+            if direction is not None:
+                sign = math.copysign(1.0, direction)
             power = probe.P if power is None else float(power)
         if constrained:
             problem = _PowerConstrainedProblem(family_template, phys, grid, objective, sign,
