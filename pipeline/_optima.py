@@ -156,6 +156,10 @@ class OptimaScene:
         return scene_hash(self.science)
 
     @property
+    def dims(self) -> tuple[str, ...]:
+        return DIMS
+
+    @property
     def shape(self) -> tuple[int, ...]:
         return (len(self.anisotropy_ratios), len(self.max_wavenumbers), len(self.exponents),
                 self.n_starts)
