@@ -111,6 +111,12 @@ class SiteBuilder:
         anchor = f"scene-{sd.name}"
         if any(a == anchor for a, _, _ in self.sections):  # the same scene in two stores
             anchor = f"scene-{sd.name}-{len(self.sections)}"
+        if sd.meta.get("kind", "grid") == "optima":
+            from ._optima import optima_section
+
+            body = optima_section(self, sd, anchor)
+            self.sections.append((anchor, f"{_esc(sd.name)} — {_esc(sd.title)}", body))
+            return
         parts = [f"<h2 id='{anchor}'>{_esc(sd.name)}</h2>",
                  f"<p><b>{_esc(sd.title)}</b>" + (f" — paper figure {_esc(sd.figure)}" if sd.figure else "") + "</p>"]
         if not sd.complete:
