@@ -98,6 +98,9 @@ def _estimate(args) -> int:
             return EXIT_BAD_SCENE
     total = 0.0
     for scene in scenes:
+        if getattr(scene, "kind", "grid") != "grid":
+            print(f"{scene.name:20s} {scene.n_points:>9d} {scene.kind} runs (no grid probe; see the scene file)")
+            continue
         _, rate = calibrate_points_per_task(scene, workers, n_probe=args.probe)
         seconds = scene.n_points / (rate * workers)
         total += seconds
