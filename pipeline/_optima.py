@@ -580,7 +580,7 @@ def compute_optima_chunk(store: str, scene: OptimaScene, index: tuple[int, ...])
     records = [optimize_start(scene, ratio, kmax, p, a0, a1) for a0, a1 in starts]
     n = len(records)
     values = {"status": np.array([r["status"] for r in records], dtype=np.int8),
-              "ill_conditioned": np.array([r.get("ill_conditioned", NOT_COMPUTED) for r in records],
+              "ill_conditioned": np.array([r.get("ill_conditioned", 0) for r in records],
                                           dtype=np.int8)}
     for name in START_FLOATS:
         values[name] = np.array([r.get(name, np.nan) for r in records], dtype=np.float64)

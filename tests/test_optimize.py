@@ -77,3 +77,17 @@ def test_speed_at_fixed_power_keeps_the_power_and_beats_the_start():
         v = np.random.default_rng(seed).normal(size=2) * 1e-3
         moved = solver.Harmonic(*(res.parameters[:2] + v))
         assert abs(speed_at_power(moved, res.physics, grid, power).value) <= abs(res.U)
+
+
+def test_direction_negative_minimises_through_u_zero_or_keeps_the_start_sign():
+    # the start moves forwards (U > 0): by default |lambda| grows with U > 0; with
+    # direction=-1 lambda is minimised as in the paper, so it never ends above its start
+    physics = solver.Physics.from_scaled(2.0 ** -4, 2.0)
+    start = solver.Harmonic(0.2, 0.5)
+    grid = FixedGrid.uniform(start, 128)
+    first = objective_gradient(start, physics, grid).efficiency
+    assert first > 0
+    kept = optimize_motion(start, physics, grid=grid, max_iterations=100)
+    assert kept.efficiency > first
+    down = optimize_motion(start, physics, grid=grid, max_iterations=100, direction=-1)
+    assert down.efficiency < first and down.iterations <= 100
