@@ -28,7 +28,7 @@ of them stall at the zero-amplitude stationary point (lambda = 0) instead.
 
 Reduction.  Per cell, the ten (``keep.best``) best *distinct* local optima by |lambda|/lambda_ub,
 among the starts whose stop reason is accepted (``keep.accept``, default: gradient norm below
-gtol).  Every optimum is first put in the paper's orientation U < 0 by the reflection
+gtol) or whose final gradient norm is below ``keep.accept_gradient_norm`` (default 0: off).  Every optimum is first put in the paper's orientation U < 0 by the reflection
 phi -> pi - phi (which maps U to -U and keeps P: "reflecting the motions about phi = pi/2
 takes U to -U").  Two optima are the same when their scaled periods agree to
 ``keep.period_tolerance`` (relative) and max_tau |phi_a(tau) - s phi_b(tau + c)| <=
@@ -124,6 +124,7 @@ class Keep:
     phi_tolerance: float = 0.02
     period_tolerance: float = 0.01
     accept: tuple[str, ...] = ("gradient_tolerance",)
+    accept_gradient_norm: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -203,7 +204,8 @@ _OPTIMIZER_KEYS = {"objective": "efficiency, speed or speed_at_power",
 _KEEP_KEYS = {"best": "distinct optima kept per cell", "n_tau": "phi samples per period",
               "phi_tolerance": "max |dphi| [rad] of equal optima",
               "period_tolerance": "relative scaled-period difference of equal optima",
-              "accept": "stop reasons of the starts eligible"}
+              "accept": "stop reasons of the starts eligible",
+              "accept_gradient_norm": "also eligible: any stop reason with a final gradient norm below this"}
 _EXECUTION_KEYS = {"starts_per_task": "", "scheduler": "", "workers": "", "store": ""}
 
 
@@ -279,7 +281,11 @@ def _build(ctx: _Ctx, doc: dict, text: str) -> OptimaScene:
                 phi_tolerance=_positive(ctx, kp.get("phi_tolerance", 0.02), "keep.phi_tolerance"),
                 period_tolerance=_positive(ctx, kp.get("period_tolerance", 0.01),
                                            "keep.period_tolerance"),
-                accept=accept)
+                accept=accept,
+                accept_gradient_norm=ctx.number(kp.get("accept_gradient_norm", 0.0),
+                                                "keep.accept_gradient_norm"))
+    if not 0 <= keep.accept_gradient_norm < 1:
+        raise ctx.err("keep.accept_gradient_norm", f"must be in [0, 1), got {keep.accept_gradient_norm:g}")
 
     quick = ctx.table(doc.get("quick", {}), "quick", {"max_wavenumber": "", "p": "", "starts": "",
                                                       "max_iterations": ""})
@@ -311,7 +317,8 @@ def _build(ctx: _Ctx, doc: dict, text: str) -> OptimaScene:
                       "max_iterations": optimizer.max_iterations,
                       "grid_rtol": optimizer.grid_rtol, "grid_rounds": optimizer.grid_rounds},
         "keep": {"best": keep.best, "n_tau": keep.n_tau, "phi_tolerance": keep.phi_tolerance,
-                 "period_tolerance": keep.period_tolerance, "accept": list(accept)},
+                 "period_tolerance": keep.period_tolerance, "accept": list(accept),
+                 "accept_gradient_norm": keep.accept_gradient_norm},
         # chunking over starts decides the store layout, so it is part of the hash
         "starts_per_task": per_task,
     }
@@ -614,6 +621,10 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
     out = {name: np.full(tuple(sizes[d] for d in dims), fill, dtype=dtype)
            for name, (dims, dtype, fill, _) in specs.items()}
     accepted = np.isin(data["status"], [STOP_CODES[a] for a in scene.keep.accept])
+    # converged to the objective's noise: gtol 1e-7 can lie below the rounding level of lambda
+    # at stiff cells, where the search ends "no_progress" or "ill_conditioned" at the optimum
+    accepted |= (data["status"] >= 0) & (data["status"] != STOP_CODES["error"]) & (
+        data["gradient_norm"] <= scene.keep.accept_gradient_norm)
     keep = scene.keep
     for cell in np.ndindex(n_r, n_k, n_p):
         ok = accepted[cell] & np.isfinite(data["relative_efficiency"][cell])
@@ -636,7 +647,8 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
     return out
 
 
-PER_START = ("status", "U", "efficiency", "relative_efficiency", "scaled_period", "coefficients")
+PER_START = ("status", "U", "efficiency", "relative_efficiency", "scaled_period", "gradient_norm",
+             "coefficients")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import subprocess
+from dataclasses import replace
 import sys
 import warnings
 
@@ -133,7 +134,8 @@ def test_reduction_orients_optima_backwards_and_skips_unconverged():
     status = np.zeros(scene.shape, dtype=np.int8)
     status[0, 0, 0, 0] = STOP_CODES["max_iterations"]
     data = {"status": status, "U": U, "efficiency": 3 * rel, "relative_efficiency": rel,
-            "scaled_period": rng.uniform(1, 4, scene.shape), "coefficients": coefficients}
+            "scaled_period": rng.uniform(1, 4, scene.shape), "coefficients": coefficients,
+            "gradient_norm": np.full(scene.shape, 1e-3)}
     out = reduce_optima(scene, data)
     assert 0 not in out["optimum_start"][0, 0, 0]  # unconverged start is not kept
     for cell in np.ndindex(n_r, n_k, n_p):
@@ -147,6 +149,11 @@ def test_reduction_orients_optima_backwards_and_skips_unconverged():
             assert out["optimum_efficiency"][cell][rank] < 0
     best = out["optimum_relative_efficiency"]
     assert np.all(np.diff(best, axis=-1)[np.isfinite(np.diff(best, axis=-1))] <= 0)
+    # an unconverged start with a gradient below accept_gradient_norm becomes eligible
+    data["gradient_norm"][0, 0, 0, 0] = 1e-6
+    data["relative_efficiency"][0, 0, 0, 0] = -0.9  # the best of its cell
+    loose = reduce_optima(replace(scene, keep=replace(scene.keep, accept_gradient_norm=1e-5)), data)
+    assert loose["optimum_start"][0, 0, 0, 0] == 0
 
 
 # -- scenes --------------------------------------------------------------------------------------
@@ -216,7 +223,7 @@ def test_small_run_resumes_and_refuses_another_scene(tmp_path):
     assert np.all(ds.iterations.values <= 3 * 60)  # max_iterations per grid round, 3 rounds
     # the reduction in the store is the reduction of the stored starts
     data = {k: ds[k].values for k in ("status", "U", "efficiency", "relative_efficiency",
-                                      "scaled_period", "coefficients")}
+                                      "scaled_period", "gradient_norm", "coefficients")}
     again = reduce_optima(scene, data)
     np.testing.assert_array_equal(ds.optimum_start.values, again["optimum_start"])
     best = ds.optimum_relative_efficiency.values[..., 0]
