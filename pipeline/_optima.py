@@ -28,7 +28,9 @@ of them stall at the zero-amplitude stationary point (lambda = 0) instead.
 
 Reduction.  Per cell, the ten (``keep.best``) best *distinct* local optima by |lambda|/lambda_ub,
 among the starts whose stop reason is accepted (``keep.accept``, default: gradient norm below
-gtol) or whose final gradient norm is below ``keep.accept_gradient_norm`` (default 0: off).  Every optimum is first put in the paper's orientation U < 0 by the reflection
+gtol) or whose final gradient norm is below ``keep.accept_gradient_norm`` (default 0: off), and whose
+period did not end on its box (``period_at_bound``: T running off to 0 or infinity, the p -> 2
+regime, is no interior optimum even with a zero projected gradient).  Every optimum is first put in the paper's orientation U < 0 by the reflection
 phi -> pi - phi (which maps U to -U and keeps P: "reflecting the motions about phi = pi/2
 takes U to -U").  Two optima are the same when their scaled periods agree to
 ``keep.period_tolerance`` (relative) and max_tau |phi_a(tau) - s phi_b(tau + c)| <=
@@ -499,6 +501,10 @@ def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
     chunks = _start_chunks(scene)
     _create(g, "status", shape=scene.shape, chunks=chunks, dtype=np.int8, fill=NOT_COMPUTED,
             dims=DIMS, attrs={"long_name": "optimiser stop reason", "flag_meanings": status_meanings()})
+    _create(g, "period_at_bound", shape=scene.shape, chunks=chunks, dtype=np.int8,
+            fill=NOT_COMPUTED, dims=DIMS,
+            attrs={"long_name": "1: the period ended at its box (1e-3 .. 1e4 x the start's): no "
+                                "interior optimum (T runs off, as p -> 2); never kept; -1 not computed"})
     _create(g, "ill_conditioned", shape=scene.shape, chunks=chunks, dtype=np.int8,
             fill=NOT_COMPUTED, dims=DIMS,
             attrs={"long_name": "1: ill-conditioned (Hessian condition above threshold, or the period "
@@ -567,6 +573,7 @@ def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: fl
     scaled_period = float(solver.scaled_from_physical(T, physics.mu_n[0], physics.mu_s[0], p)[1])
     return {
         "status": STOP_CODES[res.stop_reason], "ill_conditioned": int(res.ill_conditioned),
+        "period_at_bound": int("period" in res.at_bounds),
         "scaled_period": scaled_period, "objective": res.value, "U": res.U, "P": res.P,
         "efficiency": res.efficiency, "relative_efficiency": res.efficiency / lam_ub,
         "gradient_norm": res.gradient_norm, "condition_number": res.condition_number,
@@ -588,6 +595,8 @@ def compute_optima_chunk(store: str, scene: OptimaScene, index: tuple[int, ...])
     n = len(records)
     values = {"status": np.array([r["status"] for r in records], dtype=np.int8),
               "ill_conditioned": np.array([r.get("ill_conditioned", 0) for r in records],
+                                          dtype=np.int8),
+              "period_at_bound": np.array([r.get("period_at_bound", 0) for r in records],
                                           dtype=np.int8)}
     for name in START_FLOATS:
         values[name] = np.array([r.get(name, np.nan) for r in records], dtype=np.float64)
@@ -625,6 +634,8 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
     # at stiff cells, where the search ends "no_progress" or "ill_conditioned" at the optimum
     accepted |= (data["status"] >= 0) & (data["status"] != STOP_CODES["error"]) & (
         data["gradient_norm"] <= scene.keep.accept_gradient_norm)
+    if "period_at_bound" in data:  # a zero projected gradient with T on its box: not an optimum
+        accepted &= data["period_at_bound"] != 1
     keep = scene.keep
     for cell in np.ndindex(n_r, n_k, n_p):
         ok = accepted[cell] & np.isfinite(data["relative_efficiency"][cell])
@@ -648,7 +659,7 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
 
 
 PER_START = ("status", "U", "efficiency", "relative_efficiency", "scaled_period", "gradient_norm",
-             "coefficients")
+             "period_at_bound", "coefficients")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -108,7 +108,8 @@ def _outcomes_table(sd) -> str:
     head = ("<tr><th>p</th><th>K<sub>max</sub></th><th>optimisations</th>"
             + "".join(f"<th title='{_esc(meanings.get(str(c), ''))}'>{_esc(name)}</th>"
                       for c, name in enumerate(_STOP_NAMES))
-            + "<th>ill-conditioned</th><th>seconds per optimisation (median / max)</th>"
+            + "<th>ill-conditioned</th><th>period at its bound</th>"
+              "<th>seconds per optimisation (median / max)</th>"
               "<th>distinct optima kept (mean per ratio)</th></tr>")
     rows = []
     kept = np.asarray(ds["optimum_start"].values) >= 0
@@ -121,10 +122,12 @@ def _outcomes_table(sd) -> str:
             sec = seconds[:, ik, ip, :][done]
             sec_text = f"{np.median(sec):.2f} / {np.max(sec):.2f}" if sec.size else "n/a"
             n_ill = int(np.count_nonzero(ill[:, ik, ip, :] == 1))
+            n_bound = (int(np.count_nonzero(ds["period_at_bound"].values[:, ik, ip, :] == 1))
+                       if "period_at_bound" in ds else "n/a")
             rows.append(f"<tr><td class='num'>{p:g}</td><td class='num'>{int(k)}</td>"
                         f"<td class='num'>{int(done.sum())} / {st.size}</td>{counts}"
                         f"<td class='num'>{n_ill} ({100 * n_ill / max(int(done.sum()), 1):.0f} %)</td>"
-                        f"<td class='num'>{sec_text}</td>"
+                        f"<td class='num'>{n_bound}</td><td class='num'>{sec_text}</td>"
                         f"<td class='num'>{kept[:, ik, ip, :].sum(axis=-1).mean():.1f}</td></tr>")
     n_done = int(np.count_nonzero(status >= 0))
     converged = int(np.count_nonzero(status == 0))
@@ -227,7 +230,14 @@ def efficiency_period_figure(sd, ip: int):
                                      text=[_hover(sd, ir, ik, ip, 0) for ir in range(len(best))],
                                      hovertemplate="%{text}<extra></extra>"), row=row, col=1)
     fig.update_yaxes(title_text="λ/λ<sub>ub</sub>", row=1, col=1)
-    fig.update_yaxes(title_text=param_label("scaled_period", p), type="log", row=2, col=1)
+    periods = np.asarray(ds["optimum_scaled_period"].values[:, :, ip, :])
+    periods = periods[np.isfinite(periods) & (periods > 0)]
+    lo, hi = ((math.floor(np.log2(periods.min())), math.ceil(np.log2(periods.max())))
+              if periods.size else (0, 1))
+    ticks = list(range(lo, hi + 1, max(1, math.ceil((hi - lo + 1) / 8))))
+    fig.update_yaxes(title_text=param_label("scaled_period", p), type="log", tickmode="array",
+                     tickvals=[2.0 ** t for t in ticks],
+                     ticktext=[f"2<sup>{t}</sup>" if t else "1" for t in ticks], row=2, col=1)
     fig.update_xaxes(tickmode="array", tickvals=list(spec.tickvals), ticktext=list(spec.ticktext))
     fig.update_xaxes(title_text=spec.title, row=2, col=1)
     fig.update_layout(height=620, margin={"t": 60, "l": 70, "r": 20, "b": 50},

@@ -266,7 +266,8 @@ def synthetic_optima_store(store: Path, scene) -> Path:
     status.flat[::7] = _optima.STOP_CODES["max_iterations"]
     data = {"status": status, "U": np.sign(rel), "efficiency": 4 * rel, "relative_efficiency": rel,
             "scaled_period": 2.0 + np.abs(ratio) * rng.uniform(0.9, 1.1, shape),
-            "gradient_norm": np.full(shape, 1e-8), "coefficients": coefficients}
+            "gradient_norm": np.full(shape, 1e-8), "period_at_bound": np.zeros(shape, np.int8),
+            "coefficients": coefficients}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         g = zarr.open_group(str(store), mode="r+", zarr_format=3)

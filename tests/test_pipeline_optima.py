@@ -135,9 +135,12 @@ def test_reduction_orients_optima_backwards_and_skips_unconverged():
     status[0, 0, 0, 0] = STOP_CODES["max_iterations"]
     data = {"status": status, "U": U, "efficiency": 3 * rel, "relative_efficiency": rel,
             "scaled_period": rng.uniform(1, 4, scene.shape), "coefficients": coefficients,
-            "gradient_norm": np.full(scene.shape, 1e-3)}
+            "gradient_norm": np.full(scene.shape, 1e-3),
+            "period_at_bound": np.zeros(scene.shape, dtype=np.int8)}
+    data["period_at_bound"][1, 0, 0, 2] = 1
     out = reduce_optima(scene, data)
     assert 0 not in out["optimum_start"][0, 0, 0]  # unconverged start is not kept
+    assert 2 not in out["optimum_start"][1, 0, 0]  # nor one whose period ran to its bound
     for cell in np.ndindex(n_r, n_k, n_p):
         for rank, start in enumerate(out["optimum_start"][cell]):
             if start < 0:
@@ -223,7 +226,8 @@ def test_small_run_resumes_and_refuses_another_scene(tmp_path):
     assert np.all(ds.iterations.values <= 3 * 60)  # max_iterations per grid round, 3 rounds
     # the reduction in the store is the reduction of the stored starts
     data = {k: ds[k].values for k in ("status", "U", "efficiency", "relative_efficiency",
-                                      "scaled_period", "gradient_norm", "coefficients")}
+                                      "scaled_period", "gradient_norm", "period_at_bound",
+                                      "coefficients")}
     again = reduce_optima(scene, data)
     np.testing.assert_array_equal(ds.optimum_start.values, again["optimum_start"])
     best = ds.optimum_relative_efficiency.values[..., 0]
