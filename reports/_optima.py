@@ -17,7 +17,7 @@ import numpy as np
 
 from ._labels import axis_spec, param_label
 
-__all__ = ["optima_section", "is_optima", "KIND_VERSION"]
+__all__ = ["optima_section", "KIND_VERSION"]
 
 #: version of the optima layout this report reads (pipeline._optima.KIND_VERSION)
 KIND_VERSION = 1
@@ -25,10 +25,6 @@ KIND_VERSION = 1
 _SYMBOLS = ["square", "cross-thin-open", "triangle-up", "x-thin-open", "diamond", "circle"]
 _STOP_NAMES = ("gradient_tolerance", "max_iterations", "line_search_failed", "ill_conditioned",
                "solve_failed", "no_progress", "error")
-
-
-def is_optima(sd) -> bool:
-    return sd.meta.get("kind") == "optima"
 
 
 def _esc(x) -> str:

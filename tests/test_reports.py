@@ -199,6 +199,14 @@ def _group(path: Path, attrs: dict | None, zarr_format: int = 3) -> Path:
     return path
 
 
+def test_reads_the_optima_layout_version():
+    from pipeline import _optima
+
+    from reports import _optima as report_optima
+
+    assert report_optima.KIND_VERSION == _optima.KIND_VERSION
+
+
 def test_reads_the_pipelines_format_version():
     from pipeline import _store
 
