@@ -386,7 +386,7 @@ def _variables(template, physics, start, period_range=(1e-3, 1e4)):
 
 def optimize_motion(family_template, physics_template, start=None, *, objective="efficiency",
                     gtol=1e-7, max_iterations=200, grid=None, grid_rtol=1e-6, grid_rounds=3,
-                    max_step=0.5, newton_switch=1e-3, max_condition=1e12,
+                    max_step=0.5, newton_switch=1e-5, max_condition=1e12,
                     period_range=(1e-3, 1e4), ill_condition_threshold=1e6, power=None,
                     direction=None):
     """Maximise |lambda| (or |U|, or |U| at fixed P) over a family's parameters and the period.
@@ -420,7 +420,10 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         Longest step in the variables (the damping of the line search).
     newton_switch : float
         Newton steps are tried once the projected gradient norm has fallen below this
-        fraction of its value at the start of the grid round.
+        fraction of its value at the start of the grid round.  Each difference Hessian costs
+        2 n gradients; switching late (1e-5 rather than 1e-3) lets BFGS do the descent and
+        Newton only finish: measured at Kmax = 7, mu_n/mu_s = 2^-4, three starts, 542 instead
+        of 713 gradient evaluations to the same optima (gradient norm < 1e-7).
     max_condition : float
         Hessian condition number at which the search stops as ill-conditioned.
     period_range : (float, float)
