@@ -256,3 +256,9 @@ def test_near_p_two_is_flagged_not_looped(tmp_path):
     not_converged = ds.status.values != STOP_CODES["gradient_tolerance"]
     assert np.all(ds.ill_conditioned.values[not_converged & (ds.status.values
                                                              == STOP_CODES["ill_conditioned"])] == 1)
+    # T runs to its box there (measured: every start): flagged, and never kept as an optimum
+    at_bound = ds.period_at_bound.values == 1
+    assert at_bound.any() and np.all(ds.ill_conditioned.values[at_bound] == 1)
+    kept = ds.optimum_start.values
+    for cell in np.ndindex(kept.shape[:3]):
+        assert not np.any(at_bound[cell][kept[cell][kept[cell] >= 0]])
