@@ -21,7 +21,8 @@ EXIT_REFUSED = 3
 
 #: Shipped scenes in the order ``paper`` runs them.
 PAPER_SCENES = ("quick", "harmonic_grid", "harmonic_diagonals", "harmonic_optimum", "duty_cycle",
-                "linear_two_phase", "exponent_sets", "power_law", "accuracy", "stiffness")
+                "linear_two_phase", "exponent_sets", "power_law", "fourier_optima", "force_laws",
+                "accuracy", "stiffness")
 WORKFLOWS = Path(__file__).resolve().parent.parent / "workflows"
 
 
@@ -62,7 +63,9 @@ def quick_variant(path) -> "Scene":
     text = Path(path).read_text(encoding="utf-8")
     text = re.sub(r"\bnum\s*=\s*(\d+)", lambda m: f"num = {max(4, int(m.group(1)) // 4)}", text)
     text = re.sub(r"\bstep\s*=\s*([0-9.]+)", lambda m: f"step = {2 * float(m.group(1))!r}", text)
-    return parse_scene(text, f"{path} (quick variant)")
+    scene = parse_scene(text, f"{path} (quick variant)")
+    # a scene kind may reduce further (optima: its [quick] table)
+    return scene.quick_variant() if hasattr(scene, "quick_variant") else scene
 
 
 def _run_one(path, store, args, session=None) -> int:
@@ -97,7 +100,7 @@ def _estimate(args) -> int:
     total = 0.0
     for scene in scenes:
         if getattr(scene, "kind", "grid") != "grid":
-            print(f"{scene.name:20s} {scene.n_points:>9d} points  (study scene: not probed; see its file)", flush=True)
+            print(f"{scene.name:20s} {scene.n_points:>9d} {scene.kind} runs (no grid probe; see the scene file)", flush=True)
             continue
         _, rate = calibrate_points_per_task(scene, workers, n_probe=args.probe)
         seconds = scene.n_points / (rate * workers)

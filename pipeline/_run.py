@@ -257,7 +257,12 @@ def run_scene(scene: Scene, store: str | Path | None = None, *, scheduler: str |
     ``session`` (a :class:`Session`) lets several runs share one pool of worker processes, so
     each worker imports and JIT-compiles the solver once (``python -m pipeline paper``).
     """
-    if getattr(scene, "kind", "grid") != "grid":  # accuracy / stiffness studies: pipeline._study
+    if getattr(scene, "kind", "grid") == "optima":
+        from ._optima import run_optima_scene
+
+        return run_optima_scene(scene, store, scheduler=scheduler, workers=workers,
+                                overwrite=overwrite, progress=progress, echo=echo, session=session)
+    if getattr(scene, "kind", "grid") in ("accuracy", "stiffness"):  # studies: pipeline._study
         from ._study import run_study
 
         return run_study(scene, store, scheduler=scheduler, workers=workers, overwrite=overwrite,

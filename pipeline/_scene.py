@@ -568,7 +568,7 @@ def _parse_reduction(ctx: _Ctx, obj, key: str, dims, stored) -> Reduction:
 
 
 _TOP_KEYS = {
-    "scene": "name, title, figure, family",
+    "scene": "kind (grid, default), name, title, figure, family",
     "axes": "swept parameters",
     "fixed": "parameters held fixed",
     "solver": "method and rtol",
@@ -586,14 +586,13 @@ def parse_scene(text: str, file: str = "<scene>") -> Scene:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ctx.err("(toml)", f"not valid TOML: {exc}") from None
-    from ._study_scene import is_study, parse_study  # imported here: it imports this module
-
-    if is_study(doc):  # [scene] kind = "accuracy" | "stiffness": a study scene, not a grid
-        return parse_study(doc, text, file)
+    kind = _scene_kind(ctx, doc)
+    if kind != "grid":
+        return _other_kind_parser(kind)(doc, ctx, text)
     ctx.table(doc, "", _TOP_KEYS, required=("scene", "axes", "solver", "outputs"))
 
-    head = ctx.table(doc["scene"], "scene", {"name": "", "title": "", "figure": "", "family": "", "kind": ""},
-                     required=("name", "family"))
+    head = ctx.table(doc["scene"], "scene", {"kind": "", "name": "", "title": "", "figure": "",
+                                             "family": ""}, required=("name", "family"))
     name = ctx.string(head["name"], "scene.name")
     if not _NAME_RE.match(name):
         raise ctx.err("scene.name", f"must be an identifier, got {name!r}")
@@ -710,6 +709,25 @@ def parse_scene(text: str, file: str = "<scene>") -> Scene:
     return Scene(path=file, name=name, title=title, figure=figure, family=family, axes=axes,
                  fixed=tuple(sorted(fixed.items())), method=method, rtol=rtol, quantities=quantities,
                  diagnostics=diagnostics, reductions=reductions, series=series, execution=execution, science=science, text=text)
+
+
+#: Scene kinds other than the parameter grid: kind -> "module:parser(doc, ctx, text)".
+SCENE_KINDS = {"optima": "pipeline._optima:parse_optima_scene",
+               "accuracy": "pipeline._study_scene:parse_study_scene",
+               "stiffness": "pipeline._study_scene:parse_study_scene"}
+
+
+def _scene_kind(ctx: _Ctx, doc: dict) -> str:
+    head = doc.get("scene")
+    kind = head.get("kind", "grid") if isinstance(head, dict) else "grid"
+    return ctx.string(kind, "scene.kind", ("grid",) + tuple(SCENE_KINDS))
+
+
+def _other_kind_parser(kind: str):
+    import importlib
+
+    module, function = SCENE_KINDS[kind].split(":")
+    return getattr(importlib.import_module(module), function)
 
 
 _MAX_SERIES_POINTS = 64

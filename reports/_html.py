@@ -108,7 +108,7 @@ class SiteBuilder:
 
     # -- sections ----------------------------------------------------------
     def add_scene(self, sd: SceneStore) -> None:
-        if sd.meta.get("kind", "grid") != "grid":  # accuracy / stiffness studies: reports._study
+        if sd.meta.get("kind", "grid") in ("accuracy", "stiffness"):  # studies: reports._study
             from ._study import study_section
 
             self.sections.append(study_section(self, sd))
@@ -116,6 +116,12 @@ class SiteBuilder:
         anchor = f"scene-{sd.name}"
         if any(a == anchor for a, _, _ in self.sections):  # the same scene in two stores
             anchor = f"scene-{sd.name}-{len(self.sections)}"
+        if sd.meta.get("kind", "grid") == "optima":
+            from ._optima import optima_section
+
+            body = optima_section(self, sd, anchor)
+            self.sections.append((anchor, f"{_esc(sd.name)} — {_esc(sd.title)}", body))
+            return
         parts = [f"<h2 id='{anchor}'>{_esc(sd.name)}</h2>",
                  f"<p><b>{_esc(sd.title)}</b>" + (f" — paper figure {_esc(sd.figure)}" if sd.figure else "") + "</p>"]
         if not sd.complete:

@@ -34,7 +34,7 @@ def _esc(x) -> str:
 
 
 def is_study(sd) -> bool:
-    return sd.meta.get("kind", "grid") != "grid"
+    return sd.meta.get("kind", "grid") in ("accuracy", "stiffness")
 
 
 def _labels(sd, name) -> list[str]:

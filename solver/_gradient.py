@@ -705,3 +705,107 @@ def with_period(physics, period):
     """``physics`` (one point) with the period T replaced."""
     return Physics(period=period, mu_n=physics.mu_n, mu_s=physics.mu_s, p=physics.p,
                    delta=physics.delta)
+
+
+# ---------------------------------------------------------------------------------------------
+# U at fixed P: the period eliminated by the constraint
+
+
+#: relative accuracy of P(theta, T) = power in the period root (rounding level of P)
+POWER_ROOT_RTOL = 1e-14
+#: most Newton steps in log T; each is one forward solve and one adjoint sweep
+POWER_ROOT_MAX_ITERATIONS = 40
+#: status of ``speed_at_power`` when P cannot be brought to the target (P not monotonic in T)
+POWER_ROOT_FAILED = 100
+
+
+@dataclass(frozen=True)
+class ConstrainedGradient:
+    """|U| at fixed power: U on the constraint P(theta, T) = power, with T = T(theta).
+
+    names : the family's parameter names (the period is not a variable: the constraint fixes it)
+    period : T(theta) solving P(theta, T) = power
+    value : U there; gradient : dU/dtheta along the constraint, shape (n_family,)
+    at : GradientResult at (theta, period) (U, P, lambda and their unconstrained gradients)
+    status : 0, a solver status, or POWER_ROOT_FAILED; root_iterations : Newton steps in log T
+    u0 : u(0) at the solution (warm start)
+    """
+
+    names: list
+    period: float
+    value: float
+    gradient: np.ndarray
+    at: GradientResult
+    status: int
+    root_iterations: int
+    u0: float
+
+
+def _failed_constraint(names, period, at, status, iterations):
+    nan = np.full(len(names), np.nan)
+    u0 = at.u0 if at is not None else math.nan
+    return ConstrainedGradient(names, period, math.nan, nan, at, status, iterations, u0)
+
+
+def speed_at_power(kinematics, physics, grid, power, *, rtol=1e-13, u0=None,
+                   max_root_iterations=POWER_ROOT_MAX_ITERATIONS):
+    """U at fixed mean power P = ``power`` and its exact gradient along the constraint.
+
+    The well-posed form of "maximise |U| at fixed P" used here.  U and P both depend
+    on the period: P ~ T^-(p+1) I_Pi (eq. powerp), and I_Pi itself changes with T
+    through kappa = T^(2-p) (eq. Newtonu), so P is not a simple rescaling and the
+    constraint is handled exactly rather than by normalisation: for the shape
+    parameters theta the period T(theta) is the root of log P(theta, T) = log power,
+    found by safeguarded Newton steps in log T with the adjoint dP/dT (steps capped at a
+    factor e in T).  On that curve (implicit function theorem, P_T != 0)
+
+        dU/dtheta |_P = U_theta - U_T P_theta / P_T,
+
+    exact for the discretised problem once the root is at rounding level
+    (``POWER_ROOT_RTOL``).  Each evaluation costs one forward solve and adjoint sweep
+    per root step (typically 2-4 from a nearby period).
+
+    Parameters
+    ----------
+    kinematics : Harmonic | Fourier | PowerLaw
+        One point; theta are its ``family_parameters``.
+    physics : Physics
+        One point; mu_n, mu_s, p, delta fixed; its period is the first guess of T.
+    grid : FixedGrid
+    power : float
+        Target mean power P > 0 (eq. powerp, in the units of ``physics``).
+    rtol : float
+        Tolerance of the nonlinear iterations of the periodic solve.
+    u0 : float, optional
+        Warm start of the shooting.
+    max_root_iterations : int
+
+    Returns
+    -------
+    ConstrainedGradient
+        status POWER_ROOT_FAILED when the root is not reached (P_T >= 0: P not decreasing
+        in T there, or no T gives the target within the iteration budget).
+    """
+    if not power > 0:
+        raise ValueError(f"power: must be > 0, got {power!r}")
+    names, _ = family_parameters(kinematics)
+    period = float(physics.period[0])
+    target = math.log(power)
+    at = None
+    for iteration in range(max_root_iterations + 1):
+        at = objective_gradient(kinematics, with_period(physics, period), grid,
+                                objective="speed", rtol=rtol, u0=u0)
+        if at.status != CONVERGED or not at.P > 0:
+            return _failed_constraint(names, period, at, at.status or POWER_ROOT_FAILED,
+                                      iteration)
+        u0 = at.u0
+        residual = math.log(at.P) - target
+        slope = period * at.grad_P[-1] / at.P  # d log P / d log T
+        if abs(residual) <= POWER_ROOT_RTOL:
+            break
+        if not slope < 0 or iteration == max_root_iterations:
+            return _failed_constraint(names, period, at, POWER_ROOT_FAILED, iteration)
+        period *= math.exp(min(max(-residual / slope, -1.0), 1.0))
+    n_fam = len(names)
+    gradient = at.grad_U[:n_fam] - at.grad_U[n_fam] * at.grad_P[:n_fam] / at.grad_P[n_fam]
+    return ConstrainedGradient(names, period, at.U, gradient, at, CONVERGED, iteration, at.u0)

@@ -135,7 +135,42 @@ polish_max_evaluations = 8
 points_per_task = 12
 """
 
-SCENES = {"tiny_plane": PLANE, "tiny_facets": FACETS, "tiny_window": WINDOW}
+#: Optimal Fourier motions (scene kind "optima"): 2 ratios x Kmax {1, 2} x 2 starts.
+OPTIMA = """
+[scene]
+kind = "optima"
+name = "tiny_optima"
+title = "report test: optimal Fourier motions"
+figure = "OptMotionsLowMun (test)"
+
+[axes]
+anisotropy_ratio = { values = [0.0625, 16.0] }
+max_wavenumber = [1, 2]
+
+[starts]
+num = 2
+seed = 5
+
+[optimizer]
+max_iterations = 40
+
+[keep]
+best = 3
+n_tau = 32
+
+[execution]
+starts_per_task = 2
+"""
+
+SCENES = {"tiny_plane": PLANE, "tiny_facets": FACETS, "tiny_window": WINDOW, "tiny_optima": OPTIMA}
+#: Scenes whose sections draw the motion of an optimum with its animation (the grid kind).
+ANIMATED = ("tiny_plane", "tiny_facets", "tiny_window")
+
+
+def is_optima_scene(scene_file: Path) -> bool:
+    import tomllib
+
+    return tomllib.loads(Path(scene_file).read_text()).get("scene", {}).get("kind") == "optima"
 
 
 def build_store(tmp: Path, name: str) -> Path:
@@ -164,6 +199,8 @@ def synthetic_store(store: Path, scene_file: Path) -> Path:
     from pipeline._grid import chunk_shape
 
     scene = pipeline.load_scene(scene_file)
+    if is_optima_scene(scene_file):
+        return synthetic_optima_store(store, scene)
     if getattr(scene, "kind", "grid") != "grid":
         return synthetic_study_store(store, scene)
     _store.create_skeleton(store, scene, chunk_shape(scene.shape, 4096))
@@ -237,6 +274,48 @@ def synthetic_study_store(store: Path, scene) -> Path:
     mark = zarr.open_array(store=str(store), path="pipeline_state/chunk_done", mode="r+")
     mark[...] = 1
     _store.set_state(store, chunks_complete=True)
+
+
+def synthetic_optima_store(store: Path, scene) -> Path:
+    """An optima store at the scene's full size with synthetic optima: the pipeline's skeleton
+    and its own distinct-optima reduction over smooth random series."""
+    import warnings
+
+    import numpy as np
+    import zarr
+
+    from pipeline import _optima, _store
+
+    _optima.create_optima_skeleton(store, scene)
+    rng = np.random.default_rng(0)
+    shape = scene.shape
+    kmax = np.asarray(scene.max_wavenumbers)[None, :, None, None]
+    n_c = scene.n_coefficients
+    k_largest = max(scene.max_wavenumbers)
+    coefficients = np.zeros(shape + (n_c,))
+    coefficients[..., 0] = rng.uniform(0.3, 1.2, shape)
+    for k in range(1, k_largest + 1):
+        on = k <= kmax
+        coefficients[..., k] = np.where(on, rng.normal(0, 0.5 / k, shape), 0.0)
+        coefficients[..., k_largest + k] = np.where(on & (k > 1), rng.normal(0, 0.5 / k, shape), 0.0)
+    ratio = np.log2(np.asarray(scene.anisotropy_ratios))[:, None, None, None]
+    rel = -(0.1 + 0.02 * np.abs(ratio) + 0.01 * kmax) * rng.uniform(0.7, 1.0, shape)
+    status = np.zeros(shape, dtype=np.int8)
+    status.flat[::7] = _optima.STOP_CODES["max_iterations"]
+    data = {"status": status, "U": np.sign(rel), "efficiency": 4 * rel, "relative_efficiency": rel,
+            "scaled_period": 2.0 + np.abs(ratio) * rng.uniform(0.9, 1.1, shape),
+            "gradient_norm": np.full(shape, 1e-8), "period_at_bound": np.zeros(shape, np.int8),
+            "coefficients": coefficients}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = zarr.open_group(str(store), mode="r+", zarr_format=3)
+        for name, v in data.items():
+            g[name][...] = v
+        g["ill_conditioned"][...] = (status != 0).astype(np.int8)
+        g["seconds"][...] = rng.uniform(0.1, 5.0, shape)
+        for name, v in _optima.reduce_optima(scene, data).items():
+            g[name][...] = v
+    _store.set_state(store, chunks_complete=True, reductions_complete=True)
     return store
 
 

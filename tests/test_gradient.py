@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import solver
-from solver._gradient import (FixedGrid, adaptive_grid, discrete_objective, family_parameters,
-                              force_partials, objective_gradient, with_family_parameters,
-                              with_period)
+from solver._gradient import (POWER_ROOT_RTOL, FixedGrid, adaptive_grid, discrete_objective,
+                              family_parameters, force_partials, objective_gradient,
+                              speed_at_power, with_family_parameters, with_period)
 
 MU_N, MU_S = 0.3, 1.7
 
@@ -243,3 +243,62 @@ def test_discrete_objective_matches_the_solver_on_one_grid():
     assert st[0] == 0
     np.testing.assert_allclose(res.U, iu[0] / physics.period[0], rtol=1e-11)
     np.testing.assert_allclose(res.P, ip[0] * physics.period[0] ** -1.0, rtol=1e-11)
+
+
+# -- U at fixed P: the gradient along the constraint ---------------------------------------------
+
+
+def constrained_check(kinematics, physics, grid, power, *, seed=0, eps=1e-4):
+    """(adjoint along P = power, Richardson central difference of U(theta, T(theta)))."""
+    res = speed_at_power(kinematics, physics, grid, power)
+    assert res.status == 0
+    _, x = family_parameters(kinematics)
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=x.size) * np.maximum(np.abs(x), 0.1)
+    v /= np.linalg.norm(v)
+    start = with_period(physics, res.period)
+
+    def J(step):
+        # every difference point solves its own period root (to rounding) from the optimum's
+        return speed_at_power(with_family_parameters(kinematics, x + step * v), start, grid,
+                              power, u0=res.u0).value
+
+    d1 = (J(eps) - J(-eps)) / (2 * eps)
+    d2 = (J(eps / 2) - J(-eps / 2)) / eps
+    return float(res.gradient @ v), (4 * d2 - d1) / 3, res
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.5])
+@pytest.mark.parametrize("case", sorted(GRADIENT_CASES))
+def test_speed_at_power_gradient_matches_central_differences(case, p):
+    make, ratio_log2 = GRADIENT_CASES[case]
+    kinematics = make()
+    physics = solver.Physics.from_scaled(2.0 ** ratio_log2, 2.0, p=p)
+    grid = FixedGrid.uniform(kinematics, 64)
+    # a target 30% above the start's power: the root has to move the period
+    power = 1.3 * objective_gradient(kinematics, physics, grid).P
+    adjoint, fd, res = constrained_check(kinematics, physics, grid, power, seed=1)
+    assert abs(adjoint - fd) <= 1e-6 * abs(fd), (adjoint, fd)
+    assert abs(res.at.P / power - 1.0) <= 10 * POWER_ROOT_RTOL
+    assert res.period != physics.period[0] and res.root_iterations >= 1
+
+
+def test_speed_at_power_gradient_is_tangent_to_the_constraint():
+    # moving theta by v and T by dT = -(P_theta . v) / P_T keeps P to first order and changes U
+    # by g . v: the implicit-function formula against the unconstrained adjoint gradients
+    kinematics, physics = _clapping(), solver.Physics.from_scaled(2.0 ** 3, 1.0, p=0.5)
+    grid = FixedGrid.uniform(kinematics, 64)
+    res = speed_at_power(kinematics, physics, grid, objective_gradient(kinematics, physics, grid).P)
+    at = res.at
+    n = len(res.names)
+    rng = np.random.default_rng(2)
+    v = rng.normal(size=n)
+    dT = -(at.grad_P[:n] @ v) / at.grad_P[n]
+    np.testing.assert_allclose(at.grad_P[:n] @ v + at.grad_P[n] * dT, 0.0, atol=1e-12 * abs(at.P))
+    np.testing.assert_allclose(res.gradient @ v, at.grad_U[:n] @ v + at.grad_U[n] * dT, rtol=1e-12)
+
+
+def test_speed_at_power_rejects_bad_target():
+    kinematics, physics = _clapping(), solver.Physics.from_scaled(1.0, 1.0)
+    with pytest.raises(ValueError):
+        speed_at_power(kinematics, physics, FixedGrid.uniform(kinematics, 64), 0.0)

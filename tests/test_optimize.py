@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import solver
-from solver._gradient import FixedGrid, objective_gradient
+from solver._gradient import FixedGrid, objective_gradient, speed_at_power
 from solver._optimize import STOP_REASONS, optimize_motion
 
 
@@ -57,3 +57,37 @@ def test_rejects_bad_start():
     physics = solver.Physics.from_scaled(1.0, 1.0)
     with pytest.raises(ValueError):
         optimize_motion(solver.Harmonic(1.0, 0.5), physics, start=[1.0, 0.5])
+
+
+def test_speed_at_fixed_power_keeps_the_power_and_beats_the_start():
+    physics = solver.Physics.from_scaled(2.0 ** -4, 2.0)
+    start = solver.Harmonic(1.0, 0.5)
+    grid = FixedGrid.uniform(start, 128)
+    power = 0.8 * objective_gradient(start, physics, grid).P
+    res = optimize_motion(start, physics, objective="speed_at_power", power=power, grid=grid)
+    assert res.converged, res.stop_reason
+    assert res.iterations <= 60 and res.gradient_evaluations <= 400
+    np.testing.assert_allclose(res.P, power, rtol=1e-12)
+    # the start moved onto the constraint (its own period root) is no faster
+    on_constraint = speed_at_power(start, physics, grid, power)
+    assert abs(res.U) > abs(on_constraint.value)
+    assert res.value == res.U and np.isnan(res.gradient[-1])
+    # no feasible neighbour is faster: |U| along P = power is maximal to second order
+    for seed in range(2):
+        v = np.random.default_rng(seed).normal(size=2) * 1e-3
+        moved = solver.Harmonic(*(res.parameters[:2] + v))
+        assert abs(speed_at_power(moved, res.physics, grid, power).value) <= abs(res.U)
+
+
+def test_direction_negative_minimises_through_u_zero_or_keeps_the_start_sign():
+    # the start moves forwards (U > 0): by default |lambda| grows with U > 0; with
+    # direction=-1 lambda is minimised as in the paper, so it never ends above its start
+    physics = solver.Physics.from_scaled(2.0 ** -4, 2.0)
+    start = solver.Harmonic(0.2, 0.5)
+    grid = FixedGrid.uniform(start, 128)
+    first = objective_gradient(start, physics, grid).efficiency
+    assert first > 0
+    kept = optimize_motion(start, physics, grid=grid, max_iterations=100)
+    assert kept.efficiency > first
+    down = optimize_motion(start, physics, grid=grid, max_iterations=100, direction=-1)
+    assert down.efficiency < first and down.iterations <= 100

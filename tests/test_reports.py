@@ -106,6 +106,24 @@ def test_section_states_provenance_failures_and_errors(site):
     assert "2<sup>-4</sup>" in html and "λ/λ<sub>ub</sub>" in html and "A<sub>1</sub>/A<sub>0</sub>" in html
 
 
+def test_optima_section_has_motions_curves_and_outcomes(site):
+    import pipeline
+
+    html = site["html"]
+    section = html.split("<h2 id='scene-tiny_optima'>")[1].split("<section")[0]
+    assert pipeline.parse_scene(rh.OPTIMA).hash[:16] in section
+    for key in ("package version", "created (UTC)", "run time", "git commit", "ensemble"):
+        assert f"<th>{key}</th>" in section
+    assert "2 ratios" not in section and "= 8 optimisations" in section
+    assert "Optimisations, stop reasons and cost" in section and "ill-conditioned" in section
+    # one phi(tau) figure and one efficiency/period figure per p; hover carries the coefficients
+    assert section.count('class="plotly-graph-div"') == 2
+    assert "Best optimal" in section and "λ/λ<sub>ub</sub>" in section
+    assert "A1 = " in section and "K<sub>max</sub> = 2" in section
+    forces = html.split("<h2 id='scene-force_laws'>")[1].split("<section")[0]
+    assert forces.count('class="plotly-graph-div"') == 2 * 3  # p = 0.5, 1, 1.5
+
+
 def test_report_of_all_scenes_under_25_mb(site):
     files = [f for f in site["index"].parent.rglob("*") if f.is_file()]
     total = sum(f.stat().st_size for f in files)
@@ -132,10 +150,10 @@ def test_no_javascript_errors(browser):
 
 def test_animation_has_frames_and_controls(site, browser):
     anims = [p for p in browser["plots"] if p["frames"] > 0]
-    # One animation per scene with an optimum (every grid scene here has a reduction; the
-    # study scenes of issue 6 have none).
+    # One animation per grid scene with an optimum (every grid scene here has a reduction;
+    # optima and study scenes have none).
     grid = [n for n in SHIPPED if 'kind = "' not in (REPO / "workflows" / f"{n}.toml").read_text()]
-    assert len(anims) == len(rh.SCENES) + len(grid)
+    assert len(anims) == len(rh.ANIMATED) + len(grid)
     for p in anims:
         assert p["frames"] >= 48 and p["sliders"] == 1 and p["buttons"] == 1
 
@@ -180,6 +198,14 @@ def _group(path: Path, attrs: dict | None, zarr_format: int = 3) -> Path:
         if attrs is not None:
             g.attrs.update(attrs)
     return path
+
+
+def test_reads_the_optima_layout_version():
+    from pipeline import _optima
+
+    from reports import _optima as report_optima
+
+    assert report_optima.KIND_VERSION == _optima.KIND_VERSION
 
 
 def test_reads_the_pipelines_format_version():

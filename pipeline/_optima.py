@@ -1,0 +1,738 @@
+"""Scene kind "optima": ensembles of local optimisations of Fourier motions (section "Optimal motions").
+
+A scene ``[scene] kind = "optima"`` runs, for every (anisotropy ratio mu_n/mu_s, Kmax, p),
+many optimisations of phi(tau) = A_0 + sum_{k <= Kmax} A_k cos 2 pi k tau + B_k sin 2 pi k tau
+(eq. Fourier) and the period from random starts as the paper does: A_0 and A_1 uniform on
+(0, 1), the other coefficients zero, the starting scaled period fixed.  Start ``i`` is the
+same in every cell (one seeded generator), so a store is reproducible and cells compare.
+
+Store (Zarr v3, the conventions of ``_store``: skeleton first, whole chunks, done markers,
+lock, provenance, ``format_version``; ``attrs["pipeline"]["kind"] = "optima"``)::
+
+    anisotropy_ratio, max_wavenumber, p, start        coordinates (the scene's dims)
+    coefficient                                       0 .. 2 Kmax_largest; names in attrs
+    start_A0, start_A1                                (start,) the random starts
+    <per start>                                       (ratio, Kmax, p, start), chunked over start
+    coefficients                                      (ratio, Kmax, p, start, coefficient)
+    optimum_*                                         (ratio, Kmax, p, rank [, coefficient | tau])
+    pipeline_state/chunk_done                         one marker per chunk of starts
+
+Coefficients are stored as [A_0, A_1 .. A_Kmax, B_1 .. B_Kmax] of the scene's largest Kmax,
+zero beyond the cell's Kmax (the truncated series itself).
+
+Direction.  By default every start keeps the sign of U it starts with and maximises |lambda|
+in that basin (``[optimizer] direction = "start"``); the reflection below then brings the
+optima with U > 0 to U < 0.  Minimising lambda as the paper did (``direction = "negative"``)
+sends starts that move forwards through U = 0, and measured at mu_n/mu_s = 2^-4, Kmax = 1 half
+of them stall at the zero-amplitude stationary point (lambda = 0) instead.
+
+Reduction.  Per cell, the ten (``keep.best``) best *distinct* local optima by |lambda|/lambda_ub,
+among the starts whose stop reason is accepted (``keep.accept``, default: gradient norm below
+gtol) or whose final gradient norm is below ``keep.accept_gradient_norm`` (default 0: off), and whose
+period did not end on its box (``period_at_bound``: T running off to 0 or infinity, the p -> 2
+regime, is no interior optimum even with a zero projected gradient).  Every optimum is first put in the paper's orientation U < 0 by the reflection
+phi -> pi - phi (which maps U to -U and keeps P: "reflecting the motions about phi = pi/2
+takes U to -U").  Two optima are the same when their scaled periods agree to
+``keep.period_tolerance`` (relative) and max_tau |phi_a(tau) - s phi_b(tau + c)| <=
+``keep.phi_tolerance`` on ``keep.n_tau`` uniform samples for some cyclic shift c and s = +-1:
+the phase of a periodic motion is arbitrary (B_1 = 0 fixes it only up to c = 1/2), and phi
+and -phi are the same body (the halves are reflections of each other in the x axis; the
+paper's clapping motions).  Time reversal tau -> -tau is *not* a symmetry: inertia and
+dissipation break it (lambda changes), so time-reversed motions are distinct optima.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ._scene import Execution, _Ctx, _parse_axis, _value, scene_hash
+from ._store import (ATTRS_KEY, FORMAT_VERSION, STATE_GROUP, StoreMismatch, _create,
+                     _open_group, mark_done, open_existing, provenance, read_done, record_run,
+                     remove_partials, run_lock, set_state, write_region)
+
+__all__ = ["OptimaScene", "parse_optima_scene", "run_optima_scene", "distinct_optima",
+           "fourier_samples", "STOP_CODES"]
+
+KIND = "optima"
+#: version of this kind's array layout (checked by readers beside FORMAT_VERSION)
+KIND_VERSION = 1
+DIMS = ("anisotropy_ratio", "max_wavenumber", "p", "start")
+#: optimiser stop reasons as the int8 ``status`` of a start; -1 not computed
+STOP_CODES = {"gradient_tolerance": 0, "max_iterations": 1, "line_search_failed": 2,
+              "ill_conditioned": 3, "solve_failed": 4, "no_progress": 5, "error": 6}
+NOT_COMPUTED = -1
+#: per-start float arrays and their descriptions (mu_n mu_s = 1: scaled = unscaled)
+START_FLOATS = {
+    "scaled_period": "scaled period (mu_n mu_s)^(1/(4-2p)) T at the optimum",
+    "objective": "the optimised objective at the optimum (lambda, U, or U at fixed P), signed",
+    "U": "time-averaged speed U (eq. U) at mu_n mu_s = 1, signed",
+    "P": "time-averaged power P (eq. powerp) at mu_n mu_s = 1",
+    "efficiency": "lambda = sign(U)|U|^(p+1)/P (eq. lambdap) at mu_n mu_s = 1",
+    "relative_efficiency": "lambda/lambda_ub, lambda_ub = 1/min(mu_n, mu_s) (eq. relefficiency); signed",
+    "gradient_norm": "projected gradient norm at the end (variables: coefficients, log T)",
+    "condition_number": "condition number of the last difference Hessian (nan if none)",
+    "seconds": "wall time of the optimisation [s]",
+}
+START_INTS = {
+    "iterations": "accepted optimiser steps (all grid rounds)",
+    "gradient_evaluations": "adjoint gradient evaluations",
+    "n_steps": "steps of the final fixed tau grid",
+}
+_OBJECTIVES = ("efficiency", "speed", "speed_at_power")
+
+_TOP_KEYS = {
+    "scene": "kind, name, title, figure, family",
+    "axes": "anisotropy_ratio, max_wavenumber, p",
+    "fixed": "delta",
+    "starts": "num, seed, scaled_period",
+    "optimizer": "objective, power, gtol, max_iterations, grid_rtol, grid_rounds",
+    "keep": "best, n_tau, phi_tolerance, period_tolerance, accept",
+    "quick": "overrides for `pipeline paper --quick`: max_wavenumber, p, starts, max_iterations",
+    "execution": "starts_per_task, scheduler, workers, store (not hashed)",
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# the scene
+
+
+@dataclass(frozen=True)
+class Optimizer:
+    """Settings of ``solver.optimize_motion`` for every start."""
+
+    objective: str = "efficiency"
+    direction: int = 0  # 0: keep the start's sign; -1: minimise (the paper's U < 0)
+    power: float | None = None
+    gtol: float = 1e-7
+    max_iterations: int = 300
+    grid_rtol: float = 1e-4
+    grid_rounds: int = 3
+
+
+@dataclass(frozen=True)
+class Keep:
+    """The reduction: ``best`` distinct optima per cell, compared on ``n_tau`` samples."""
+
+    best: int = 10
+    n_tau: int = 128
+    phi_tolerance: float = 0.02
+    period_tolerance: float = 0.01
+    accept: tuple[str, ...] = ("gradient_tolerance",)
+    accept_gradient_norm: float = 0.0
+
+
+@dataclass(frozen=True)
+class OptimaScene:
+    """A validated optima scene; ``science`` is hashed, ``execution`` is not."""
+
+    path: str
+    name: str
+    title: str
+    figure: str
+    family: str
+    anisotropy_ratios: tuple[float, ...]
+    max_wavenumbers: tuple[int, ...]
+    exponents: tuple[float, ...]
+    delta: float
+    n_starts: int
+    seed: int
+    start_scaled_period: float
+    optimizer: Optimizer
+    keep: Keep
+    starts_per_task: int
+    execution: Execution
+    quick: dict = field(compare=False, repr=False, default_factory=dict)
+    science: dict = field(compare=False, repr=False, default_factory=dict)
+    text: str = field(default="", compare=False, repr=False)
+    kind: str = KIND
+
+    @property
+    def hash(self) -> str:
+        return scene_hash(self.science)
+
+    @property
+    def dims(self) -> tuple[str, ...]:
+        return DIMS
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return (len(self.anisotropy_ratios), len(self.max_wavenumbers), len(self.exponents),
+                self.n_starts)
+
+    @property
+    def n_points(self) -> int:
+        """Optimisations in the scene (one per start and cell)."""
+        return int(np.prod(self.shape))
+
+    @property
+    def n_coefficients(self) -> int:
+        return 2 * max(self.max_wavenumbers) + 1
+
+    def start_values(self) -> np.ndarray:
+        """(A_0, A_1) of every start, shape (n_starts, 2): uniform on (0, 1), seeded."""
+        return np.random.default_rng(self.seed).uniform(0.0, 1.0, size=(self.n_starts, 2))
+
+    def quick_variant(self) -> "OptimaScene":
+        """The scene with its ``[quick]`` overrides (``pipeline paper --quick``)."""
+        if not self.quick:
+            return self
+        doc = tomllib.loads(self.text)
+        q = doc.pop("quick")
+        for key in ("max_wavenumber", "p"):
+            if key in q:
+                doc["axes"][key] = q[key]
+        if "starts" in q:
+            doc["starts"]["num"] = q["starts"]
+        if "max_iterations" in q:
+            doc.setdefault("optimizer", {})["max_iterations"] = q["max_iterations"]
+        return _build(_Ctx(f"{self.path} (quick)"), doc, self.text)
+
+
+_STARTS_KEYS = {"num": "random starts per cell", "seed": "seed of the starts' generator",
+                "scaled_period": "starting scaled period"}
+_OPTIMIZER_KEYS = {"objective": "efficiency, speed or speed_at_power",
+                   "direction": "start (keep the start's sign; default) or negative (minimise, as the paper)",
+                   "power": "target mean power of speed_at_power (mu_n mu_s = 1)",
+                   "gtol": "gradient-norm tolerance", "max_iterations": "steps per grid round",
+                   "grid_rtol": "rtol of the adaptive tau grid", "grid_rounds": "grid re-adaptations"}
+_KEEP_KEYS = {"best": "distinct optima kept per cell", "n_tau": "phi samples per period",
+              "phi_tolerance": "max |dphi| [rad] of equal optima",
+              "period_tolerance": "relative scaled-period difference of equal optima",
+              "accept": "stop reasons of the starts eligible",
+              "accept_gradient_norm": "also eligible: any stop reason with a final gradient norm below this"}
+_EXECUTION_KEYS = {"starts_per_task": "", "scheduler": "", "workers": "", "store": ""}
+
+
+def parse_optima_scene(doc: dict, ctx: _Ctx, text: str) -> OptimaScene:
+    """Validate a parsed TOML ``doc`` of kind "optima" (errors name the key, one line)."""
+    return _build(ctx, doc, text)
+
+
+def _positive(ctx, obj, key, upper=math.inf) -> float:
+    v = ctx.number(obj, key)
+    if not 0 < v <= upper:
+        raise ctx.err(key, f"must be in (0, {upper:g}], got {v:g}")
+    return v
+
+
+def _wavenumbers(ctx, obj, key) -> tuple[int, ...]:
+    if not isinstance(obj, list) or not obj:
+        raise ctx.err(key, "must be a non-empty array of integers >= 1")
+    vals = tuple(ctx.integer(v, f"{key}[{i}]", lo=1) for i, v in enumerate(obj))
+    if any(b <= a for a, b in zip(vals, vals[1:])):
+        raise ctx.err(key, "must be strictly increasing")
+    if vals[-1] > 64:
+        raise ctx.err(key, f"Kmax {vals[-1]} is beyond 64 (2 Kmax + 2 parameters per optimisation)")
+    return vals
+
+
+def _build(ctx: _Ctx, doc: dict, text: str) -> OptimaScene:
+    ctx.table(doc, "", _TOP_KEYS, required=("scene", "axes", "starts"))
+    head = ctx.table(doc["scene"], "scene", {"kind": "", "name": "", "title": "", "figure": "",
+                                             "family": ""}, required=("name",))
+    name = ctx.string(head["name"], "scene.name")
+    if not name.isidentifier():
+        raise ctx.err("scene.name", f"must be an identifier, got {name!r}")
+    family = ctx.string(head.get("family", "fourier"), "scene.family", ("fourier",))
+    axes = ctx.table(doc["axes"], "axes", {"anisotropy_ratio": "", "max_wavenumber": "", "p": ""},
+                     required=("anisotropy_ratio", "max_wavenumber"))
+    ratios = _parse_axis(ctx, "anisotropy_ratio", axes["anisotropy_ratio"], "axes.anisotropy_ratio")
+    kmax = _wavenumbers(ctx, axes["max_wavenumber"], "axes.max_wavenumber")
+    exponents = (_parse_axis(ctx, "p", axes["p"], "axes.p").values if "p" in axes else (0.0,))
+    fixed = ctx.table(doc.get("fixed", {}), "fixed", {"delta": ""})
+    delta = _value(ctx, "delta", fixed.get("delta", 1e-5), "fixed.delta")
+    if delta == 0 and min(exponents) == 0:
+        raise ctx.err("fixed.delta", "delta = 0 needs p > 0")
+
+    starts = ctx.table(doc["starts"], "starts", _STARTS_KEYS, required=("num",))
+    n_starts = ctx.integer(starts["num"], "starts.num", lo=1)
+    seed = ctx.integer(starts.get("seed", 0), "starts.seed", lo=0)
+    start_period = _positive(ctx, starts.get("scaled_period", 2.0), "starts.scaled_period")
+
+    opt = ctx.table(doc.get("optimizer", {}), "optimizer", _OPTIMIZER_KEYS)
+    objective = ctx.string(opt.get("objective", "efficiency"), "optimizer.objective", _OBJECTIVES)
+    power = None
+    if objective == "speed_at_power":
+        if "power" not in opt:
+            raise ctx.err("optimizer.power", "missing: speed_at_power needs the target power")
+        power = _positive(ctx, opt["power"], "optimizer.power")
+    elif "power" in opt:
+        raise ctx.err("optimizer.power", "only allowed with objective = \"speed_at_power\"")
+    direction = ctx.string(opt.get("direction", "start"), "optimizer.direction",
+                           ("negative", "start"))
+    optimizer = Optimizer(
+        objective=objective, direction=-1 if direction == "negative" else 0, power=power,
+        gtol=_positive(ctx, opt.get("gtol", 1e-7), "optimizer.gtol", 1.0),
+        max_iterations=ctx.integer(opt.get("max_iterations", 300), "optimizer.max_iterations", lo=1),
+        grid_rtol=_positive(ctx, opt.get("grid_rtol", 1e-4), "optimizer.grid_rtol", 0.1),
+        grid_rounds=ctx.integer(opt.get("grid_rounds", 3), "optimizer.grid_rounds", lo=1))
+
+    kp = ctx.table(doc.get("keep", {}), "keep", _KEEP_KEYS)
+    accept = ctx.names(kp.get("accept", ["gradient_tolerance"]), "keep.accept",
+                       tuple(k for k in STOP_CODES if k != "error"))
+    keep = Keep(best=ctx.integer(kp.get("best", 10), "keep.best", lo=1),
+                n_tau=ctx.integer(kp.get("n_tau", 128), "keep.n_tau", lo=8),
+                phi_tolerance=_positive(ctx, kp.get("phi_tolerance", 0.02), "keep.phi_tolerance"),
+                period_tolerance=_positive(ctx, kp.get("period_tolerance", 0.01),
+                                           "keep.period_tolerance"),
+                accept=accept,
+                accept_gradient_norm=ctx.number(kp.get("accept_gradient_norm", 0.0),
+                                                "keep.accept_gradient_norm"))
+    if not 0 <= keep.accept_gradient_norm < 1:
+        raise ctx.err("keep.accept_gradient_norm", f"must be in [0, 1), got {keep.accept_gradient_norm:g}")
+
+    quick = ctx.table(doc.get("quick", {}), "quick", {"max_wavenumber": "", "p": "", "starts": "",
+                                                      "max_iterations": ""})
+    if "max_wavenumber" in quick:
+        _wavenumbers(ctx, quick["max_wavenumber"], "quick.max_wavenumber")
+    if "p" in quick:
+        _parse_axis(ctx, "p", quick["p"], "quick.p")
+    if "starts" in quick:
+        ctx.integer(quick["starts"], "quick.starts", lo=1)
+    if "max_iterations" in quick:
+        ctx.integer(quick["max_iterations"], "quick.max_iterations", lo=1)
+
+    ex = ctx.table(doc.get("execution", {}), "execution", _EXECUTION_KEYS)
+    per_task = ctx.integer(ex.get("starts_per_task", 4), "execution.starts_per_task", lo=1)
+    execution = Execution(
+        points_per_task=per_task,
+        scheduler=ctx.string(ex.get("scheduler", "processes"), "execution.scheduler",
+                             ("processes", "threads", "synchronous")),
+        workers=ctx.integer(ex["workers"], "execution.workers", lo=1) if "workers" in ex else None,
+        store=ctx.string(ex["store"], "execution.store") if "store" in ex else None)
+
+    science = {
+        "kind": KIND, "name": name, "family": family,
+        "axes": {"anisotropy_ratio": list(ratios.values), "max_wavenumber": list(kmax),
+                 "p": list(exponents)},
+        "fixed": {"delta": delta},
+        "starts": {"num": n_starts, "seed": seed, "scaled_period": start_period},
+        "optimizer": {"objective": objective, "direction": direction, "power": power, "gtol": optimizer.gtol,
+                      "max_iterations": optimizer.max_iterations,
+                      "grid_rtol": optimizer.grid_rtol, "grid_rounds": optimizer.grid_rounds},
+        "keep": {"best": keep.best, "n_tau": keep.n_tau, "phi_tolerance": keep.phi_tolerance,
+                 "period_tolerance": keep.period_tolerance, "accept": list(accept),
+                 "accept_gradient_norm": keep.accept_gradient_norm},
+        # chunking over starts decides the store layout, so it is part of the hash
+        "starts_per_task": per_task,
+    }
+    return OptimaScene(
+        path=ctx.file, name=name, title=ctx.string(head.get("title", ""), "scene.title"),
+        figure=ctx.string(head.get("figure", ""), "scene.figure"), family=family,
+        anisotropy_ratios=ratios.values, max_wavenumbers=kmax, exponents=tuple(exponents),
+        delta=delta, n_starts=n_starts, seed=seed, start_scaled_period=start_period,
+        optimizer=optimizer, keep=keep, starts_per_task=per_task, execution=execution,
+        quick=dict(quick), science=science, text=text)
+
+
+# ---------------------------------------------------------------------------------------------
+# phi samples and the distinct-optima reduction (pure numpy)
+
+
+def coefficient_names(k_largest: int) -> list[str]:
+    return [f"A{k}" for k in range(k_largest + 1)] + [f"B{k}" for k in range(1, k_largest + 1)]
+
+
+def fourier_samples(coefficients: np.ndarray, n_tau: int) -> np.ndarray:
+    """phi(tau_j), tau_j = j / n_tau, of series stored as [A_0, A_1..A_K, B_1..B_K] (eq. Fourier).
+
+    coefficients : ndarray, shape (..., 2K + 1)  [rad]
+    Returns ndarray, shape (..., n_tau)  [rad]
+    """
+    c = np.asarray(coefficients, dtype=np.float64)
+    K = (c.shape[-1] - 1) // 2
+    tau = np.arange(n_tau) / n_tau
+    k = np.arange(1, K + 1)
+    cos = np.cos(2 * np.pi * np.outer(k, tau))
+    sin = np.sin(2 * np.pi * np.outer(k, tau))
+    return c[..., :1] + c[..., 1:K + 1] @ cos + c[..., K + 1:] @ sin
+
+
+def reflect_about_half_pi(coefficients: np.ndarray) -> np.ndarray:
+    """The series of pi - phi (maps U to -U at the same P)."""
+    out = -np.asarray(coefficients, dtype=np.float64)
+    out[..., 0] += np.pi
+    return out
+
+
+def _symmetric_copies(phi: np.ndarray) -> np.ndarray:
+    """Every cyclic shift of phi and of -phi, shape (2 n_tau, n_tau)."""
+    n = phi.size
+    index = (np.arange(n)[:, None] + np.arange(n)[None, :]) % n
+    shifted = phi[index]
+    return np.concatenate([shifted, -shifted])
+
+
+@dataclass(frozen=True)
+class DistinctOptima:
+    """Indices of the kept optima (best first) and how many eligible starts each stands for."""
+
+    index: np.ndarray
+    multiplicity: np.ndarray
+
+
+def distinct_optima(phi: np.ndarray, period: np.ndarray, score: np.ndarray, *, best: int,
+                    phi_tolerance: float, period_tolerance: float) -> DistinctOptima:
+    """The ``best`` highest-``score`` optima that are pairwise distinct (greedy, best first).
+
+    Parameters
+    ----------
+    phi : ndarray, shape (n, n_tau)
+        Samples of each optimum in the common orientation (U < 0) [rad].
+    period : ndarray, shape (n,)
+        Scaled periods.
+    score : ndarray, shape (n,)
+        |lambda|/lambda_ub; NaN entries are not eligible.
+    best : int
+    phi_tolerance, period_tolerance : float
+        Two optima are equal when their periods agree to ``period_tolerance`` (relative) and
+        max |phi_a - s phi_b(. + c)| <= phi_tolerance for some cyclic shift c and s = +-1.
+
+    Returns
+    -------
+    DistinctOptima
+        ``index`` into the inputs, ``multiplicity``: eligible optima equal to each kept one
+        (each counted once, with the first kept optimum it equals).
+    """
+    eligible = np.flatnonzero(np.isfinite(score))
+    order = eligible[np.argsort(-score[eligible], kind="stable")]
+    kept: list[int] = []
+    copies: list[np.ndarray] = []
+    multiplicity: list[int] = []
+    for i in order:
+        match = -1
+        for j, (k, c) in enumerate(zip(kept, copies)):
+            if abs(period[i] - period[k]) > period_tolerance * max(period[i], period[k]):
+                continue
+            if np.min(np.max(np.abs(c - phi[i]), axis=1)) <= phi_tolerance:
+                match = j
+                break
+        if match >= 0:
+            multiplicity[match] += 1
+        elif len(kept) < best:
+            kept.append(int(i))
+            copies.append(_symmetric_copies(phi[i]))
+            multiplicity.append(1)
+    return DistinctOptima(np.asarray(kept, dtype=np.int64), np.asarray(multiplicity, dtype=np.int64))
+
+
+# ---------------------------------------------------------------------------------------------
+# the store
+
+
+def _chunk_grid(scene: OptimaScene) -> tuple[int, ...]:
+    n_r, n_k, n_p, n_s = scene.shape
+    return (n_r, n_k, n_p, -(-n_s // scene.starts_per_task))
+
+
+def _start_chunks(scene: OptimaScene) -> tuple[int, ...]:
+    return (1, 1, 1, min(scene.starts_per_task, scene.n_starts))
+
+
+def status_meanings() -> dict[str, str]:
+    from solver._optimize import STOP_REASONS
+
+    reasons = {**STOP_REASONS, "error": "the optimiser raised (e.g. no periodic solution at the start)"}
+    out = {str(NOT_COMPUTED): "not computed yet"}
+    out.update({str(code): f"{name}: {reasons[name]}" for name, code in STOP_CODES.items()})
+    return out
+
+
+def reduction_specs(scene: OptimaScene) -> dict[str, tuple]:
+    """{array: (dims, dtype, fill, long name)} of the reduction (the kept optima)."""
+    cell = DIMS[:3] + ("rank",)
+    f8, i4 = np.dtype(np.float64), np.dtype(np.int32)
+    return {
+        "optimum_start": (cell, i4, -1, "start index of the kept optimum (-1: fewer distinct optima)"),
+        "optimum_multiplicity": (cell, i4, 0, "eligible starts equal to this optimum (symmetries)"),
+        "optimum_relative_efficiency": (cell, f8, np.nan, "|lambda|/lambda_ub (eq. relefficiency)"),
+        "optimum_efficiency": (cell, f8, np.nan, "lambda at mu_n mu_s = 1, orientation U < 0"),
+        "optimum_scaled_period": (cell, f8, np.nan, "scaled period (mu_n mu_s)^(1/(4-2p)) T"),
+        "optimum_coefficients": (cell + ("coefficient",), f8, np.nan,
+                                 "[A_0, A_k, B_k] in the orientation U < 0 (phi -> pi - phi "
+                                 "applied where U > 0) [rad]"),
+        "optimum_phi": (cell + ("tau",), f8, np.nan,
+                        "phi(tau) of the kept optimum at tau = j/n_tau, orientation U < 0 [rad]"),
+    }
+
+
+def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
+    """Every array, coordinate and attribute, before any task runs (``_store`` conventions)."""
+    import shutil
+
+    if store.exists():
+        shutil.rmtree(store)
+    g = _open_group(store, "w")
+    n_r, n_k, n_p, n_s = scene.shape
+    n_c = scene.n_coefficients
+    coords = {
+        "anisotropy_ratio": (np.asarray(scene.anisotropy_ratios), np.float64,
+                             {"long_name": "friction anisotropy ratio mu_n/mu_s", "units": "1",
+                              "spacing": "log2"}),
+        "max_wavenumber": (np.asarray(scene.max_wavenumbers), np.int32,
+                           {"long_name": "Kmax: highest wavenumber of the series (eq. Fourier)"}),
+        "p": (np.asarray(scene.exponents), np.float64,
+              {"long_name": "exponent p of the resistive force law (eq. frictionp)", "units": "1"}),
+        "start": (np.arange(n_s), np.int32, {"long_name": "index of the random start"}),
+        "coefficient": (np.arange(n_c), np.int32,
+                        {"long_name": "index into [A_0, A_1..A_K, B_1..B_K]",
+                         "names": coefficient_names(max(scene.max_wavenumbers))}),
+        "rank": (np.arange(scene.keep.best), np.int32,
+                 {"long_name": "rank of a kept distinct optimum (0: best)"}),
+        "tau": (np.arange(scene.keep.n_tau) / scene.keep.n_tau, np.float64,
+                {"long_name": "scaled time tau = t/T", "units": "1"}),
+    }
+    for name, (values, dtype, attrs) in coords.items():
+        _create(g, name, shape=values.shape, chunks=values.shape, dtype=dtype, fill=0,
+                dims=(name,), attrs=attrs)[:] = values
+    starts = scene.start_values()
+    for j, name in enumerate(("start_A0", "start_A1")):
+        _create(g, name, shape=(n_s,), chunks=(n_s,), dtype=np.float64, fill=np.nan,
+                dims=("start",), attrs={"long_name": f"A_{j} of the start, uniform on (0, 1) [rad]"}
+                )[:] = starts[:, j]
+    chunks = _start_chunks(scene)
+    _create(g, "status", shape=scene.shape, chunks=chunks, dtype=np.int8, fill=NOT_COMPUTED,
+            dims=DIMS, attrs={"long_name": "optimiser stop reason", "flag_meanings": status_meanings()})
+    _create(g, "period_at_bound", shape=scene.shape, chunks=chunks, dtype=np.int8,
+            fill=NOT_COMPUTED, dims=DIMS,
+            attrs={"long_name": "1: the period ended at its box (1e-3 .. 1e4 x the start's): no "
+                                "interior optimum (T runs off, as p -> 2); never kept; -1 not computed"})
+    _create(g, "ill_conditioned", shape=scene.shape, chunks=chunks, dtype=np.int8,
+            fill=NOT_COMPUTED, dims=DIMS,
+            attrs={"long_name": "1: ill-conditioned (Hessian condition above threshold, or the period "
+                                "at its bound: p near 2); 0: no; -1 not computed"})
+    for name, text_ in START_FLOATS.items():
+        _create(g, name, shape=scene.shape, chunks=chunks, dtype=np.float64, fill=np.nan,
+                dims=DIMS, attrs={"long_name": text_})
+    for name, text_ in START_INTS.items():
+        _create(g, name, shape=scene.shape, chunks=chunks, dtype=np.int32, fill=0, dims=DIMS,
+                attrs={"long_name": text_})
+    _create(g, "coefficients", shape=scene.shape + (n_c,), chunks=chunks + (n_c,),
+            dtype=np.float64, fill=np.nan, dims=DIMS + ("coefficient",),
+            attrs={"long_name": "optimal [A_0, A_k, B_k] as found (zero beyond the cell's Kmax) [rad]"})
+    sizes = {"anisotropy_ratio": n_r, "max_wavenumber": n_k, "p": n_p, "rank": scene.keep.best,
+             "coefficient": n_c, "tau": scene.keep.n_tau}
+    for name, (dims, dtype, fill, long_name) in reduction_specs(scene).items():
+        shape = tuple(sizes[d] for d in dims)
+        _create(g, name, shape=shape, chunks=shape, dtype=dtype, fill=fill, dims=dims,
+                attrs={"long_name": long_name, "reduction": "distinct_optima"})
+    grid = _chunk_grid(scene)
+    sg = g.create_group(STATE_GROUP)
+    _create(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
+            dims=tuple(f"chunk_{d}" for d in DIMS),
+            attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+    g.attrs[ATTRS_KEY] = {
+        "format_version": FORMAT_VERSION, "kind": KIND, "kind_version": KIND_VERSION,
+        "provenance": provenance(scene),
+        "layout": {"dims": list(DIMS), "shape": list(scene.shape), "chunks": list(chunks),
+                   "chunk_grid": list(grid)},
+        "state": {"skeleton_complete": True, "chunks_complete": False,
+                  "reductions_complete": False, "series_complete": True},
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# one task: a chunk of starts of one cell
+
+
+def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: float,
+                   a1: float) -> dict:
+    """One optimisation from the start (A_0, A_1) = (a0, a1); a record of the store's fields."""
+    import solver
+    from solver._optimize import optimize_motion
+
+    physics = solver.Physics.from_scaled(ratio, scene.start_scaled_period, p=p, delta=scene.delta)
+    A = np.zeros((1, kmax + 1))
+    A[0, :2] = a0, a1
+    template = solver.Fourier(A, np.zeros((1, kmax)))
+    opt = scene.optimizer
+    t0 = time.perf_counter()
+    try:
+        res = optimize_motion(template, physics, objective=opt.objective, power=opt.power,
+                              direction=opt.direction or None,
+                              gtol=opt.gtol, max_iterations=opt.max_iterations,
+                              grid_rtol=opt.grid_rtol, grid_rounds=opt.grid_rounds)
+    except (RuntimeError, ValueError, FloatingPointError, ZeroDivisionError) as exc:
+        print(f"optima: ratio {ratio:g} Kmax {kmax} p {p:g} start ({a0:.4f}, {a1:.4f}): "
+              f"{type(exc).__name__}: {exc}", file=sys.stderr)
+        return {"status": STOP_CODES["error"], "seconds": time.perf_counter() - t0}
+    lam_ub = 1.0 / min(float(physics.mu_n[0]), float(physics.mu_s[0]))
+    full = np.zeros(scene.n_coefficients)
+    k_largest = max(scene.max_wavenumbers)
+    full[:kmax + 1] = res.parameters[:kmax + 1]
+    full[k_largest + 1:k_largest + 1 + kmax] = res.parameters[kmax + 1:2 * kmax + 1]
+    T = float(res.parameters[-1])
+    scaled_period = float(solver.scaled_from_physical(T, physics.mu_n[0], physics.mu_s[0], p)[1])
+    return {
+        "status": STOP_CODES[res.stop_reason], "ill_conditioned": int(res.ill_conditioned),
+        "period_at_bound": int("period" in res.at_bounds),
+        "scaled_period": scaled_period, "objective": res.value, "U": res.U, "P": res.P,
+        "efficiency": res.efficiency, "relative_efficiency": res.efficiency / lam_ub,
+        "gradient_norm": res.gradient_norm, "condition_number": res.condition_number,
+        "seconds": time.perf_counter() - t0, "iterations": res.iterations,
+        "gradient_evaluations": res.gradient_evaluations, "n_steps": res.n_steps,
+        "coefficients": full,
+    }
+
+
+def compute_optima_chunk(store: str, scene: OptimaScene, index: tuple[int, ...]) -> dict:
+    """Optimise every start of chunk ``index``, write its arrays, then mark it done."""
+    i_r, i_k, i_p, i_c = index
+    c = scene.starts_per_task
+    first, last = i_c * c, min((i_c + 1) * c, scene.n_starts)
+    starts = scene.start_values()[first:last]
+    ratio, kmax, p = (scene.anisotropy_ratios[i_r], scene.max_wavenumbers[i_k],
+                      scene.exponents[i_p])
+    records = [optimize_start(scene, ratio, kmax, p, a0, a1) for a0, a1 in starts]
+    n = len(records)
+    values = {"status": np.array([r["status"] for r in records], dtype=np.int8),
+              "ill_conditioned": np.array([r.get("ill_conditioned", 0) for r in records],
+                                          dtype=np.int8),
+              "period_at_bound": np.array([r.get("period_at_bound", 0) for r in records],
+                                          dtype=np.int8)}
+    for name in START_FLOATS:
+        values[name] = np.array([r.get(name, np.nan) for r in records], dtype=np.float64)
+    for name in START_INTS:
+        values[name] = np.array([r.get(name, 0) for r in records], dtype=np.int32)
+    shape4 = (1, 1, 1, n)
+    values = {k: v.reshape(shape4) for k, v in values.items()}
+    region = (slice(i_r, i_r + 1), slice(i_k, i_k + 1), slice(i_p, i_p + 1), slice(first, last))
+    chunks = _start_chunks(scene)
+    path = Path(store)
+    write_region(path, region, index, chunks, scene.shape, values)
+    n_c = scene.n_coefficients
+    coefficients = np.array([r.get("coefficients", np.full(n_c, np.nan)) for r in records])
+    write_region(path, region + (slice(0, n_c),), tuple(index) + (0,), chunks + (n_c,),
+                 scene.shape + (n_c,), {"coefficients": coefficients.reshape(shape4 + (n_c,))})
+    mark_done(path, index)  # last: a chunk without its marker is recomputed on resume
+    return {"points": n, "failures": int(np.count_nonzero(values["status"] == STOP_CODES["error"])),
+            "seconds": float(np.nansum(values["seconds"]))}
+
+
+# ---------------------------------------------------------------------------------------------
+# the reduction over a whole store
+
+
+def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The kept distinct optima of every cell from the per-start arrays ``data`` (whole store)."""
+    specs = reduction_specs(scene)
+    n_r, n_k, n_p, _ = scene.shape
+    sizes = {"anisotropy_ratio": n_r, "max_wavenumber": n_k, "p": n_p, "rank": scene.keep.best,
+             "coefficient": scene.n_coefficients, "tau": scene.keep.n_tau}
+    out = {name: np.full(tuple(sizes[d] for d in dims), fill, dtype=dtype)
+           for name, (dims, dtype, fill, _) in specs.items()}
+    accepted = np.isin(data["status"], [STOP_CODES[a] for a in scene.keep.accept])
+    # converged to the objective's noise: gtol 1e-7 can lie below the rounding level of lambda
+    # at stiff cells, where the search ends "no_progress" or "ill_conditioned" at the optimum
+    accepted |= (data["status"] >= 0) & (data["status"] != STOP_CODES["error"]) & (
+        data["gradient_norm"] <= scene.keep.accept_gradient_norm)
+    if "period_at_bound" in data:  # a zero projected gradient with T on its box: not an optimum
+        accepted &= data["period_at_bound"] != 1
+    keep = scene.keep
+    for cell in np.ndindex(n_r, n_k, n_p):
+        ok = accepted[cell] & np.isfinite(data["relative_efficiency"][cell])
+        coefficients = data["coefficients"][cell].copy()
+        forward = data["U"][cell] > 0
+        coefficients[forward] = reflect_about_half_pi(coefficients[forward])
+        phi = fourier_samples(coefficients, keep.n_tau)
+        score = np.where(ok, np.abs(data["relative_efficiency"][cell]), np.nan)
+        found = distinct_optima(phi, data["scaled_period"][cell], score, best=keep.best,
+                                phi_tolerance=keep.phi_tolerance,
+                                period_tolerance=keep.period_tolerance)
+        m = found.index.size
+        out["optimum_start"][cell][:m] = found.index
+        out["optimum_multiplicity"][cell][:m] = found.multiplicity
+        out["optimum_relative_efficiency"][cell][:m] = score[found.index]
+        out["optimum_efficiency"][cell][:m] = -np.abs(data["efficiency"][cell][found.index])
+        out["optimum_scaled_period"][cell][:m] = data["scaled_period"][cell][found.index]
+        out["optimum_coefficients"][cell][:m] = coefficients[found.index]
+        out["optimum_phi"][cell][:m] = phi[found.index]
+    return out
+
+
+PER_START = ("status", "U", "efficiency", "relative_efficiency", "scaled_period", "gradient_norm",
+             "period_at_bound", "coefficients")
+
+
+# ---------------------------------------------------------------------------------------------
+# the driver
+
+
+def run_optima_scene(scene: OptimaScene, store=None, *, scheduler=None, workers=None,
+                     overwrite=False, progress=True, echo=print, session=None):
+    """Run an optima scene into ``store``, resuming what an earlier run left undone.
+
+    The same contract as ``run_scene`` (lock, refusal of a different scene, resumable chunks,
+    provenance, run record); the reduction runs in the driver (numpy, seconds).
+    """
+    import dask
+
+    from ._run import RunSummary, _Borrowed, _compute, _consolidate, _load, _Progress, _Scheduler, _write
+
+    t_start = time.perf_counter()
+    store = Path(store) if store is not None else (
+        Path(scene.execution.store) if scene.execution.store else Path("out") / f"{scene.name}.zarr")
+    scheduler = scheduler or scene.execution.scheduler
+    workers = workers or scene.execution.workers
+    n_workers = workers or (os.cpu_count() or 1 if scheduler in ("processes", "threads") else 1)
+    own = session is None or session.name != scheduler or session.workers != workers
+    with run_lock(store), (_Scheduler(scheduler, workers) if own else _Borrowed(session)) as sched:
+        meta = open_existing(store)
+        if meta is not None and (meta["provenance"]["scene_hash"] != scene.hash or overwrite):
+            old = meta["provenance"]["scene_hash"]
+            if old != scene.hash and not overwrite:
+                raise StoreMismatch(
+                    f"{store}: built from a different scene ({meta['provenance']['scene_file']}, hash "
+                    f"{old[:12]}) than {scene.path} (hash {scene.hash[:12]}); rerun with --overwrite to "
+                    "replace it, or choose another --store")
+            meta = None
+        if meta is None:
+            create_optima_skeleton(store, scene)
+            meta = open_existing(store)
+        else:
+            remove_partials(store)
+        done = read_done(store)
+        pending = [tuple(int(i) for i in idx) for idx in zip(*np.nonzero(~done))]
+        computed = sum(min(scene.starts_per_task, scene.n_starts - i[-1] * scene.starts_per_task)
+                       for i in pending)
+        t_solve = time.perf_counter()
+        solve_seconds = 0.0
+        if pending:
+            tasks = [dask.delayed(compute_optima_chunk, pure=False)(
+                str(store), scene, idx, dask_key_name="pipeline-optima-" + "-".join(map(str, idx)))
+                for idx in pending]
+            bar = _Progress(len(tasks), scene.starts_per_task, scene.name, progress,
+                            rate_unit="optimisations/s")
+            _compute(tasks, sched, bar)
+            solve_seconds = time.perf_counter() - t_solve
+            set_state(store, chunks_complete=True, reductions_complete=False)
+        reduce_now = bool(pending) or not meta["state"].get("reductions_complete")
+        if reduce_now:
+            _write(store, reduce_optima(scene, _load(store, PER_START)))
+        status = _load(store, ["status"])["status"]
+        failures = int(np.count_nonzero(status == STOP_CODES["error"]))
+        if reduce_now:
+            set_state(store, chunks_complete=True, reductions_complete=True)
+            import datetime as _dt
+
+            record_run(store, {
+                "finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                "wall_seconds": round(time.perf_counter() - t_start, 3),
+                "solve_seconds": round(solve_seconds, 3),
+                "computed_points": computed,
+                "computed_chunks": len(pending), "total_chunks": int(done.size),
+                "failures": failures, "scheduler": scheduler, "workers": n_workers})
+            _consolidate(store)
+    return RunSummary(scene=scene.name, store=str(store), points=scene.n_points,
+                      computed_points=computed, computed_chunks=len(pending),
+                      total_chunks=int(done.size), failures=failures,
+                      wall_seconds=time.perf_counter() - t_start, solve_seconds=solve_seconds,
+                      reductions_computed=reduce_now)
