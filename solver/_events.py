@@ -35,8 +35,9 @@ from numba import njit, prange
 from ._force import force_and_slope
 from ._kinematics import angle_and_rate
 
-#: at most this many events per period are placed (more only on pathological motions)
-MAX_EVENTS = 64
+#: at most this many events per period are placed (beyond it the rest are not; a Fourier
+#: motion of Kmax = 10 has at most ~4 Kmax zeros of each of the four functions)
+MAX_EVENTS = 256
 
 
 @njit(cache=True, error_model="numpy")
@@ -87,6 +88,8 @@ def _locate(code, params, grid, N, u_nodes, n, k, g0, g1, physics):
     if N >= 2 and t_prev < t0 and abs(om_left - om) <= 1e-12 * (1.0 + abs(om)):
         x = t_prev - t0
         curve = (u_nodes[m] - u0 - slope * x) / (x * x)
+        if abs(curve) * (grid[n + 1] - t0) > abs(slope):
+            curve = 0.0  # u has a corner at tau_n (an event of the last pass): linear only
     x = t1 - t0
     phi, om = angle_and_rate(code, params, t1, mid)
     f0 = g0
@@ -196,21 +199,29 @@ def place_events(grid, events, protected, min_gap):
         gap = abs(e - out[near])
         if gap <= min_gap or (count > 0 and e - inserted[count - 1] <= min_gap):
             continue
-        if gap <= 0.25 * (right - left) and not fixed[near]:
+        movable = False
+        if not fixed[near]:  # (0 < near < size - 1 then)
+            # the step beyond the moved node grows by gap: only where it is not finer
+            far = out[near] - out[near - 1] if near == pos - 1 else out[near + 1] - out[near]
+            movable = gap <= 0.25 * min(right - left, far)
+        if movable:
             out[near] = e
         else:
             inserted[count] = e
             count += 1
     if count == 0:
         return out
-    merged = np.sort(np.concatenate((out, inserted[:count])))
-    # an inserted node next to a moved one: drop the movable one of the pair
+    # an inserted node closer than min_gap to any node (a moved one) is dropped: only
+    # inserted nodes, so refinement finer than min_gap elsewhere is kept
+    merged = np.concatenate((out, inserted[:count]))
+    is_new = np.zeros(merged.size, dtype=np.bool_)
+    is_new[out.size:] = True
+    order = np.argsort(merged)
+    merged = merged[order]
+    is_new = is_new[order]
     keep = np.ones(merged.size, dtype=np.bool_)
-    for j in range(merged.size - 1):
-        if merged[j + 1] - merged[j] <= min_gap:
-            drop = j + 1
-            if j + 1 == merged.size - 1 or np.any(protected == merged[j + 1]):
-                drop = j
-            if drop > 0:
-                keep[drop] = False
+    for j in range(merged.size):
+        if is_new[j] and ((j > 0 and merged[j] - merged[j - 1] <= min_gap)
+                          or (j + 1 < merged.size and merged[j + 1] - merged[j] <= min_gap)):
+            keep[j] = False
     return merged[keep]

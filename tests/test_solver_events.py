@@ -72,3 +72,13 @@ def test_place_events_never_leaves_a_step_below_the_gap():
                        np.array([0.0, 0.5]), gap)
     assert np.all(np.diff(out) > gap)
     assert out[0] == 0.0 and out[-1] == 1.0 and 0.5 in out
+
+
+def test_place_events_keeps_refinement_finer_than_the_gap():
+    """Only an inserted node can be dropped for closeness: steps refined below the gap
+    elsewhere in the grid survive an event placed far from them."""
+    gap = 1e-7
+    fine = 0.5 + 0.25 * gap * np.arange(1, 9)
+    grid = np.concatenate([np.linspace(0.0, 0.5, 5), fine, [0.75, 1.0]])
+    out = place_events(grid, np.array([0.26]), np.array([0.0, 0.25]), gap)
+    assert np.all(np.isin(fine, out)) and 0.26 in out and out.size == grid.size + 1
