@@ -44,7 +44,6 @@ dissipation break it (lambda changes), so time-reversed motions are distinct opt
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 import tomllib
@@ -56,7 +55,7 @@ import numpy as np
 from ._scene import Execution, _Ctx, _parse_axis, _value, scene_hash
 from ._store import (ATTRS_KEY, FORMAT_VERSION, STATE_GROUP, StoreMismatch, _create,
                      _open_group, mark_done, open_existing, provenance, read_done, record_run,
-                     remove_partials, run_lock, set_state, write_region)
+                     remove_partials, set_state, write_region)
 
 __all__ = ["OptimaScene", "parse_optima_scene", "run_optima_scene", "distinct_optima",
            "fourier_samples", "STOP_CODES"]
@@ -675,16 +674,11 @@ def run_optima_scene(scene: OptimaScene, store=None, *, scheduler=None, workers=
     """
     import dask
 
-    from ._run import RunSummary, _Borrowed, _compute, _consolidate, _load, _Progress, _Scheduler, _write
+    from ._run import RunSummary, _compute, _consolidate, _load, _Progress, _write, scene_run
 
     t_start = time.perf_counter()
-    store = Path(store) if store is not None else (
-        Path(scene.execution.store) if scene.execution.store else Path("out") / f"{scene.name}.zarr")
-    scheduler = scheduler or scene.execution.scheduler
-    workers = workers or scene.execution.workers
-    n_workers = workers or (os.cpu_count() or 1 if scheduler in ("processes", "threads") else 1)
-    own = session is None or session.name != scheduler or session.workers != workers
-    with run_lock(store), (_Scheduler(scheduler, workers) if own else _Borrowed(session)) as sched:
+    with scene_run(scene, store, scheduler, workers, session) as run:
+        store, scheduler, n_workers, sched = run.store, run.scheduler, run.n_workers, run.sched
         meta = open_existing(store)
         if meta is not None and (meta["provenance"]["scene_hash"] != scene.hash or overwrite):
             old = meta["provenance"]["scene_hash"]

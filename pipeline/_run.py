@@ -6,6 +6,7 @@ import os
 import sys
 import time
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,7 +52,9 @@ class RunSummary:
 
 
 def default_store(scene: Scene) -> Path:
-    return Path(scene.execution.store) if scene.execution.store else Path("out") / f"{scene.name}.zarr"
+    """``[execution] store`` of the scene, else out/<name>.zarr."""
+    store = getattr(scene.execution, "store", None)
+    return Path(store) if store else Path("out") / f"{scene.name}.zarr"
 
 
 class _Progress:
@@ -129,6 +132,29 @@ class _Borrowed:
 
 #: A scheduler (and its process pool) shared by several runs; use as a context manager.
 Session = _Scheduler
+
+
+@dataclass(frozen=True)
+class RunContext:
+    """Where and on what one scene run computes (``scene_run``)."""
+
+    store: Path
+    scheduler: str
+    n_workers: int
+    sched: object  # _Scheduler (own pool) or the session's
+
+
+@contextmanager
+def scene_run(scene, store, scheduler, workers, session):
+    """Resolve the store path and the scheduler of a run, hold the store's lock and a
+    scheduler (the ``session``'s pool when it matches) for its duration."""
+    store = Path(store) if store is not None else default_store(scene)
+    scheduler = scheduler or scene.execution.scheduler
+    workers = workers or scene.execution.workers
+    n_workers = workers or (os.cpu_count() or 1 if scheduler in ("processes", "threads") else 1)
+    own = session is None or session.name != scheduler or session.workers != workers
+    with run_lock(store), (_Scheduler(scheduler, workers) if own else _Borrowed(session)) as sched:
+        yield RunContext(store, scheduler, n_workers, sched)
 
 
 def _compute(tasks, sched: _Scheduler, progress: _Progress):
@@ -268,12 +294,8 @@ def run_scene(scene: Scene, store: str | Path | None = None, *, scheduler: str |
         return run_study(scene, store, scheduler=scheduler, workers=workers, overwrite=overwrite,
                          progress=progress, echo=echo, session=session)
     t_start = time.perf_counter()
-    store = Path(store) if store is not None else default_store(scene)
-    scheduler = scheduler or scene.execution.scheduler
-    workers = workers or scene.execution.workers
-    n_workers = workers or (os.cpu_count() or 1 if scheduler in ("processes", "threads") else 1)
-    own = session is None or session.name != scheduler or session.workers != workers
-    with run_lock(store), (_Scheduler(scheduler, workers) if own else _Borrowed(session)) as sched:
+    with scene_run(scene, store, scheduler, workers, session) as run:
+        store, scheduler, n_workers, sched = run.store, run.scheduler, run.n_workers, run.sched
         meta = open_existing(store)
         if meta is not None:
             old = meta["provenance"]["scene_hash"]

@@ -30,7 +30,7 @@ import numpy as np
 
 from ._store import (ATTRS_KEY, FORMAT_VERSION, NOT_COMPUTED, STATE_GROUP, StoreMismatch, _create,
                      _open_group, mark_done, open_existing, provenance, read_done, record_run, remove_partials,
-                     run_lock, set_state, status_meanings, write_region)
+                     set_state, status_meanings, write_region)
 from ._study_scene import StudyScene
 
 __all__ = ["run_study", "compute_study_chunk", "study_arrays", "solver_norm_errors", "NOT_APPLICABLE",
@@ -464,15 +464,11 @@ def run_study(scene: StudyScene, store=None, *, scheduler=None, workers=None, ov
     """
     import dask
 
-    from ._run import RunSummary, _Borrowed, _compute, _load, _Progress, _Scheduler, default_store
+    from ._run import RunSummary, _compute, _load, _Progress, scene_run
 
     t_start = time.perf_counter()
-    store = Path(store) if store is not None else default_store(scene)
-    scheduler = scheduler or scene.execution.scheduler
-    workers = workers or scene.execution.workers
-    n_workers = workers or (os.cpu_count() or 1 if scheduler in ("processes", "threads") else 1)
-    own = session is None or session.name != scheduler or session.workers != workers
-    with run_lock(store), (_Scheduler(scheduler, workers) if own else _Borrowed(session)) as sched:
+    with scene_run(scene, store, scheduler, workers, session) as run:
+        store, scheduler, n_workers, sched = run.store, run.scheduler, run.n_workers, run.sched
         meta = open_existing(store)
         if meta is not None and (meta["provenance"]["scene_hash"] != scene.hash or overwrite):
             if not overwrite:

@@ -252,13 +252,12 @@ def _run_time(meta: dict) -> str:
     return text
 
 
-def _provenance_html(sd: SceneStore) -> str:
+def provenance_table(sd, kind_rows) -> str:
+    """The provenance table of a section: scene hash and file, versions, creation, host and run
+    time, then ``kind_rows`` ((label, html) describing what the scene computes), libraries, the
+    store, and the scene file itself."""
     pv = sd.provenance
-    shape = sd.meta.get("layout", {}).get("shape", [])
-    n = int(np.prod(shape)) if shape else 0
     libs = ", ".join(f"{k} {v}" for k, v in (pv.get("library_versions") or {}).items())
-    dims = " × ".join(f"{param_label(d, sd.p)} ({s})" for d, s in zip(sd.dims, shape))
-    fixed = ", ".join(f"{param_label(k, sd.p)} = {format_value(k, v)}" for k, v in sd.fixed.items())
     rows = [
         ("scene hash", f"<code title='{_esc(pv.get('scene_hash', ''))}'>{_esc(pv.get('scene_hash', '')[:16])}…</code>"),
         ("scene file", f"<code>{_esc(pv.get('scene_file', ''))}</code>"),
@@ -267,9 +266,7 @@ def _provenance_html(sd: SceneStore) -> str:
         ("created (UTC)", _esc(pv.get("created", "?"))),
         ("host", _esc(pv.get("host", "?"))),
         ("run time", _run_time(sd.meta)),
-        ("grid", f"{dims} = {n:,} points"),
-        ("fixed", fixed or "—"),
-        ("solver", f"{_esc(sd.method)}, rtol {sd.rtol:g}"),
+        *kind_rows,
         ("libraries", _esc(libs)),
         ("store", f"<code>{_esc(sd.path)}</code>"),
     ]
@@ -277,6 +274,18 @@ def _provenance_html(sd: SceneStore) -> str:
     toml = pv.get("scene_toml")
     extra = f"<details><summary>scene file</summary><pre>{_esc(toml)}</pre></details>" if toml else ""
     return f"<h3>Provenance</h3><table>{body}</table>{extra}"
+
+
+def _provenance_html(sd: SceneStore) -> str:
+    shape = sd.meta.get("layout", {}).get("shape", [])
+    n = int(np.prod(shape)) if shape else 0
+    dims = " × ".join(f"{param_label(d, sd.p)} ({s})" for d, s in zip(sd.dims, shape))
+    fixed = ", ".join(f"{param_label(k, sd.p)} = {format_value(k, v)}" for k, v in sd.fixed.items())
+    return provenance_table(sd, [
+        ("grid", f"{dims} = {n:,} points"),
+        ("fixed", fixed or "—"),
+        ("solver", f"{_esc(sd.method)}, rtol {sd.rtol:g}"),
+    ])
 
 
 def _status_html(sd: SceneStore) -> str:

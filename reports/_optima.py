@@ -50,9 +50,6 @@ def _coefficient_text(coefficients, kmax: int, names) -> str:
 
 
 def _provenance_rows(sd) -> str:
-    from ._html import _run_time
-
-    pv = sd.provenance
     sc = sd.science
     shape = sd.meta.get("layout", {}).get("shape", [])
     n = int(np.prod(shape)) if shape else 0
@@ -61,15 +58,9 @@ def _provenance_rows(sd) -> str:
     ratios = axes.get("anisotropy_ratio", [])
     ratio_text = (f"2<sup>{math.log2(ratios[0]):g}</sup> … 2<sup>{math.log2(ratios[-1]):g}</sup> "
                   f"({len(ratios)} values)") if ratios else "?"
-    libs = ", ".join(f"{k} {v}" for k, v in (pv.get("library_versions") or {}).items())
-    rows = [
-        ("scene hash", f"<code title='{_esc(pv.get('scene_hash', ''))}'>{_esc(pv.get('scene_hash', '')[:16])}…</code>"),
-        ("scene file", f"<code>{_esc(pv.get('scene_file', ''))}</code>"),
-        ("package version", _esc(pv.get("package_version", "?"))),
-        ("git commit", f"<code>{_esc(pv.get('git_commit') or 'unknown')}</code>"),
-        ("created (UTC)", _esc(pv.get("created", "?"))),
-        ("host", _esc(pv.get("host", "?"))),
-        ("run time", _run_time(sd.meta)),
+    from ._html import provenance_table
+
+    return provenance_table(sd, [
         ("ensemble", f"μ<sub>n</sub>/μ<sub>s</sub> {ratio_text} × K<sub>max</sub> "
                      f"{_esc(axes.get('max_wavenumber'))} × p {_esc(axes.get('p'))} × "
                      f"{_esc(starts.get('num'))} starts = {n:,} optimisations"),
@@ -83,13 +74,7 @@ def _provenance_rows(sd) -> str:
                         f"{_esc(', '.join(keep.get('accept', [])))}; equal when max |Δφ| ≤ "
                         f"{_esc(keep.get('phi_tolerance'))} rad (modulo phase shift and φ → −φ) and "
                         f"scaled periods within {_esc(keep.get('period_tolerance'))} (relative)"),
-        ("libraries", _esc(libs)),
-        ("store", f"<code>{_esc(sd.path)}</code>"),
-    ]
-    body = "".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in rows)
-    toml = pv.get("scene_toml")
-    extra = f"<details><summary>scene file</summary><pre>{_esc(toml)}</pre></details>" if toml else ""
-    return f"<h3>Provenance</h3><table>{body}</table>{extra}"
+    ])
 
 
 def _outcomes_table(sd) -> str:

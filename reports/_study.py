@@ -464,27 +464,18 @@ def _stiffness_body(site, sd) -> list[str]:
 
 
 def _provenance(sd) -> str:
-    from ._html import _run_time
+    from ._html import provenance_table
 
-    pv, sc = sd.provenance, sd.science
+    sc = sd.science
     sol = sc.get("solver", {})
-    libs = ", ".join(f"{k} {v}" for k, v in (pv.get("library_versions") or {}).items())
-    rows = [("scene hash", f"<code>{_esc(pv.get('scene_hash', '')[:16])}…</code>"),
-            ("scene file", f"<code>{_esc(pv.get('scene_file', ''))}</code>"),
-            ("git commit", f"<code>{_esc(pv.get('git_commit') or 'unknown')}</code>"),
-            ("created (UTC)", _esc(pv.get("created", "?"))), ("host", _esc(pv.get("host", "?"))),
-            ("run time", _run_time(sd.meta)),
-            ("points", f"{sd.ds.sizes['point']} ({len(sc.get('motions', []))} motions, "
-                       f"{len(sc.get('sweeps', []))} sweeps)"),
-            ("solvers", f"{', '.join(sol.get('methods', []))} at rtol "
-                        f"{', '.join(f'{r:.0e}' for r in sol.get('rtols', []))}"
-                        + (f"; fixed grids {sol.get('fixed_steps')}" if sol.get("fixed_steps") else "")
-                        + (f"; fallback {sol.get('fallback')}" if sol.get("fallback", "none") != "none" else "")),
-            ("libraries", _esc(libs)), ("store", f"<code>{_esc(sd.path)}</code>")]
-    body = "".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in rows)
-    toml = pv.get("scene_toml")
-    extra = f"<details><summary>scene file</summary><pre>{_esc(toml)}</pre></details>" if toml else ""
-    return f"<h3>Provenance</h3><table>{body}</table>{extra}"
+    return provenance_table(sd, [
+        ("points", f"{sd.ds.sizes['point']} ({len(sc.get('motions', []))} motions, "
+                   f"{len(sc.get('sweeps', []))} sweeps)"),
+        ("solvers", f"{', '.join(sol.get('methods', []))} at rtol "
+                    f"{', '.join(f'{r:.0e}' for r in sol.get('rtols', []))}"
+                    + (f"; fixed grids {sol.get('fixed_steps')}" if sol.get("fixed_steps") else "")
+                    + (f"; fallback {sol.get('fallback')}" if sol.get("fallback", "none") != "none" else "")),
+    ])
 
 
 def study_section(site, sd) -> tuple[str, str, str]:

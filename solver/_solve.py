@@ -33,7 +33,6 @@ from . import _march, _periodic
 from ._events import event_times, place_events
 from ._kinematics import period_grid
 from ._limits import fast_limit_velocity, kinematic_speed
-from ._physics import Physics
 from ._status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
 
 METHODS = ("periodic", "march")
@@ -364,7 +363,9 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                 indicators = local_indicators(
                     ser[j, :n_coarse], ser[m + j, :2 * n_coarse:2], step_m[j, :n_coarse],
                     step_u[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1) - step_u[j, :n_coarse], h)
-                hot = refinement_levels(indicators / scale_u, h, rtol, spec.order)
+                # steps at MIN_STEP cannot be split: mark among the others
+                hot = refinement_levels(np.where(h >= 2 * MIN_STEP, indicators, 0.0) / scale_u,
+                                        h, rtol, spec.order)
                 if unresolved is not None:  # explicit steps too long for stiff friction
                     hot[unresolved] = MAX_BISECTIONS
                     chatter_passes[i] += 1
