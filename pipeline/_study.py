@@ -325,15 +325,13 @@ def _reference(case, scene: StudyScene, vscale: float) -> dict:
 
 
 def _baseline(case, tol, cap, vscale):
-    """The scipy LSODA baseline of ``solver.bench`` (harmonic motions only)."""
+    """The scipy LSODA baseline of ``solver.bench`` (any family, phi from the solver's kernel)."""
     from solver import bench
 
-    if case.family != "harmonic":
-        return math.nan, math.nan, NOT_APPLICABLE, math.nan, 0
     phys = case.physics()
-    s = dict(case.shape)
-    U, P, periods, seconds = bench.baseline_point(s["A0"], s["A1"], phys.mu_n[0], phys.mu_s[0], phys.p[0],
-                                                  phys.period[0], phys.delta_tau[0], vscale, tol, cap)
+    U, P, periods, seconds = bench.baseline_point(bench.family_angle(case.kinematics()), phys.mu_n[0],
+                                                  phys.mu_s[0], phys.p[0], phys.period[0],
+                                                  phys.delta_tau[0], vscale, tol, cap)
     return U, P, (0 if np.isfinite(U) else BASELINE_FAILED), seconds, periods
 
 

@@ -284,8 +284,8 @@ def _accuracy_body(site, sd) -> list[str]:
     if "baseline_tol" in sd.ds:
         parts.append("<p class='note'>The scipy baseline is <code>solver.bench.baseline_point</code> (LSODA, "
                      "period by period from rest until periodic, serial, wall-time cap "
-                     f"{sd.science.get('baseline', {}).get('cap_seconds')} s); it takes harmonic motions only, "
-                     "so the other cases have no baseline curve.</p>")
+                     f"{sd.science.get('baseline', {}).get('cap_seconds')} s, phi from the solver's kinematics "
+                     "kernel); a point that hits the cap has no baseline value.</p>")
     for q in ("U", "P"):
         parts.append(site.guarded(f"{sd.name} work-precision {q}",
                                   lambda q=q: site.figure(work_precision_figure(sd, q))))

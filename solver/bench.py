@@ -126,14 +126,29 @@ class _OverTime(Exception):
     """Raised from inside the ODE right-hand side when a point exceeds its wall-time cap."""
 
 
-def _make_ode(A0, A1, mu_n, mu_s, p, kappa, delta_tau, deadline):
-    """Right-hand side and Jacobian of y = [u, int u, int Pi] for one point."""
-    force = solver.force_and_slope
-    power = solver.power_density
+def harmonic_angle(A0, A1):
+    """phi(tau), dphi/dtau of a harmonic motion, as a Python function of tau."""
     two_pi = 2.0 * math.pi
 
     def angle(tau):
         return A0 + A1 * math.cos(two_pi * tau), -two_pi * A1 * math.sin(two_pi * tau)
+
+    return angle
+
+
+def family_angle(kinematics):
+    """phi(tau), dphi/dtau of a one-point family (any kind), through the solver's kernel."""
+    from ._kinematics import angle_and_rate
+
+    code, params = kinematics.kernel_encoding()
+    row = params[0].copy()
+    return lambda tau: angle_and_rate(code, row, tau, tau)
+
+
+def _make_ode(angle, mu_n, mu_s, p, kappa, delta_tau, deadline):
+    """Right-hand side and Jacobian of y = [u, int u, int Pi] for one point."""
+    force = solver.force_and_slope
+    power = solver.power_density
 
     def rhs(tau, y):
         if time.perf_counter() > deadline:
@@ -151,16 +166,17 @@ def _make_ode(A0, A1, mu_n, mu_s, p, kappa, delta_tau, deadline):
     return rhs, jac
 
 
-def baseline_point(A0, A1, mu_n, mu_s, p, period, delta_tau, vscale, tol, cap):
+def baseline_point(angle, mu_n, mu_s, p, period, delta_tau, vscale, tol, cap):
     """March one point period by period with LSODA; returns (U, P, periods, seconds).
 
-    U and P are NaN when the wall-time cap was hit or LSODA failed.
+    ``angle(tau)`` gives (phi, dphi/dtau) (``harmonic_angle``, ``family_angle``).  U and P
+    are NaN when the wall-time cap was hit or LSODA failed.
     """
     from scipy.integrate import solve_ivp
 
     start = time.perf_counter()
     kappa = period ** (2.0 - p)
-    rhs, jac = _make_ode(A0, A1, mu_n, mu_s, p, kappa, delta_tau, start + cap)
+    rhs, jac = _make_ode(angle, mu_n, mu_s, p, kappa, delta_tau, start + cap)
     atol = 1e-2 * tol * np.array([vscale, vscale, min(mu_n, mu_s) * vscale])
     u = 0.0
     periods = 0
@@ -188,7 +204,8 @@ def run_baseline(kinematics, physics, tol, cap):
     start = time.perf_counter()
     for i in range(n):
         U[i], P[i], periods[i], _ = baseline_point(
-            kinematics.A0[i], kinematics.A1[i], physics.mu_n[i], physics.mu_s[i], physics.p[i],
+            harmonic_angle(kinematics.A0[i], kinematics.A1[i]), physics.mu_n[i], physics.mu_s[i],
+            physics.p[i],
             physics.period[i], physics.delta_tau[i], vscale[i], tol, cap)
     return dict(U=U, P=P, periods=periods, seconds=time.perf_counter() - start,
                 failures=int(np.count_nonzero(~np.isfinite(U))), tol=tol)
@@ -368,7 +385,7 @@ def benchmark(n_points, n_baseline, seed, cap):
     U_periodic = periodic[RTOLS[0]][0].U[index]
     periodic_error = relative_u_error(U_periodic, reference.U, phys_sub.period, vscale)
 
-    baseline_point(1.0, 0.3, 1.0, 1.0, 0.0, 1.0, 1e-5, 0.3, 1e-4, cap)  # warm up scipy/dispatch
+    baseline_point(harmonic_angle(1.0, 0.3), 1.0, 1.0, 0.0, 1.0, 1e-5, 0.3, 1e-4, cap)  # warm up scipy/dispatch
     print(f"baseline: LSODA period by period from rest, cap {cap:g} s per point", flush=True)
     base = calibrated_baseline(kin_sub, phys_sub, reference.U, periodic_error, cap)
     base_rate = len(index) / base["seconds"]

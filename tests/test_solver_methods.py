@@ -179,3 +179,21 @@ def test_bad_arguments_name_themselves():
         solver.PowerLaw(1.0, 0.3, 1.2, 1.0, False, 1.0, False)
     with pytest.raises(ValueError, match="method"):
         solver.solve_periodic(solver.Harmonic(1, 0.3), solver.Physics(1, 1, 1), method="rk4")
+
+
+@pytest.mark.parametrize("name", ["power_law_corners_p1.5", "linear_two_phase", "clapping_fourier"])
+def test_scipy_lsoda_baseline_agrees_on_every_family(name):
+    """A third, independent method (scipy LSODA marching, ``solver.bench.baseline_point``,
+    phi from the kinematics kernel) agrees with ``periodic`` on non-harmonic families."""
+    from solver import bench
+
+    case = {c.name: c for c in AGREEMENT_CASES}[name]
+    kin, phys = case.kinematics, case.physics
+    ref = solver.solve_periodic(kin, phys, rtol=1e-8)
+    vscale = solver.kinematic_speed(kin)[0]
+    U, P, periods, _ = bench.baseline_point(bench.family_angle(kin), phys.mu_n[0], phys.mu_s[0],
+                                            phys.p[0], phys.period[0], phys.delta_tau[0], vscale,
+                                            1e-8, 60.0)
+    scale_u = max(abs(ref.U[0]), 1e-3 * vscale / phys.period[0])
+    assert abs(U - ref.U[0]) <= 1e-5 * scale_u, (U, ref.U[0])
+    assert abs(P - ref.P[0]) <= 1e-5 * ref.P[0]
