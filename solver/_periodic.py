@@ -136,8 +136,12 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     stage_its = 0
     first = True
     it_out = 0
-    lo = -math.inf
-    hi = math.inf
+    # g(u0) = Phi(u0) - u0 is > 0 for u0 << 0 and < 0 for u0 >> 0 (friction decelerates any
+    # fast enough body within a period): a fixed point lies in (-bound, bound), and the sign
+    # of g at any iterate tells on which side of it one lies
+    bound = 1e3 * vscale + 10.0 * abs(u0)
+    lo = -bound
+    hi = bound
     for it_out in range(1, MAX_SHOOTING_ITERATIONS + 1):
         u = u0
         log_m = 0.0
@@ -179,23 +183,21 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         one_minus_M = -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
         if not (math.isfinite(g) and one_minus_M != 0.0 and math.isfinite(one_minus_M)):
             return math.nan, math.nan, u0, NON_FINITE, it_out, stage_its
-        if abs(g) <= tol_fix * one_minus_M:
+        if abs(g) <= tol_fix * abs(one_minus_M):
             status = CONVERGED
             break
-        # g(u0) = Phi(u0) - u0 is decreasing: keep a bracket of the fixed point and fall
-        # back to bisection (or a plain period-map step) when Newton leaves it
-        if one_minus_M > 0.0:  # contracting period map: g decreasing
-            if g > 0.0:
-                lo = max(lo, u0)
-            else:
-                hi = min(hi, u0)
+        # keep the bracket of a fixed point and bisect when Newton leaves it (the map need
+        # not be monotone: the anisotropic law can amplify, M > 1 or M < 0)
+        if g > 0.0:
+            lo = max(lo, u0)
+        else:
+            hi = min(hi, u0)
         candidate = u0 + g / one_minus_M
         if not (lo < candidate < hi):
-            if math.isfinite(lo) and math.isfinite(hi):
-                candidate = 0.5 * (lo + hi)
-            else:
-                candidate = u0 + g
+            candidate = 0.5 * (lo + hi)
         u0 = candidate
+    if status == CONVERGED and not (abs(u0) < 0.999 * bound):
+        status = NOT_PERIODIC  # converged onto the edge of the bracket: no fixed point inside
     if status != CONVERGED:
         return math.nan, math.nan, u0, status, it_out, stage_its
     # quadrature of the converged sweep with the Radau weights (order 3)

@@ -197,3 +197,27 @@ def test_scipy_lsoda_baseline_agrees_on_every_family(name):
     scale_u = max(abs(ref.U[0]), 1e-3 * vscale / phys.period[0])
     assert abs(U - ref.U[0]) <= 1e-5 * scale_u, (U, ref.U[0])
     assert abs(P - ref.P[0]) <= 1e-5 * ref.P[0]
+
+
+def test_shooting_is_bracketed_where_the_period_map_is_not_monotone():
+    """A short-period burst-and-coast point where Newton on u(0) cycled (NOT_PERIODIC on every
+    grid) and, from a far start, ran off to u(0) ~ 1e23 and called it converged.  The shooting
+    iteration keeps a bracket from the sign of g = Phi(u0) - u0 alone."""
+    from solver._kinematics import period_grid
+    from solver._periodic import _solve_point
+
+    A0 = np.pi / 2
+    kin = solver.PowerLaw([A0], [0.2 * A0], [0.5], [10.0], [True], [1.0], [False])
+    phys = solver.Physics.from_scaled(2.0 ** -6, 0.125, p=0.0, delta=1e-5)
+    a = solver.solve_periodic(kin, phys, rtol=1e-5)
+    b = solver.solve_periodic(kin, phys, rtol=1e-5, method="march")
+    assert a.converged[0] and b.converged[0]
+    assert abs(a.U[0] - b.U[0]) <= 2e-5 * abs(a.U[0])
+    code, params = kin.kernel_encoding()
+    vscale = solver.kinematic_speed(kin)[0]
+    work = [np.zeros(64) for _ in range(4)]
+    for start in (-0.05, -0.02, 0.0, 0.05):
+        out = _solve_point(code, params[0], period_grid(kin, 64)[0], 64, phys.inertia_factor[0],
+                           phys.mu_n[0], phys.mu_s[0], 0.0, phys.delta_tau[0], start, vscale, 1e-6,
+                           *work)
+        assert out[3] == 0 and abs(out[2]) < vscale, (start, out[:5])
