@@ -132,12 +132,18 @@ class _Problem:
         full[-1] = math.exp(x[-1])
         return full
 
+    def kinematics(self, full):
+        """The family at the full parameter vector, or None outside its domain."""
+        try:
+            return with_family_parameters(self.template, full[:-1])
+        except ValueError:
+            return None
+
     def evaluate(self, x, u0=None):
         """(f, grad f in x, GradientResult)."""
         full = self.full(x)
-        try:
-            kin = with_family_parameters(self.template, full[:-1])
-        except ValueError:
+        kin = self.kinematics(full)
+        if kin is None:
             return math.inf, None, None
         phys = with_period(self.physics, full[-1])
         res = objective_gradient(kin, phys, self.grid, objective=self.objective, u0=u0)
@@ -167,9 +173,8 @@ class _PowerConstrainedProblem(_Problem):
 
     def evaluate(self, x, u0=None):
         full = self.full(x)
-        try:
-            kin = with_family_parameters(self.template, full[:-1])
-        except ValueError:
+        kin = self.kinematics(full)
+        if kin is None:
             return math.inf, None, None
         guess = self.periods.get("last", full[-1])
         res = speed_at_power(kin, with_period(self.physics, guess), self.grid, self.power, u0=u0)

@@ -193,6 +193,21 @@ def _pad(grids):
     return out, n_steps
 
 
+def _pair_change(coarse_steps, fine_steps, n_coarse):
+    """Per coarse step: the fine grid's integral over it (two half steps) minus the coarse one."""
+    return fine_steps[:2 * n_coarse].reshape(n_coarse, 2).sum(1) - coarse_steps[:n_coarse]
+
+
+def _chatter(stiff_coarse, stiff_fine, u_coarse, h, threshold):
+    """The coarse steps where the march chatters (on either grid of the pair), or None when
+    the u stalled in them carries at most ``threshold`` of int u: a short chatter (a brief
+    stop at a turning point) costs nothing measurable."""
+    n_coarse = h.size
+    steps = stiff_coarse[:n_coarse] | stiff_fine[:2 * n_coarse].reshape(n_coarse, 2).any(1)
+    mass = np.sum(np.abs(u_coarse[:n_coarse][steps]) * h[steps])
+    return steps if mass > threshold else None
+
+
 def _steps_to_resolve(kinematics, physics, i, tau, h):
     """Steps an explicit method needs on the intervals [tau, tau + h) to resolve sticking:
     h T^(2-p) |dF/du| each, with the slope of F across the band of a link at rest,
@@ -336,23 +351,16 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
             if ok[j]:
                 scale_u = max(abs(iu[m + j]), u_floor[i])
                 scale_p = abs(ip[m + j])
-                d_u = np.abs(step_u[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1)
-                             - step_u[j, :n_coarse]) / scale_u
-                d_p = np.abs(step_pi[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1)
-                             - step_pi[j, :n_coarse]) / scale_p
-                estimate[i] = max(d_u.sum(), d_p.sum())
+                change_u = _pair_change(step_u[j], step_u[m + j], n_coarse)
+                change_p = _pair_change(step_pi[j], step_pi[m + j], n_coarse)
+                estimate[i] = max(np.abs(change_u).sum() / scale_u,
+                                  np.abs(change_p).sum() / scale_p)
                 unresolved = None
                 if stiff is not None:
-                    unresolved = stiff[j, :n_coarse] | stiff[m + j, :2 * n_coarse].reshape(
-                        n_coarse, 2).any(1)
-                    # a short chatter (a brief stop at a turning point) costs nothing
-                    # measurable: only chatter carrying more than CHATTER_SHARE rtol of
-                    # the period integral of u counts
-                    mass = np.sum(np.abs(ser[j, :n_coarse][unresolved]) * h[unresolved])
-                    if mass > CHATTER_SHARE * rtol * scale_u:
+                    unresolved = _chatter(stiff[j], stiff[m + j], ser[j], h,
+                                          CHATTER_SHARE * rtol * scale_u)
+                    if unresolved is not None:
                         last_status[i] = UNSTABLE
-                    else:
-                        unresolved = None
                 if level >= 1 and estimate[i] <= rtol and unresolved is None:
                     status[i] = CONVERGED
                     keep[j] = False
@@ -362,7 +370,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                     continue
                 indicators = local_indicators(
                     ser[j, :n_coarse], ser[m + j, :2 * n_coarse:2], step_m[j, :n_coarse],
-                    step_u[m + j, :2 * n_coarse].reshape(n_coarse, 2).sum(1) - step_u[j, :n_coarse], h)
+                    change_u, h)
                 # steps at MIN_STEP cannot be split: mark among the others
                 hot = refinement_levels(np.where(h >= 2 * MIN_STEP, indicators, 0.0) / scale_u,
                                         h, rtol, spec.order)
