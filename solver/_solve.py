@@ -328,36 +328,39 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     while active.size:
         coarse = [grids[i] for i in active]
         fine = [bisect(g) for g in coarse]
-        padded, steps = _pad(coarse + fine)
-        both = np.concatenate([active, active])
+        # rows alternate coarse, fine: the kernel's static split over threads then gets
+        # equal work (coarse rows first would give one thread a third, the other two)
+        padded, steps = _pad([g for pair in zip(coarse, fine) for g in pair])
         iu, ip, u0_new, st, its, step_u, step_pi, step_m, ser, stiff = _run_level(
-            method, code, params, padded, steps, physics, u0, vscale, rtol, both)
+            method, code, params, padded, steps, physics, u0, vscale, rtol, np.repeat(active, 2))
         m = active.size
-        iterations[active] += its[:m] + its[m:]
-        ok = (st[:m] == CONVERGED) & (st[m:] == CONVERGED)
-        last_status[active] = np.where(st[m:] != CONVERGED, st[m:], st[:m])
-        fine_ok = st[m:] == CONVERGED
-        u0[active[fine_ok]] = u0_new[m:][fine_ok]
-        int_u[active] = np.where(ok, iu[m:], np.nan)
-        int_pi[active] = np.where(ok, ip[m:], np.nan)
-        n_tau[active] = steps[m:]
-        found = event_times(code, params[active], padded[m:], steps[m:], ser[m:],
+        C, F = slice(0, None, 2), slice(1, None, 2)
+        iterations[active] += its[C] + its[F]
+        ok = (st[C] == CONVERGED) & (st[F] == CONVERGED)
+        last_status[active] = np.where(st[F] != CONVERGED, st[F], st[C])
+        fine_ok = st[F] == CONVERGED
+        u0[active[fine_ok]] = u0_new[F][fine_ok]
+        int_u[active] = np.where(ok, iu[F], np.nan)
+        int_pi[active] = np.where(ok, ip[F], np.nan)
+        n_tau[active] = steps[F]
+        found = event_times(code, params[active], padded[F], steps[F], ser[F],
                             physics.inertia_factor[active], physics.mu_n[active],
                             physics.mu_s[active], physics.p[active], physics.delta_tau[active])
         keep = np.ones(m, dtype=bool)
         for j, i in enumerate(active):
-            n_coarse = steps[j]
+            jc, jf = 2 * j, 2 * j + 1
+            n_coarse = steps[jc]
             h = np.diff(coarse[j])
             if ok[j]:
-                scale_u = max(abs(iu[m + j]), u_floor[i])
-                scale_p = abs(ip[m + j])
-                change_u = _pair_change(step_u[j], step_u[m + j], n_coarse)
-                change_p = _pair_change(step_pi[j], step_pi[m + j], n_coarse)
+                scale_u = max(abs(iu[jf]), u_floor[i])
+                scale_p = abs(ip[jf])
+                change_u = _pair_change(step_u[jc], step_u[jf], n_coarse)
+                change_p = _pair_change(step_pi[jc], step_pi[jf], n_coarse)
                 estimate[i] = max(np.abs(change_u).sum() / scale_u,
                                   np.abs(change_p).sum() / scale_p)
                 unresolved = None
                 if stiff is not None:
-                    unresolved = _chatter(stiff[j], stiff[m + j], ser[j], h,
+                    unresolved = _chatter(stiff[jc], stiff[jf], ser[jc], h,
                                           CHATTER_SHARE * rtol * scale_u)
                     if unresolved is not None:
                         last_status[i] = UNSTABLE
@@ -365,11 +368,11 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                     status[i] = CONVERGED
                     keep[j] = False
                     if return_series:
-                        series[i] = ser[m + j, :2 * n_coarse].copy()
+                        series[i] = ser[jf, :2 * n_coarse].copy()
                         series_tau[i] = fine[j][:-1]
                     continue
                 indicators = local_indicators(
-                    ser[j, :n_coarse], ser[m + j, :2 * n_coarse:2], step_m[j, :n_coarse],
+                    ser[jc, :n_coarse], ser[jf, :2 * n_coarse:2], step_m[jc, :n_coarse],
                     change_u, h)
                 # steps at MIN_STEP cannot be split: mark among the others
                 hot = refinement_levels(np.where(h >= 2 * MIN_STEP, indicators, 0.0) / scale_u,
@@ -390,7 +393,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
             if new.size - 1 > max_steps or not hot.any():
                 keep[j] = False  # out of budget: TOLERANCE_NOT_REACHED or the kernel's reason
                 if return_series and ok[j]:
-                    series[i] = ser[m + j, :2 * n_coarse].copy()
+                    series[i] = ser[jf, :2 * n_coarse].copy()
                     series_tau[i] = fine[j][:-1]
                 continue
             grids[i] = new
