@@ -215,10 +215,11 @@ def _fourier(params, tau):
     K = int(params[0])
     phi = params[1]
     rate = 0.0
-    for k in range(1, K + 1):
-        arg = 2.0 * math.pi * k * tau
-        ca = math.cos(arg)
-        sa = math.sin(arg)
+    c1 = math.cos(2.0 * math.pi * tau)
+    s1 = math.sin(2.0 * math.pi * tau)
+    ca, sa = 1.0, 0.0
+    for k in range(1, K + 1):  # cos, sin of 2 pi k tau by angle addition (error ~k eps)
+        ca, sa = ca * c1 - sa * s1, sa * c1 + ca * s1
         Ak = params[1 + k]
         Bk = params[K + 1 + k]
         phi += Ak * ca + Bk * sa

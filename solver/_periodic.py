@@ -110,11 +110,13 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
 
 @njit(cache=True)
 def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
-                 u_out, step_u, step_pi, step_m):
+                 u_out, step_u, step_pi, step_m, stages_out=None):
     """Periodic solution for one parameter point on the first N steps of ``grid``.
 
     Writes u at the nodes into ``u_out``, the per-step integrals of u and Pi into
-    ``step_u``, ``step_pi`` and the step derivatives du_{n+1}/du_n into ``step_m``.
+    ``step_u``, ``step_pi``, the step derivatives du_{n+1}/du_n into ``step_m`` and,
+    if given, the stage values (U1_0, U2_0, U1_1, ...) of the converged sweep into
+    ``stages_out`` (2N,).
     Returns (int_u, int_Pi, u0, status, shooting_iterations, stage_iterations).
     """
     phis = np.empty(2 * N)
@@ -214,6 +216,8 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         int_pi += step_pi[n]
         u_out[n] = u_start[n]
         step_m[n] = 1.0 + m_minus_1[n]
+    if stages_out is not None:
+        stages_out[:2 * N] = stages
     return int_u, int_pi, u0, CONVERGED, it_out, stage_its
 
 

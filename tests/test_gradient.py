@@ -13,7 +13,8 @@ import pytest
 
 import solver
 from solver._gradient import (POWER_ROOT_RTOL, FixedGrid, adaptive_grid, discrete_objective,
-                              family_parameters, force_partials, objective_gradient,
+                              family_parameters, force_partials, force_partials_quadrature,
+                              objective_gradient,
                               speed_at_power, with_family_parameters, with_period)
 
 MU_N, MU_S = 0.3, 1.7
@@ -139,6 +140,28 @@ def test_force_partials_match_high_precision_reference():
                 natural = (MU_N + MU_S) * (1.0 if index == 2 else 1.0 / (abs(omega) + abs(u)))
                 assert abs(P[index] - ref) <= 1e-11 * (abs(ref) + size) + 1e-15 * natural, (
                     u, phi, omega, dtau)
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.0, 1.5, 1.9])
+def test_closed_form_partials_match_quadrature(p):
+    # force_partials (closed forms; omega by homogeneity) against the graded quadrature,
+    # on the hard inputs, where both the closed forms and the omega fallback are taken
+    rng = np.random.default_rng(int(10 * p))
+    fallbacks = 0
+    for dtau in (1e-2, 1e-5, 1e-9):
+        for u, phi, omega in _hard_inputs(rng, 200):
+            P = force_partials(u, phi, omega, MU_N, MU_S, p, dtau)
+            Q = force_partials_quadrature(u, phi, omega, MU_N, MU_S, p, dtau)
+            fallbacks += P[3] == Q[3]
+            e = math.hypot(math.cos(phi) * (u + omega * math.sin(phi) / 4), dtau)
+            speed = abs(omega) + abs(u) + dtau
+            # natural scales: mu for F, F_phi; mu / e for F_u (the kink's slope); / speed for
+            # the omega partials (degree-0 homogeneity at p = 0); |Pi| for the power columns
+            force = (MU_N + MU_S) * np.array([1.0, 1.0 / e, 1.0, 1.0 / speed, 1.0 / e])
+            power = (abs(Q[5]) + 1e-300) * np.array([1.0, 1.0 / e, 1.0, 1.0 / speed, 1.0 / e])
+            scale = np.concatenate([force, power])
+            assert np.all(np.abs(P - Q) <= 1e-11 * (np.abs(Q) + scale)), (u, phi, omega, dtau)
+    assert 0 < fallbacks < 600  # both branches of the omega partials are exercised
 
 
 # -- gradients of the discretised objective ------------------------------------------------------
