@@ -24,10 +24,12 @@ two.
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, fields
 
 import numpy as np
+from numba import njit
 
 from . import _march, _periodic
 from ._events import event_times, place_events
@@ -129,6 +131,7 @@ def _outputs(int_u, int_pi, physics):
     )
 
 
+@njit(cache=True)
 def local_indicators(u_coarse, u_fine, step_derivative, integral_change, h):
     """Where each step's error originates, not where it is carried to.
 
@@ -137,12 +140,18 @@ def local_indicators(u_coarse, u_fine, step_derivative, integral_change, h):
     step); the part of the step's integral change not explained by the node
     differences is the step's own quadrature error.
     """
-    e = u_fine - u_coarse
-    e_next = np.roll(e, -1)
-    return (np.abs(e_next - step_derivative * e) * h
-            + np.abs(integral_change - 0.5 * h * (e + e_next)))
+    N = h.size
+    out = np.empty(N)
+    for n in range(N):
+        e = u_fine[n] - u_coarse[n]
+        k = n + 1 if n + 1 < N else 0
+        e_next = u_fine[k] - u_coarse[k]
+        out[n] = (abs(e_next - step_derivative[n] * e) * h[n]
+                  + abs(integral_change[n] - 0.5 * h[n] * (e + e_next)))
+    return out
 
 
+@njit(cache=True)
 def refinement_levels(indicators, h, rtol, order=2):
     """How many times to bisect each step: enough that its local error per unit
     length, shrinking like h^order, meets its share 0.5 rtol h_j of the tolerance;
@@ -151,37 +160,56 @@ def refinement_levels(indicators, h, rtol, order=2):
     refines again (assuming order 2 here over-resolved by ~2x in n_tau).  When no step is
     over its share (the estimate is dominated by propagation), the steps holding
     half of the total indicator are bisected once (Doerfler marking)."""
-    target = 0.5 * rtol * h
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = indicators / target
-    levels = np.where(ratio > 1.0, np.ceil(np.log2(np.maximum(ratio, 1.0)) / order), 0.0)
-    levels = np.clip(np.nan_to_num(levels, nan=1.0, posinf=MAX_BISECTIONS), 0, MAX_BISECTIONS)
-    if levels.max() > 0:
-        return levels.astype(np.int64)
-    order = np.argsort(-indicators)
-    total = indicators.sum()
-    levels = np.zeros(indicators.size, dtype=np.int64)
-    if not np.isfinite(total) or total == 0:
+    N = indicators.size
+    levels = np.zeros(N, dtype=np.int64)
+    marked = False
+    total = 0.0
+    for n in range(N):
+        total += indicators[n]
+        ratio = indicators[n] / (0.5 * rtol * h[n])
+        if ratio > 1.0:  # (NaN: not marked here)
+            levels[n] = min(int(math.ceil(math.log2(ratio) / order)), MAX_BISECTIONS) \
+                if math.isfinite(ratio) else MAX_BISECTIONS
+        marked = marked or levels[n] > 0
+    if marked:
+        return levels
+    if not math.isfinite(total) or total == 0.0:
         levels[:] = 1
         return levels
-    count = np.searchsorted(np.cumsum(indicators[order]), 0.5 * total) + 1
-    levels[order[:count]] = 1
+    order_desc = np.argsort(-indicators)
+    running = 0.0
+    for n in order_desc:  # the largest indicators until half of the total is covered
+        levels[n] = 1
+        running += indicators[n]
+        if running >= 0.5 * total:
+            break
     return levels
 
 
-def bisect(grid, levels=None):
-    """Nodes of ``grid`` with step j split into 2^levels[j] equal steps (default: all once)."""
-    if levels is None:
-        out = np.empty(2 * grid.size - 1)
-        out[0::2] = grid
-        out[1::2] = 0.5 * (grid[:-1] + grid[1:])
-        return out
-    pieces = 2 ** levels
-    start = np.repeat(grid[:-1], pieces)
-    step = np.repeat(np.diff(grid) / pieces, pieces)
-    # k-th sub-node of each step: k = position within its run of repeats
-    k = np.arange(start.size) - np.repeat(np.cumsum(pieces) - pieces, pieces)
-    return np.append(start + k * step, grid[-1])
+@njit(cache=True)
+def bisect(grid, levels):
+    """Nodes of ``grid`` with step j split into 2^levels[j] equal steps."""
+    size = 1
+    for j in range(levels.size):
+        size += 1 << levels[j]
+    out = np.empty(size)
+    pos = 0
+    for j in range(levels.size):
+        pieces = 1 << levels[j]
+        step = (grid[j + 1] - grid[j]) / pieces
+        for k in range(pieces):
+            out[pos] = grid[j] + k * step
+            pos += 1
+    out[pos] = grid[-1]
+    return out
+
+
+def bisect_all(grid):
+    """Nodes of ``grid`` with every step split once."""
+    out = np.empty(2 * grid.size - 1)
+    out[0::2] = grid
+    out[1::2] = 0.5 * (grid[:-1] + grid[1:])
+    return out
 
 
 def _pad(grids):
@@ -193,9 +221,43 @@ def _pad(grids):
     return out, n_steps
 
 
-def _pair_change(coarse_steps, fine_steps, n_coarse):
-    """Per coarse step: the fine grid's integral over it (two half steps) minus the coarse one."""
-    return fine_steps[:2 * n_coarse].reshape(n_coarse, 2).sum(1) - coarse_steps[:n_coarse]
+@njit(cache=True)
+def _pair_estimate(coarse_u, fine_u, coarse_pi, fine_pi, n_coarse, scale_u, scale_p):
+    """Per coarse step the change of its integral of u from the coarse to the fine grid
+    (two half steps), and the estimate sum |change| in the norm of the module docstring."""
+    change_u = np.empty(n_coarse)
+    sum_u = 0.0
+    sum_p = 0.0
+    for n in range(n_coarse):
+        change_u[n] = fine_u[2 * n] + fine_u[2 * n + 1] - coarse_u[n]
+        sum_u += abs(change_u[n])
+        sum_p += abs(fine_pi[2 * n] + fine_pi[2 * n + 1] - coarse_pi[n])
+    return max(sum_u / scale_u, sum_p / scale_p), change_u
+
+
+@njit(cache=True)
+def _marked_levels(grid, change_u, u_coarse, u_fine, step_m, scale_u, rtol, order):
+    """Bisection levels of the coarse steps from the local indicators (``refinement_levels``);
+    steps at MIN_STEP cannot be split, so marking is among the others."""
+    n_coarse = change_u.size
+    h = grid[1:n_coarse + 1] - grid[:n_coarse]
+    indicators = local_indicators(u_coarse[:n_coarse], u_fine[:2 * n_coarse:2],
+                                  step_m[:n_coarse], change_u, h)
+    for n in range(n_coarse):
+        indicators[n] = indicators[n] / scale_u if h[n] >= 2 * MIN_STEP else 0.0
+    return refinement_levels(indicators, h, rtol, order)
+
+
+@njit(cache=True)
+def _next_grid(grid, levels, events, corners):
+    """``grid`` bisected by ``levels`` (never below MIN_STEP: tiny steps at events are fine,
+    bisecting them is not), with nodes on ``events`` (``place_events``)."""
+    clipped = np.empty(levels.size, dtype=np.int64)
+    for n in range(levels.size):
+        ratio = (grid[n + 1] - grid[n]) / MIN_STEP
+        room = int(math.floor(math.log2(ratio))) if ratio >= 1.0 else 0
+        clipped[n] = max(0, min(levels[n], room))
+    return place_events(bisect(grid, clipped), events, corners, EVENT_GAP), clipped.any()
 
 
 def _chatter(stiff_coarse, stiff_fine, u_coarse, h, threshold):
@@ -327,7 +389,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     level = 0
     while active.size:
         coarse = [grids[i] for i in active]
-        fine = [bisect(g) for g in coarse]
+        fine = [bisect_all(g) for g in coarse]
         # rows alternate coarse, fine: the kernel's static split over threads then gets
         # equal work (coarse rows first would give one thread a third, the other two)
         padded, steps = _pad([g for pair in zip(coarse, fine) for g in pair])
@@ -350,16 +412,13 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         for j, i in enumerate(active):
             jc, jf = 2 * j, 2 * j + 1
             n_coarse = steps[jc]
-            h = np.diff(coarse[j])
             if ok[j]:
                 scale_u = max(abs(iu[jf]), u_floor[i])
-                scale_p = abs(ip[jf])
-                change_u = _pair_change(step_u[jc], step_u[jf], n_coarse)
-                change_p = _pair_change(step_pi[jc], step_pi[jf], n_coarse)
-                estimate[i] = max(np.abs(change_u).sum() / scale_u,
-                                  np.abs(change_p).sum() / scale_p)
+                estimate[i], change_u = _pair_estimate(step_u[jc], step_u[jf], step_pi[jc],
+                                                       step_pi[jf], n_coarse, scale_u, abs(ip[jf]))
                 unresolved = None
                 if stiff is not None:
+                    h = np.diff(coarse[j])
                     unresolved = _chatter(stiff[jc], stiff[jf], ser[jc], h,
                                           CHATTER_SHARE * rtol * scale_u)
                     if unresolved is not None:
@@ -371,12 +430,8 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                         series[i] = ser[jf, :2 * n_coarse].copy()
                         series_tau[i] = fine[j][:-1]
                     continue
-                indicators = local_indicators(
-                    ser[jc, :n_coarse], ser[jf, :2 * n_coarse:2], step_m[jc, :n_coarse],
-                    change_u, h)
-                # steps at MIN_STEP cannot be split: mark among the others
-                hot = refinement_levels(np.where(h >= 2 * MIN_STEP, indicators, 0.0) / scale_u,
-                                        h, rtol, spec.order)
+                hot = _marked_levels(coarse[j], change_u, ser[jc], ser[jf], step_m[jc], scale_u,
+                                     rtol, spec.order)
                 if unresolved is not None:  # explicit steps too long for stiff friction
                     hot[unresolved] = MAX_BISECTIONS
                     chatter_passes[i] += 1
@@ -387,10 +442,8 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                         continue
             else:
                 hot = np.ones(n_coarse, dtype=np.int64)  # a failed solve: refine everywhere
-            # never below MIN_STEP: tiny steps at events are fine, bisecting them is not
-            hot = np.clip(hot, 0, np.floor(np.log2(h / MIN_STEP))).astype(np.int64)
-            new = place_events(bisect(coarse[j], hot), found[j], corners[i], EVENT_GAP)
-            if new.size - 1 > max_steps or not hot.any():
+            new, refined = _next_grid(coarse[j], hot, found[j], corners[i])
+            if new.size - 1 > max_steps or not refined:
                 keep[j] = False  # out of budget: TOLERANCE_NOT_REACHED or the kernel's reason
                 if return_series and ok[j]:
                     series[i] = ser[jf, :2 * n_coarse].copy()

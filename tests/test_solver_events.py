@@ -4,7 +4,7 @@ import pytest
 
 import solver
 from solver._events import event_times, place_events
-from solver._solve import U_FLOOR_FRACTION
+from solver._solve import MAX_BISECTIONS, U_FLOOR_FRACTION, bisect, refinement_levels
 
 
 def test_kinematic_event_located_to_rounding():
@@ -82,3 +82,26 @@ def test_place_events_keeps_refinement_finer_than_the_gap():
     grid = np.concatenate([np.linspace(0.0, 0.5, 5), fine, [0.75, 1.0]])
     out = place_events(grid, np.array([0.26]), np.array([0.0, 0.25]), gap)
     assert np.all(np.isin(fine, out)) and 0.26 in out and out.size == grid.size + 1
+
+
+def test_bisect_and_refinement_levels_match_their_definitions():
+    rng = np.random.default_rng(4)
+    grid = np.sort(np.concatenate([[0.0, 1.0], rng.uniform(0, 1, 30)]))
+    h = np.diff(grid)
+    levels = rng.integers(0, 4, h.size)
+    out = bisect(grid, levels)
+    expected = np.concatenate([np.linspace(a, b, 2 ** k, endpoint=False)
+                               for a, b, k in zip(grid[:-1], grid[1:], levels)] + [[1.0]])
+    assert np.allclose(out, expected, rtol=0, atol=1e-15) and out.size == expected.size
+    # over its share 0.5 rtol h: ceil(log2(ratio) / order) bisections, at most MAX_BISECTIONS
+    rtol, order = 1e-4, 3
+    indicators = 0.5 * rtol * h * 10.0 ** rng.uniform(-2, 6, h.size)
+    ratio = indicators / (0.5 * rtol * h)
+    want = np.where(ratio > 1, np.minimum(np.ceil(np.log2(ratio) / order), MAX_BISECTIONS), 0)
+    assert np.array_equal(refinement_levels(indicators, h, rtol, order), want)
+    # none over its share: the largest indicators holding half the total, once (Doerfler)
+    small = 0.1 * 0.5 * rtol * h * rng.uniform(0, 1, h.size)
+    marked = refinement_levels(small, h, rtol, order)
+    top = np.argsort(-small)
+    count = np.searchsorted(np.cumsum(small[top]), 0.5 * small.sum()) + 1
+    assert set(np.flatnonzero(marked)) == set(top[:count]) and marked.max() == 1
