@@ -110,13 +110,14 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
 
 @njit(cache=True)
 def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
-                 u_out, step_u, step_pi, step_m, stages_out=None):
+                 u_out, step_u, step_pi, step_m, stages_out=None, stage_guess=None):
     """Periodic solution for one parameter point on the first N steps of ``grid``.
 
     Writes u at the nodes into ``u_out``, the per-step integrals of u and Pi into
     ``step_u``, ``step_pi``, the step derivatives du_{n+1}/du_n into ``step_m`` and,
     if given, the stage values (U1_0, U2_0, U1_1, ...) of the converged sweep into
-    ``stages_out`` (2N,).
+    ``stages_out`` (2N,).  ``stage_guess`` (2N,), optional: starting stage values for the
+    first sweep (default: u_n, cold; a step whose Newton fails from the guess retries cold).
     Returns (int_u, int_Pi, u0, status, shooting_iterations, stage_iterations).
     """
     phis = np.empty(2 * N)
@@ -149,7 +150,10 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         log_m = 0.0
         sign_m = 1.0
         for n in range(N):
-            if first:
+            if first and stage_guess is not None:
+                U1 = stage_guess[2 * n]
+                U2 = stage_guess[2 * n + 1]
+            elif first:
                 U1 = u
                 U2 = u
             else:  # tangent prediction from the previous sweep
@@ -161,7 +165,8 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
                 u, U1, U2, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
                 kappa, mu_n, mu_s, p, dtau, atol_stage)
             stage_its += its
-            if not ok and not first:  # the tangent prediction can miss the basin: retry cold
+            if not ok and (not first or stage_guess is not None):
+                # the tangent prediction (or the guess) can miss the basin: retry cold
                 U1, U2, s1, s2, mm1, its, ok = radau_step(
                     u, u, u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
                     kappa, mu_n, mu_s, p, dtau, atol_stage)
@@ -242,4 +247,61 @@ def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, v
         int_u[i], int_pi[i], u0_out[i], status[i], its[i], stage_its[i] = _solve_point(
             code, params[i], grids[i], n_steps[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
             u0[i], vscale[i], rtol, nodes[i], step_u[i], step_pi[i], step_m[i])
+    return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes
+
+
+@njit(cache=True)
+def _bisection_guess(grid, N, u_nodes, stages, guess):
+    """Stage values for the bisected grid (steps [t_n, t_n + h/2], [t_n + h/2, t_n+1]) from
+    each coarse step's collocation polynomial, the quadratic through (0, u_n), (1/3, U1),
+    (1, U2) in theta = (t - t_n)/h, at the fine stage times theta = 1/6, 1/2, 2/3, 1."""
+    for n in range(N):
+        u = u_nodes[n]
+        U1 = stages[2 * n]
+        U2 = stages[2 * n + 1]
+        # Lagrange weights of (u_n, U1, U2) at theta = 1/6, 1/2, 2/3
+        guess[4 * n] = (10.0 * u + 15.0 * U1 - U2) / 24.0
+        guess[4 * n + 1] = (-2.0 * u + 9.0 * U1 + U2) / 8.0
+        guess[4 * n + 2] = U1 + (U2 - u) / 3.0
+        guess[4 * n + 3] = U2
+
+
+@njit(cache=True, parallel=True)
+def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol):
+    """``solve_points`` for rows that come in pairs: row 2j a grid, row 2j + 1 its bisection.
+
+    The bisected grid's shooting starts from the coarse grid's u(0) and its first sweep
+    from the coarse collocation polynomials (``_bisection_guess``): its stage Newton then
+    starts O(h^3) close instead of O(h) (u_n).  One thread per pair.
+    """
+    n, m = grids.shape
+    int_u = np.empty(n)
+    int_pi = np.empty(n)
+    u0_out = np.empty(n)
+    status = np.empty(n, np.int8)
+    its = np.empty(n, np.int64)
+    stage_its = np.empty(n, np.int64)
+    step_u = np.full((n, m - 1), np.nan)
+    step_pi = np.full((n, m - 1), np.nan)
+    step_m = np.full((n, m - 1), np.nan)
+    nodes = np.full((n, m - 1), np.nan)
+    for j in prange(n // 2):
+        c = 2 * j
+        f = c + 1
+        N = n_steps[c]
+        stages = np.empty(2 * N)
+        int_u[c], int_pi[c], u0_out[c], status[c], its[c], stage_its[c] = _solve_point(
+            code, params[c], grids[c], N, kappa[c], mu_n[c], mu_s[c], p[c], dtau[c],
+            u0[c], vscale[c], rtol, nodes[c], step_u[c], step_pi[c], step_m[c], stages)
+        if status[c] == CONVERGED and n_steps[f] == 2 * N:
+            guess = np.empty(4 * N)
+            _bisection_guess(grids[c], N, nodes[c], stages, guess)
+            int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = _solve_point(
+                code, params[f], grids[f], n_steps[f], kappa[f], mu_n[f], mu_s[f], p[f],
+                dtau[f], u0_out[c], vscale[f], rtol, nodes[f], step_u[f], step_pi[f],
+                step_m[f], None, guess)
+        else:
+            int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = _solve_point(
+                code, params[f], grids[f], n_steps[f], kappa[f], mu_n[f], mu_s[f], p[f],
+                dtau[f], u0[f], vscale[f], rtol, nodes[f], step_u[f], step_pi[f], step_m[f])
     return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes

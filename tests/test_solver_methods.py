@@ -121,6 +121,9 @@ def test_isotropic_linear_law_does_not_move():
     res = solver.solve_periodic(kin, solver.Physics(1.3, 0.7, 0.7, p=1.0, delta=0.0), rtol=1e-8)
     assert res.converged[0]
     assert abs(res.U[0]) <= 1e-9 * solver.kinematic_speed(kin)[0]
+    # U = 0: the estimate is P's, and refinement must follow P's changes (marking by u's
+    # rounding noise once split 19,541 steps and left the one holding P's error)
+    assert res.n_tau[0] < 2 ** 13
 
 
 def test_slow_limit_is_quasi_static_and_does_not_move():
@@ -221,3 +224,44 @@ def test_shooting_is_bracketed_where_the_period_map_is_not_monotone():
                            phys.mu_n[0], phys.mu_s[0], 0.0, phys.delta_tau[0], start, vscale, 1e-6,
                            *work)
         assert out[3] == 0 and abs(out[2]) < vscale, (start, out[:5])
+
+
+def test_bisection_guess_reproduces_the_collocation_quadratic():
+    from solver._periodic import _bisection_guess
+
+    grid = np.array([0.0, 0.3, 1.0])
+    quad = lambda t: 0.7 - 2.0 * t + 3.5 * t ** 2  # noqa: E731
+    nodes = quad(grid[:-1])
+    stages = quad(np.array([0.1, 0.3, 0.3 + 0.7 / 3, 1.0]))
+    guess = np.empty(8)
+    _bisection_guess(grid, 2, nodes, stages, guess)
+    fine = np.array([0.05, 0.15, 0.2, 0.3, 0.3 + 0.35 / 3, 0.65, 0.65 + 0.35 / 3, 1.0])
+    assert np.allclose(guess, quad(fine), rtol=0, atol=1e-14)
+
+
+def test_paired_solves_match_independent_ones():
+    """solve_pairs (the bisected grid started from its coarse partner) solves the same
+    discrete problems as solve_points, to the nonlinear tolerance."""
+    from solver._kinematics import period_grid
+    from solver._periodic import solve_pairs, solve_points
+    from solver._solve import bisect_all
+
+    rng = np.random.default_rng(2)
+    n = 24
+    kin = solver.Harmonic(rng.uniform(0.2, 1.5, n), rng.uniform(0.05, 0.6, n))
+    phys = solver.Physics.from_scaled(2.0 ** rng.uniform(-8, 8, n), 2.0 ** rng.uniform(-3, 3, n),
+                                      p=0.0, delta=1e-5)
+    code, params = kin.kernel_encoding()
+    coarse = period_grid(kin, 48)
+    rows = np.repeat(np.arange(n), 2)
+    grids = np.ones((2 * n, 97))
+    grids[0::2, :49] = coarse
+    grids[1::2] = np.array([bisect_all(g) for g in coarse])
+    steps = np.tile([48, 96], n)
+    vscale = solver.kinematic_speed(kin)[rows]
+    args = (code, params[rows], grids, steps, phys.inertia_factor[rows], phys.mu_n[rows],
+            phys.mu_s[rows], phys.p[rows], phys.delta_tau[rows], np.zeros(2 * n), vscale, 1e-8)
+    a, b = solve_pairs(*args), solve_points(*args)
+    assert np.all(a[3] == 0) and np.all(b[3] == 0)
+    assert np.allclose(a[0], b[0], rtol=0, atol=1e-9 * vscale.max())
+    assert np.allclose(a[1], b[1], rtol=1e-9)
