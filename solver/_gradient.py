@@ -199,8 +199,8 @@ def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
     Where that difference cancels (|omega F_omega| below 1e-4 of its terms, e.g. near a
     turning point, omega ~ 0) the graded quadrature ``force_partials_quadrature`` is
     used for the two omega partials, so their relative error stays ~1e-11; the other
-    columns are always the closed forms (F_u is then ``force_and_slope``'s slope: the
-    adjoint's Jacobian is the derivative of what the forward residual evaluates).
+    columns are always the closed forms (F_u equals ``force_and_slope``'s slope to rounding:
+    the adjoint's Jacobian is the derivative of what the forward residual evaluates).
     """
     S, C, a, b, c, e2 = _force_setup(u, phi, omega, delta_tau, p)
     m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)
@@ -251,7 +251,7 @@ def force_partials_quadrature(u, phi, omega, mu_n, mu_s, p, delta_tau):
     C = math.cos(phi)
     acc = np.zeros(10)
     c = C * (u + 0.25 * omega * S)
-    e = math.sqrt(c * c + delta_tau * delta_tau)
+    e = max(math.sqrt(c * c + delta_tau * delta_tau), E_FLOOR)  # as in _panel: rho > 0
     a = -u * S - 0.25 * omega * S * S
     if omega == 0.0 or p == 1.0:
         # polynomial or constant in s: one panel is exact

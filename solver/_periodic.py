@@ -275,6 +275,8 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
     starts O(h^3) close instead of O(h) (u_n).  One thread per pair.
     """
     n, m = grids.shape
+    if n % 2:
+        raise ValueError("grids: solve_pairs needs rows in (grid, bisection) pairs")
     int_u = np.empty(n)
     int_pi = np.empty(n)
     u0_out = np.empty(n)

@@ -221,7 +221,7 @@ def _pad(grids):
     return out, n_steps
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _pair_estimate(coarse_u, fine_u, coarse_pi, fine_pi, n_coarse, scale_u, scale_p):
     """Per coarse step the change of its integrals of u and Pi from the coarse to the fine
     grid (two half steps), and the estimates sum |change| of U and P in the norm of the
@@ -238,7 +238,7 @@ def _pair_estimate(coarse_u, fine_u, coarse_pi, fine_pi, n_coarse, scale_u, scal
     return sum_u / scale_u, sum_p / scale_p, change_u, change_p
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _marked_levels(grid, change_u, change_p, u_coarse, u_fine, step_m, scale_u, scale_p, rtol,
                    order):
     """Bisection levels of the coarse steps from the local indicators (``refinement_levels``)
@@ -448,8 +448,8 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                         series_tau[i] = fine[j][:-1]
                     continue
                 hot = _marked_levels(coarse[j], change_u, change_p, ser[jc], ser[jf], step_m[jc],
-                                     scale_u, scale_p if estimate_u <= rtol else 0.0, rtol,
-                                     spec.order)
+                                     scale_u, scale_p if estimate_u <= rtol < estimate_p else 0.0,
+                                     rtol, spec.order)
                 if unresolved is not None:  # explicit steps too long for stiff friction
                     hot[unresolved] = MAX_BISECTIONS
                     chatter_passes[i] += 1

@@ -164,6 +164,15 @@ def test_closed_form_partials_match_quadrature(p):
     assert 0 < fallbacks < 600  # both branches of the omega partials are exercised
 
 
+def test_partials_at_rest_apex_without_regularisation():
+    # c = 0 and delta_tau = 0 (p > 0): e is floored, the quadrature fallback must not divide by 0
+    phi, omega = 0.6845872936468235, 1.3
+    u = -0.25 * omega * math.sin(phi)
+    P = force_partials(u, phi, omega, MU_N, MU_S, 1.5, 0.0)
+    assert np.all(np.isfinite(P))
+    assert np.all(np.isfinite(force_partials_quadrature(u, phi, omega, MU_N, MU_S, 1.5, 0.0)))
+
+
 # -- gradients of the discretised objective ------------------------------------------------------
 
 
