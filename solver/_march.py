@@ -21,6 +21,7 @@ from numba import njit, prange
 
 from ._force import force_and_slope, power_density
 from ._kinematics import angle_and_rate
+from ._periodic import batch_outputs
 from ._status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
 
 #: Heun's method (explicit trapezoidal RK2).
@@ -146,15 +147,8 @@ def march_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u_ini
                  max_steps):
     """Batched ``_march_point``; ``grids`` row i valid up to ``n_steps[i]`` steps."""
     n, m = grids.shape
-    int_u = np.empty(n)
-    int_pi = np.empty(n)
-    u0_out = np.empty(n)
-    status = np.empty(n, np.int8)
-    periods = np.empty(n, np.int64)
-    step_u = np.full((n, m - 1), np.nan)
-    step_pi = np.full((n, m - 1), np.nan)
-    step_m = np.full((n, m - 1), np.nan)
-    nodes = np.full((n, m - 1), np.nan)
+    int_u, int_pi, u0_out, status, periods, _, step_u, step_pi, step_m, nodes = \
+        batch_outputs(n, m)
     stiff = np.zeros((n, m - 1), dtype=np.bool_)
     for i in prange(n):
         int_u[i], int_pi[i], u0_out[i], status[i], periods[i] = _march_point(

@@ -226,6 +226,15 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     return int_u, int_pi, u0, CONVERGED, it_out, stage_its
 
 
+@njit(cache=True)
+def batch_outputs(n, m):
+    """Output arrays of a batched solve of n rows of grids with up to m - 1 steps:
+    (int_u, int_pi, u0, status, iterations, stage_iterations, step_u, step_pi, step_m, nodes)."""
+    return (np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.int8), np.empty(n, np.int64),
+            np.empty(n, np.int64), np.full((n, m - 1), np.nan), np.full((n, m - 1), np.nan),
+            np.full((n, m - 1), np.nan), np.full((n, m - 1), np.nan))
+
+
 @njit(cache=True, parallel=True)
 def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol):
     """Batched ``_solve_point`` over parameter points (one thread per point).
@@ -233,16 +242,8 @@ def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, v
     ``grids`` has shape (n, max_steps + 1), row i valid up to ``n_steps[i]`` steps.
     """
     n, m = grids.shape
-    int_u = np.empty(n)
-    int_pi = np.empty(n)
-    u0_out = np.empty(n)
-    status = np.empty(n, np.int8)
-    its = np.empty(n, np.int64)
-    stage_its = np.empty(n, np.int64)
-    step_u = np.full((n, m - 1), np.nan)
-    step_pi = np.full((n, m - 1), np.nan)
-    step_m = np.full((n, m - 1), np.nan)
-    nodes = np.full((n, m - 1), np.nan)
+    int_u, int_pi, u0_out, status, its, stage_its, step_u, step_pi, step_m, nodes = \
+        batch_outputs(n, m)
     for i in prange(n):
         int_u[i], int_pi[i], u0_out[i], status[i], its[i], stage_its[i] = _solve_point(
             code, params[i], grids[i], n_steps[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
@@ -277,16 +278,8 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
     n, m = grids.shape
     if n % 2:
         raise ValueError("grids: solve_pairs needs rows in (grid, bisection) pairs")
-    int_u = np.empty(n)
-    int_pi = np.empty(n)
-    u0_out = np.empty(n)
-    status = np.empty(n, np.int8)
-    its = np.empty(n, np.int64)
-    stage_its = np.empty(n, np.int64)
-    step_u = np.full((n, m - 1), np.nan)
-    step_pi = np.full((n, m - 1), np.nan)
-    step_m = np.full((n, m - 1), np.nan)
-    nodes = np.full((n, m - 1), np.nan)
+    int_u, int_pi, u0_out, status, its, stage_its, step_u, step_pi, step_m, nodes = \
+        batch_outputs(n, m)
     for j in prange(n // 2):
         c = 2 * j
         f = c + 1
