@@ -6,8 +6,10 @@ bisection B(G) are solved; for every step j of G, delta_j is the change of
 that step's contribution to the period integrals int u and int Pi between G
 and B(G).  The estimate E = sum_j |delta_j| (in the norm below) bounds the
 error of the coarse solution, so it is conservative for the returned
-B(G) solution.  While E > rtol, the steps with delta_j > 0.5 rtol h_j are
-bisected (error equidistribution), which concentrates steps at the
+B(G) solution.  While E > rtol, the steps whose local indicator (the part of
+delta_j made in step j, not carried into it: ``local_indicators``) exceeds
+0.5 rtol h_j are bisected (error equidistribution; by P's delta_j where P
+alone is over the tolerance), which concentrates steps at the
 stick-slip and velocity-reversal events of Coulomb friction, where the
 solution is not smooth and uniform refinement converges slowly and
 irregularly.  A point is accepted only from the second grid on (a single
@@ -15,6 +17,12 @@ coarse grid can miss a short sticking phase altogether).  The corners of F
 along the solution are nodes of every grid after the first (``_events``):
 the comparison of a grid with its bisection is blind to a corner that both
 sample on the same side.
+
+Cost (``python -m solver.bench``, 2000 harmonic points at rtol 1e-4, 2 cores):
+about 2,300 step-sweeps per point (Radau steps times shooting sweeps, summed over
+the ~3 grid pairs), ~0.7 us each on one core.  B(G) is solved after G on the same
+thread, from G's u(0) and collocation polynomials (``_periodic.solve_pairs``),
+and the pairs alternate across threads so numba's static split stays balanced.
 
 Error norm.  For P (always > 0) the error is relative.  U can vanish (for
 example at isotropic friction and p = 1), so its error is measured relative
