@@ -9,6 +9,11 @@ fixed grid (the adaptive grid of the start at rtol 1e-6), in the same variables
 ``scipy.optimize.minimize(method="BFGS")`` with its own finite-difference gradient.
 Prints seconds per optimisation, gradient evaluations per second and the final
 objective of both, then one JSON line.
+
+Which local optimum a BFGS run ends in depends on its path, so from one start either
+optimiser can end higher.  ``--seeds N`` repeats the comparison from N starts (seeds S,
+S + 1, ...) and the JSON line then holds the medians of the times and speed-ups, the
+per-start values and how many starts each optimiser ended higher.
 """
 from __future__ import annotations
 
@@ -21,36 +26,29 @@ import time
 import numpy as np
 import scipy.optimize
 
-from ._gradient import adaptive_grid, discrete_objective
+from ._gradient import adaptive_grid, discrete_objective, with_family_parameters, with_period
 from ._kinematics import Fourier
 from ._optimize import _Problem, _variables, optimize_motion
 from ._physics import Physics
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog="python -m solver.bench_optimize", description=__doc__)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--kmax", type=int, default=7)
-    parser.add_argument("--ratio-log2", type=float, default=-4.0)
-    parser.add_argument("--gtol", type=float, default=1e-7)
-    args = parser.parse_args(argv)
-
-    rng = np.random.default_rng(args.seed)
-    K = args.kmax
-    A = np.zeros((1, K + 1))
+def compare(seed, kmax, ratio_log2, gtol):
+    """One start: our optimiser and scipy's BFGS with differences on the same objective."""
+    rng = np.random.default_rng(seed)
+    A = np.zeros((1, kmax + 1))
     A[0, :2] = rng.uniform(0.0, 1.0, 2)
-    template = Fourier(A, np.zeros((1, K)))
-    physics = Physics.from_scaled(2.0 ** args.ratio_log2, 2.0)
+    template = Fourier(A, np.zeros((1, kmax)))
+    physics = Physics.from_scaled(2.0 ** ratio_log2, 2.0)
     grid = adaptive_grid(template, physics, rtol=1e-6)
     # warm the compiled kernels outside the timings
     optimize_motion(template, physics, grid=grid, max_iterations=1)
-    print(f"Kmax = {K}, mu_n/mu_s = 2^{args.ratio_log2:g}, start A0 = {A[0, 0]:.4f}, "
+    print(f"seed {seed}: Kmax = {kmax}, mu_n/mu_s = 2^{ratio_log2:g}, start A0 = {A[0, 0]:.4f}, "
           f"A1 = {A[0, 1]:.4f}, fixed grid of {grid.n_steps} steps")
 
     start = time.perf_counter()
-    ours = optimize_motion(template, physics, grid=grid, gtol=args.gtol, max_iterations=2000)
+    ours = optimize_motion(template, physics, grid=grid, gtol=gtol, max_iterations=2000)
     seconds = time.perf_counter() - start
-    print(f"adjoint BFGS/Newton: {seconds:.2f} s, {ours.iterations} iterations "
+    print(f"  adjoint BFGS/Newton: {seconds:.2f} s, {ours.iterations} iterations "
           f"({ours.newton_steps} Newton), {ours.gradient_evaluations} gradient evaluations "
           f"({ours.gradient_evaluations / seconds:.1f}/s), |grad| = {ours.gradient_norm:.2e}, "
           f"stop: {ours.stop_reason}, lambda = {ours.efficiency:.10f}")
@@ -65,7 +63,6 @@ def main(argv=None):
     def fun(x):
         counts["objective"] += 1
         full_x = problem.full(x)
-        from ._gradient import with_family_parameters, with_period
         value, _, _, _, status, u0 = discrete_objective(
             with_family_parameters(template, full_x[:-1]), with_period(physics, full_x[-1]),
             grid, u0=state["u0"])
@@ -77,20 +74,46 @@ def main(argv=None):
     x0 = full[free].copy()
     x0[-1] = math.log(full[-1])
     start = time.perf_counter()
-    base = scipy.optimize.minimize(fun, x0, method="BFGS", options={"gtol": args.gtol,
+    base = scipy.optimize.minimize(fun, x0, method="BFGS", options={"gtol": gtol,
                                                                      "maxiter": 2000})
     baseline_seconds = time.perf_counter() - start
     baseline_objective = -sign * base.fun
     n_grad = getattr(base, "njev", base.nit + 1)
-    print(f"scipy BFGS + differences: {baseline_seconds:.2f} s, {base.nit} iterations, "
+    print(f"  scipy BFGS + differences: {baseline_seconds:.2f} s, {base.nit} iterations, "
           f"{counts['objective']} objective evaluations (~{n_grad / baseline_seconds:.1f} "
           f"gradients/s), stop: {base.message}, lambda = {baseline_objective:.10f}")
     speedup = baseline_seconds / seconds
-    print(f"speedup {speedup:.1f}x; objective difference (ours - baseline in |lambda|) "
+    print(f"  speedup {speedup:.1f}x; objective difference (ours - baseline in |lambda|) "
           f"{abs(ours.efficiency) - abs(baseline_objective):.3e}")
-    print(json.dumps({"seconds": seconds, "baseline_seconds": baseline_seconds,
-                      "speedup": speedup, "objective": ours.efficiency,
-                      "baseline_objective": baseline_objective}))
+    return dict(seconds=seconds, baseline_seconds=baseline_seconds, speedup=speedup,
+                objective=ours.efficiency, baseline_objective=baseline_objective)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python -m solver.bench_optimize", description=__doc__)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--seeds", type=int, default=1,
+                        help="number of starts (seed, seed + 1, ...)")
+    parser.add_argument("--kmax", type=int, default=7)
+    parser.add_argument("--ratio-log2", type=float, default=-4.0)
+    parser.add_argument("--gtol", type=float, default=1e-7)
+    args = parser.parse_args(argv)
+    if args.seeds < 1:
+        parser.error(f"--seeds: must be >= 1, got {args.seeds}")
+    runs = [compare(args.seed + k, args.kmax, args.ratio_log2, args.gtol)
+            for k in range(args.seeds)]
+    if len(runs) == 1:
+        print(json.dumps(runs[0]))
+        return 0
+    higher = sum(abs(r["objective"]) > abs(r["baseline_objective"]) for r in runs)
+    summary = {key: float(np.median([r[key] for r in runs]))
+               for key in ("seconds", "baseline_seconds", "speedup")}
+    print(f"{len(runs)} starts: median speedup {summary['speedup']:.1f}x; ours ended higher "
+          f"from {higher}, scipy from {len(runs) - higher}")
+    print(json.dumps({**summary, "objective": [r["objective"] for r in runs],
+                      "baseline_objective": [r["baseline_objective"] for r in runs],
+                      "speedups": [r["speedup"] for r in runs], "seeds": args.seeds,
+                      "ours_higher": higher}))
     return 0
 
 
