@@ -55,7 +55,10 @@ w1 = a and w2 = a + b/2:
     e^2 M_0^1 = E,   M_2^1 = M_0^0 - E,   M_2^0 = ([w r^(p+1)] - e^2 M_0^0) / (p+2)
 
 and m = M / b.  For p = 0, M_0^0 = asinh(x2) - asinh(x1) (taken as the log of
-a ratio when x1, x2 have one sign) and E = [w / r].  Near p = 0 the two terms
+a ratio when x1, x2 have one sign) and E = [w / r], formed without powers
+(``_moments_closed_coulomb``); for w1, w2 of one sign E = e^2 (w2^2 - w1^2) /
+((w2 r1 + w1 r2) r1 r2), since w / r -> sign(w) cancels when e << |w| (m_0^1 =
+E / e^2, in dF/du, had lost every digit at e ~ 1e-11 with the kink off the link).  Near p = 0 the two terms
 of M_0^0 cancel by a factor ~p: for p < 0.05 up to one digit is lost.
 """
 from __future__ import annotations
@@ -202,6 +205,34 @@ def _moments_closed(a, b, e2, p):
 
 
 @njit(cache=True)
+def _moments_closed_coulomb(a, b, e2):
+    """``_moments_closed`` at p = 0 with no powers: with r_i = sqrt(w_i^2 + e^2),
+    sqrt(1 + x_i^2) = r_i / e, so asinh(x2) - asinh(x1) = log((|w2| + r2) / (|w1| + r1))
+    (w1, w2 of one sign: no cancellation of large logs) and E = [w / r]."""
+    w1 = a
+    w2 = a + 0.5 * b
+    r1 = math.sqrt(w1 * w1 + e2)
+    r2 = math.sqrt(w2 * w2 + e2)
+    if w1 * w2 > 0.0:
+        M00 = math.log((abs(w2) + r2) / (abs(w1) + r1))
+        if w1 < 0.0:
+            M00 = -M00
+        # [w / r] = e^2 (w2^2 - w1^2) / ((w2 r1 + w1 r2) r1 r2): w / r -> sign(w) cancels
+        # when e << |w| (M01 = E / e^2 lost all digits at e ~ 1e-11)
+        E = e2 * ((w2 - w1) * (w2 + w1) / ((w2 * r1 + w1 * r2) * r1 * r2))
+    else:
+        e = math.sqrt(e2)
+        M00 = math.asinh(w2 / e) - math.asinh(w1 / e)
+        E = w2 / r2 - w1 / r1
+    M10 = r2 - r1
+    M11 = 1.0 / r1 - 1.0 / r2
+    M20 = 0.5 * (w2 * r2 - w1 * r1 - e2 * M00)
+    inv_b = 1.0 / b
+    M01 = (w2 - w1) * (w2 + w1) / ((w2 * r1 + w1 * r2) * r1 * r2) if w1 * w2 > 0.0 else E / e2
+    return (M00 * inv_b, M10 * inv_b, M20 * inv_b, M01 * inv_b, M11 * inv_b, (M00 - E) * inv_b)
+
+
+@njit(cache=True)
 def link_moments(a, b, e2, p):
     """Moments m_k^j of the link integrand; see the module docstring."""
     if p == 1.0:
@@ -215,6 +246,8 @@ def link_moments(a, b, e2, p):
     gap = max(abs(mid) - h, 0.0)
     if gap * gap + e2 >= (SWITCH_RATIO * h) ** 2:
         return _moments_quadrature(a, b, e2, p)
+    if p == 0.0:
+        return _moments_closed_coulomb(a, b, e2)
     return _moments_closed(a, b, e2, p)
 
 

@@ -81,3 +81,44 @@ def test_force_is_continuous_across_the_quadrature_switch():
     assert np.all(jumps < 2e-2)  # smooth sampling of a smooth curve: no O(1) jump anywhere
     F_ref = [reference(0.01, 1.1, om, 0.3, 1.7, 0.0, 1e-5)[0] for om in omegas[::400]]
     np.testing.assert_allclose(F[::400], F_ref, rtol=1e-11)
+
+
+def _moment_reference(a, b, e2, p):
+    """m_k^j = int_0^{1/2} w^k r^(p-1-2j) ds, w = a + b s, r^2 = w^2 + e2 (30 digits), and the
+    integrals of their absolute values (the integrands keep their sign on each side of the
+    kink w = 0, where the quadrature is split)."""
+    with mp.workdps(30):
+        a, b, e2, p = map(mp.mpf, (a, b, e2, p))
+        pts = [mp.mpf(0), mp.mpf(1) / 2]
+        if 0 < -a / b < pts[1]:
+            pts = [pts[0], -a / b, pts[1]]
+        values, sizes = [], []
+        for k, j in [(0, 0), (1, 0), (2, 0), (0, 1), (1, 1), (2, 1)]:
+            pieces = [mp.quad(lambda s: (a + b * s) ** k * ((a + b * s) ** 2 + e2)
+                              ** ((p - 1) / 2 - j), [lo, hi]) for lo, hi in zip(pts, pts[1:])]
+            values.append(float(sum(pieces)))
+            sizes.append(float(sum(abs(x) for x in pieces)))
+    return np.array(values), np.array(sizes)
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.5])
+def test_link_moments_in_the_closed_form_regime(p):
+    """All six moments (dF/du needs the j = 1 ones) where the closed forms are used, down to
+    e ~ 1e-12 with the kink off the link: at p = 0, m_0^1 = [w/r] / e^2 once lost every digit
+    there (w/r -> sign(w) cancels)."""
+    from solver._force import SWITCH_RATIO, link_moments
+
+    rng = np.random.default_rng(int(10 * p))
+    checked = 0
+    while checked < 15:
+        e2 = 10 ** rng.uniform(-24, 0)
+        a = rng.normal() * 10 ** rng.uniform(-8, 0)
+        b = rng.normal() * 10 ** rng.uniform(-8, 1)
+        h = 0.25 * abs(b)
+        gap = max(abs(a + 0.25 * b) - h, 0.0)
+        if gap * gap + e2 >= (SWITCH_RATIO * h) ** 2:
+            continue  # the Gauss-Legendre regime
+        checked += 1
+        ref, size = _moment_reference(a, b, e2, p)
+        got = np.array(link_moments(a, b, e2, p))
+        assert np.all(np.abs(got - ref) <= 1e-13 * size), (a, b, e2, got, ref)
