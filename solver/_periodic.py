@@ -116,8 +116,9 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     Writes u at the nodes into ``u_out``, the per-step integrals of u and Pi into
     ``step_u``, ``step_pi``, the step derivatives du_{n+1}/du_n into ``step_m`` and,
     if given, the stage values (U1_0, U2_0, U1_1, ...) of the converged sweep into
-    ``stages_out`` (2N,).  ``stage_guess`` (2N,), optional: starting stage values for the
-    first sweep (default: u_n, cold; a step whose Newton fails from the guess retries cold).
+    ``stages_out`` (>= 2N,).  ``stage_guess`` (2N,), optional: starting stage values for the
+    first sweep (default, or an array of another size: u_n, cold; a step whose Newton fails
+    from the guess retries cold).
     Returns (int_u, int_Pi, u0, status, shooting_iterations, stage_iterations).
     """
     phis = np.empty(2 * N)
@@ -129,6 +130,7 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         mid = grid[n] + 0.5 * h
         phis[2 * n], oms[2 * n] = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
         phis[2 * n + 1], oms[2 * n + 1] = angle_and_rate(code, params, grid[n + 1], mid)
+    guessed = stage_guess is not None and stage_guess.size == 2 * N
     stages = np.empty(2 * N)
     sens = np.empty(2 * N)
     m_minus_1 = np.empty(N)
@@ -150,7 +152,7 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         log_m = 0.0
         sign_m = 1.0
         for n in range(N):
-            if first and stage_guess is not None:
+            if first and guessed:
                 U1 = stage_guess[2 * n]
                 U2 = stage_guess[2 * n + 1]
             elif first:
@@ -165,7 +167,7 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
                 u, U1, U2, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
                 kappa, mu_n, mu_s, p, dtau, atol_stage)
             stage_its += its
-            if not ok and (not first or stage_guess is not None):
+            if not ok and (not first or guessed):
                 # the tangent prediction (or the guess) can miss the basin: retry cold
                 U1, U2, s1, s2, mm1, its, ok = radau_step(
                     u, u, u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
@@ -221,7 +223,7 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         int_pi += step_pi[n]
         u_out[n] = u_start[n]
         step_m[n] = 1.0 + m_minus_1[n]
-    if stages_out is not None:
+    if stages_out is not None and stages_out.size >= 2 * N:
         stages_out[:2 * N] = stages
     return int_u, int_pi, u0, CONVERGED, it_out, stage_its
 
@@ -267,36 +269,67 @@ def _bisection_guess(grid, N, u_nodes, stages, guess):
         guess[4 * n + 3] = U2
 
 
+@njit(cache=True)
+def _collocation_guess(grid, N, old_grid, old_N, old_nodes, old_stages, guess):
+    """Stage values on ``grid`` from a solution on another grid of the period: at each stage
+    time, the quadratic collocation polynomial of the old step that contains it (through
+    (0, u_k), (1/3, U1_k), (1, U2_k) in theta = (t - t_k) / h_k)."""
+    k = 0
+    for n in range(N):
+        h = grid[n + 1] - grid[n]
+        for q in range(2):
+            t = grid[n] + h / 3.0 if q == 0 else grid[n + 1]
+            while k < old_N - 1 and old_grid[k + 1] < t:
+                k += 1
+            theta = (t - old_grid[k]) / (old_grid[k + 1] - old_grid[k])
+            guess[2 * n + q] = (3.0 * (theta - 1.0 / 3.0) * (theta - 1.0) * old_nodes[k]
+                                - 4.5 * theta * (theta - 1.0) * old_stages[2 * k]
+                                + 1.5 * theta * (theta - 1.0 / 3.0) * old_stages[2 * k + 1])
+
+
 @njit(cache=True, parallel=True)
-def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol):
+def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
+                old_grids, old_steps, old_nodes, old_stages):
     """``solve_points`` for rows that come in pairs: row 2j a grid, row 2j + 1 its bisection.
 
     The bisected grid's shooting starts from the coarse grid's u(0) and its first sweep
     from the coarse collocation polynomials (``_bisection_guess``): its stage Newton then
-    starts O(h^3) close instead of O(h) (u_n).  One thread per pair.
+    starts O(h^3) close instead of O(h) (u_n).  The coarse grid's first sweep starts from
+    pair j's previous solution where ``old_steps[j]`` > 0 (``_collocation_guess``; the
+    old_* rows: its grid, node values and stages).  One thread per pair.
+
+    Returns the arrays of ``solve_points`` and the stages of every row (n, 2 (m - 1)),
+    written for the converged rows.
     """
     n, m = grids.shape
     if n % 2:
         raise ValueError("grids: solve_pairs needs rows in (grid, bisection) pairs")
     int_u, int_pi, u0_out, status, its, stage_its, step_u, step_pi, step_m, nodes = \
         batch_outputs(n, m)
+    stages = np.empty((n, 2 * (m - 1)))
     for j in prange(n // 2):
         c = 2 * j
         f = c + 1
         N = n_steps[c]
-        stages = np.empty(2 * N)
+        guess = np.empty(2 * N)
+        if old_steps[j] > 0:
+            _collocation_guess(grids[c], N, old_grids[j], old_steps[j], old_nodes[j],
+                               old_stages[j], guess)
+            guess_c = guess
+        else:
+            guess_c = guess[:0]  # cold
         int_u[c], int_pi[c], u0_out[c], status[c], its[c], stage_its[c] = _solve_point(
             code, params[c], grids[c], N, kappa[c], mu_n[c], mu_s[c], p[c], dtau[c],
-            u0[c], vscale[c], rtol, nodes[c], step_u[c], step_pi[c], step_m[c], stages)
+            u0[c], vscale[c], rtol, nodes[c], step_u[c], step_pi[c], step_m[c], stages[c],
+            guess_c)
+        start = u0[f]
+        guess_f = guess[:0]
         if status[c] == CONVERGED and n_steps[f] == 2 * N:
-            guess = np.empty(4 * N)
-            _bisection_guess(grids[c], N, nodes[c], stages, guess)
-            int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = _solve_point(
-                code, params[f], grids[f], n_steps[f], kappa[f], mu_n[f], mu_s[f], p[f],
-                dtau[f], u0_out[c], vscale[f], rtol, nodes[f], step_u[f], step_pi[f],
-                step_m[f], None, guess)
-        else:
-            int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = _solve_point(
-                code, params[f], grids[f], n_steps[f], kappa[f], mu_n[f], mu_s[f], p[f],
-                dtau[f], u0[f], vscale[f], rtol, nodes[f], step_u[f], step_pi[f], step_m[f])
-    return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes
+            guess_f = np.empty(4 * N)
+            _bisection_guess(grids[c], N, nodes[c], stages[c], guess_f)
+            start = u0_out[c]
+        int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = _solve_point(
+            code, params[f], grids[f], n_steps[f], kappa[f], mu_n[f], mu_s[f], p[f],
+            dtau[f], start, vscale[f], rtol, nodes[f], step_u[f], step_pi[f], step_m[f],
+            stages[f], guess_f)
+    return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes, stages

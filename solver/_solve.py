@@ -229,6 +229,24 @@ def _pad(grids):
     return out, n_steps
 
 
+def _pad_previous(solutions):
+    """(grids, steps, nodes, stages) padded over points from (grid, nodes, stages) or None
+    (steps 0: no previous solution)."""
+    width = max([s[0].size for s in solutions if s is not None], default=2)
+    grids = np.ones((len(solutions), width))
+    steps = np.zeros(len(solutions), dtype=np.int64)
+    nodes = np.zeros((len(solutions), width - 1))
+    stages = np.zeros((len(solutions), 2 * (width - 1)))
+    for j, s in enumerate(solutions):
+        if s is not None:
+            grid, u, st = s
+            grids[j, :grid.size] = grid
+            steps[j] = grid.size - 1
+            nodes[j, :u.size] = u
+            stages[j, :st.size] = st
+    return grids, steps, nodes, stages
+
+
 @njit(cache=True, error_model="numpy")
 def _pair_estimate(coarse_u, fine_u, coarse_pi, fine_pi, n_coarse, scale_u, scale_p):
     """Per coarse step the change of its integrals of u and Pi from the coarse to the fine
@@ -301,21 +319,25 @@ def _steps_to_resolve(kinematics, physics, i, tau, h):
 
 
 def _run_level(method, code, params, grids, n_steps, physics, u0, vscale, rtol, index,
-               paired=False):
+               paired=False, previous=None):
     """Solve the points ``index`` on padded ``grids``.
 
     Returns (int_u, int_pi, u0, status, iterations, step_u, step_pi, step_m, u_nodes,
-    step_stiff); step_stiff (march only, else None) flags the steps that do not resolve
-    the friction's time scale (chatter, ``_march.step_jumps``).  ``paired``: rows 2j + 1
-    bisect rows 2j (``_periodic.solve_pairs`` then starts each from its partner).
+    step_stiff, stages); step_stiff (march only, else None) flags the steps that do not
+    resolve the friction's time scale (chatter, ``_march.step_jumps``).  ``paired``: rows
+    2j + 1 bisect rows 2j (``_periodic.solve_pairs`` then starts each from its partner, and
+    pair j's coarse grid from ``previous``, the padded (grids, steps, nodes, stages) of an
+    earlier solution; stages: the periodic stages of every row, else None).
     """
     args = (code, params[index], grids, n_steps, physics.inertia_factor[index],
             physics.mu_n[index], physics.mu_s[index], physics.p[index],
             physics.delta_tau[index], u0[index], np.maximum(vscale[index], 1e-300), float(rtol))
+    if method == "periodic" and paired:
+        out = _periodic.solve_pairs(*args, *previous)
+        return out[:9] + (None, out[9])
     if method == "periodic":
-        kernel = _periodic.solve_pairs if paired else _periodic.solve_points
-        return kernel(*args) + (None,)
-    return _march.march_points(*args, MARCH_MAX_STEPS)
+        return _periodic.solve_points(*args) + (None, None)
+    return _march.march_points(*args, MARCH_MAX_STEPS) + (None,)
 
 
 def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e-12):
@@ -407,6 +429,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     grids = list(period_grid(kinematics, spec.first_steps))
     corners = kinematics.corners()
     chatter_passes = np.zeros(n, dtype=np.int64)
+    previous = [None] * n  # (grid, node values, stages) of the last fine solution
     last_status = np.full(n, CONVERGED, dtype=np.int8)
     level = 0
     while active.size:
@@ -415,9 +438,9 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         # rows alternate coarse, fine: the kernel's static split over threads then gets
         # equal work (coarse rows first would give one thread a third, the other two)
         padded, steps = _pad([g for pair in zip(coarse, fine) for g in pair])
-        iu, ip, u0_new, st, its, step_u, step_pi, step_m, ser, stiff = _run_level(
+        iu, ip, u0_new, st, its, step_u, step_pi, step_m, ser, stiff, stages = _run_level(
             method, code, params, padded, steps, physics, u0, vscale, rtol, np.repeat(active, 2),
-            paired=True)
+            paired=True, previous=_pad_previous([previous[i] for i in active]))
         m = active.size
         C, F = slice(0, None, 2), slice(1, None, 2)
         iterations[active] += its[C] + its[F]
@@ -476,6 +499,9 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                     series_tau[i] = fine[j][:-1]
                 continue
             grids[i] = new
+            if stages is not None and st[jf] == CONVERGED:
+                previous[i] = (fine[j], ser[jf, :2 * n_coarse].copy(),
+                               stages[jf, :4 * n_coarse].copy())
         active = active[keep]
         level += 1
 

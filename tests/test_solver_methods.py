@@ -239,12 +239,27 @@ def test_bisection_guess_reproduces_the_collocation_quadratic():
     assert np.allclose(guess, quad(fine), rtol=0, atol=1e-14)
 
 
+def test_collocation_guess_reproduces_quadratics_across_grids():
+    from solver._periodic import _collocation_guess
+
+    quad = lambda t: 0.7 - 2.0 * t + 3.5 * t ** 2  # noqa: E731
+    old = np.array([0.0, 0.2, 0.45, 0.7, 1.0])
+    h = np.diff(old)
+    old_stages = quad(np.ravel(np.column_stack([old[:-1] + h / 3, old[1:]])))
+    new = np.array([0.0, 0.1, 0.3, 0.33, 0.8, 1.0])
+    guess = np.empty(10)
+    _collocation_guess(new, 5, old, 4, quad(old[:-1]), old_stages, guess)
+    hn = np.diff(new)
+    times = np.ravel(np.column_stack([new[:-1] + hn / 3, new[1:]]))
+    assert np.allclose(guess, quad(times), rtol=0, atol=1e-14)
+
+
 def test_paired_solves_match_independent_ones():
     """solve_pairs (the bisected grid started from its coarse partner) solves the same
     discrete problems as solve_points, to the nonlinear tolerance."""
     from solver._kinematics import period_grid
     from solver._periodic import solve_pairs, solve_points
-    from solver._solve import bisect_all
+    from solver._solve import _pad_previous, bisect_all
 
     rng = np.random.default_rng(2)
     n = 24
@@ -261,7 +276,14 @@ def test_paired_solves_match_independent_ones():
     vscale = solver.kinematic_speed(kin)[rows]
     args = (code, params[rows], grids, steps, phys.inertia_factor[rows], phys.mu_n[rows],
             phys.mu_s[rows], phys.p[rows], phys.delta_tau[rows], np.zeros(2 * n), vscale, 1e-8)
-    a, b = solve_pairs(*args), solve_points(*args)
+    b = solve_points(*args)
+    a = solve_pairs(*args, *_pad_previous([None] * n))
     assert np.all(a[3] == 0) and np.all(b[3] == 0)
     assert np.allclose(a[0], b[0], rtol=0, atol=1e-9 * vscale.max())
     assert np.allclose(a[1], b[1], rtol=1e-9)
+    # the coarse grids started from those solutions (another grid: the bisected one)
+    previous = [(grids[2 * j + 1], a[8][2 * j + 1, :96], a[9][2 * j + 1, :192]) for j in range(n)]
+    again = solve_pairs(*args, *_pad_previous(previous))
+    assert np.all(again[3] == 0)
+    assert np.allclose(again[0], b[0], rtol=0, atol=1e-9 * vscale.max())
+    assert np.allclose(again[1], b[1], rtol=1e-9)
