@@ -122,8 +122,6 @@ def k_small(X, p):
 @njit(cache=True)
 def k_difference(x1, x2, p):
     """K(x2) - K(x1), K odd, without forming K(inf) - tail differences of close tails."""
-    if p == 0.0:
-        return x2 / math.sqrt(1.0 + x2 * x2) - x1 / math.sqrt(1.0 + x1 * x1)
     if x1 * x2 > 0.0 and abs(x1) > K_SERIES_START and abs(x2) > K_SERIES_START:
         sgn = 1.0 if x1 > 0.0 else -1.0
         return sgn * (k_tail(abs(x1), p) - k_tail(abs(x2), p))
@@ -140,18 +138,6 @@ def k_odd(x, p):
     else:
         val = k_infinity(p) - k_tail(ax, p)
     return val if x >= 0.0 else -val
-
-
-@njit(cache=True)
-def asinh_difference(x1, x2):
-    """asinh(x2) - asinh(x1); for one sign, the log of a ratio (no cancellation of large logs)."""
-    if x1 * x2 > 0.0:
-        a1 = abs(x1)
-        a2 = abs(x2)
-        ratio = (a2 + math.sqrt(1.0 + a2 * a2)) / (a1 + math.sqrt(1.0 + a1 * a1))
-        d = math.log(ratio)
-        return d if x1 > 0.0 else -d
-    return math.asinh(x2) - math.asinh(x1)
 
 
 @njit(cache=True)
@@ -180,7 +166,8 @@ def _moments_quadrature(a, b, e2, p):
 
 @njit(cache=True)
 def _moments_closed(a, b, e2, p):
-    """The same moments from closed forms in w (b != 0, e2 > 0)."""
+    """The same moments from closed forms in w (b != 0, e2 > 0; 0 < p < 2, p != 1: p = 0 is
+    ``_moments_closed_coulomb``, p = 1 polynomial)."""
     w1 = a
     w2 = a + 0.5 * b
     e = math.sqrt(e2)
@@ -189,14 +176,9 @@ def _moments_closed(a, b, e2, p):
     x1 = w1 / e
     x2 = w2 / e
     E = (e ** p) * k_difference(x1, x2, p)
-    if p == 0.0:
-        M00 = asinh_difference(x1, x2)
-        M10 = r2 - r1
-        M11 = -(1.0 / r2 - 1.0 / r1)
-    else:
-        M00 = (w2 * r2 ** (p - 1.0) - w1 * r1 ** (p - 1.0)) / p + (p - 1.0) / p * E
-        M10 = (r2 ** (p + 1.0) - r1 ** (p + 1.0)) / (p + 1.0)
-        M11 = (r2 ** (p - 1.0) - r1 ** (p - 1.0)) / (p - 1.0)
+    M00 = (w2 * r2 ** (p - 1.0) - w1 * r1 ** (p - 1.0)) / p + (p - 1.0) / p * E
+    M10 = (r2 ** (p + 1.0) - r1 ** (p + 1.0)) / (p + 1.0)
+    M11 = (r2 ** (p - 1.0) - r1 ** (p - 1.0)) / (p - 1.0)
     M20 = (w2 * r2 ** (p + 1.0) - w1 * r1 ** (p + 1.0) - e2 * M00) / (p + 2.0)
     M21 = M00 - E
     M01 = E / e2

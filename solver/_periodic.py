@@ -254,22 +254,6 @@ def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, v
 
 
 @njit(cache=True)
-def _bisection_guess(grid, N, u_nodes, stages, guess):
-    """Stage values for the bisected grid (steps [t_n, t_n + h/2], [t_n + h/2, t_n+1]) from
-    each coarse step's collocation polynomial, the quadratic through (0, u_n), (1/3, U1),
-    (1, U2) in theta = (t - t_n)/h, at the fine stage times theta = 1/6, 1/2, 2/3, 1."""
-    for n in range(N):
-        u = u_nodes[n]
-        U1 = stages[2 * n]
-        U2 = stages[2 * n + 1]
-        # Lagrange weights of (u_n, U1, U2) at theta = 1/6, 1/2, 2/3
-        guess[4 * n] = (10.0 * u + 15.0 * U1 - U2) / 24.0
-        guess[4 * n + 1] = (-2.0 * u + 9.0 * U1 + U2) / 8.0
-        guess[4 * n + 2] = U1 + (U2 - u) / 3.0
-        guess[4 * n + 3] = U2
-
-
-@njit(cache=True)
 def _collocation_guess(grid, N, old_grid, old_N, old_nodes, old_stages, guess):
     """Stage values on ``grid`` from a solution on another grid of the period: at each stage
     time, the quadratic collocation polynomial of the old step that contains it (through
@@ -293,10 +277,10 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
     """``solve_points`` for rows that come in pairs: row 2j a grid, row 2j + 1 its bisection.
 
     The bisected grid's shooting starts from the coarse grid's u(0) and its first sweep
-    from the coarse collocation polynomials (``_bisection_guess``): its stage Newton then
-    starts O(h^3) close instead of O(h) (u_n).  The coarse grid's first sweep starts from
-    pair j's previous solution where ``old_steps[j]`` > 0 (``_collocation_guess``; the
-    old_* rows: its grid, node values and stages).  One thread per pair.
+    from the coarse collocation polynomials: its stage Newton then starts O(h^3) close
+    instead of O(h) (u_n).  The coarse grid's first sweep starts likewise from pair j's
+    previous solution where ``old_steps[j]`` > 0 (the old_* rows: its grid, node values and
+    stages).  Both guesses are ``_collocation_guess``.  One thread per pair.
 
     Returns the arrays of ``solve_points`` and the stages of every row (n, 2 (m - 1)),
     written for the converged rows.
@@ -326,7 +310,7 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
         guess_f = guess[:0]
         if status[c] == CONVERGED and n_steps[f] == 2 * N:
             guess_f = np.empty(4 * N)
-            _bisection_guess(grids[c], N, nodes[c], stages[c], guess_f)
+            _collocation_guess(grids[f], 2 * N, grids[c], N, nodes[c], stages[c], guess_f)
             start = u0_out[c]
         int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = _solve_point(
             code, params[f], grids[f], n_steps[f], kappa[f], mu_n[f], mu_s[f], p[f],

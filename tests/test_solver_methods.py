@@ -227,14 +227,15 @@ def test_shooting_is_bracketed_where_the_period_map_is_not_monotone():
 
 
 def test_bisection_guess_reproduces_the_collocation_quadratic():
-    from solver._periodic import _bisection_guess
+    from solver._periodic import _collocation_guess
+    from solver._solve import bisect_all
 
     grid = np.array([0.0, 0.3, 1.0])
     quad = lambda t: 0.7 - 2.0 * t + 3.5 * t ** 2  # noqa: E731
     nodes = quad(grid[:-1])
     stages = quad(np.array([0.1, 0.3, 0.3 + 0.7 / 3, 1.0]))
     guess = np.empty(8)
-    _bisection_guess(grid, 2, nodes, stages, guess)
+    _collocation_guess(bisect_all(grid), 4, grid, 2, nodes, stages, guess)
     fine = np.array([0.05, 0.15, 0.2, 0.3, 0.3 + 0.35 / 3, 0.65, 0.65 + 0.35 / 3, 1.0])
     assert np.allclose(guess, quad(fine), rtol=0, atol=1e-14)
 
