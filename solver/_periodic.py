@@ -67,11 +67,16 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
     R2 = U2 - u_n - h * kappa * (a21 * F1 + a22 * F2)
     ok = False
     it = 0
+    previous = math.inf  # size of the previous full Newton step (inf: none yet, or damped)
     for it in range(1, MAX_STAGE_ITERATIONS + 1):
         J11, J12, J21, J22, det = stage_jacobian(h * kappa * d1, h * kappa * d2)
         x1 = -(J22 * R1 - J12 * R2) / det
         x2 = -(-J21 * R1 + J11 * R2) / det
-        if max(abs(x1), abs(x2)) <= atol:
+        size = max(abs(x1), abs(x2))
+        # error left after this step, at the observed contraction theta = size / previous:
+        # theta / (1 - theta) size (Hairer & Wanner IV.8); Newton converges faster than that
+        if size <= atol or (size < previous < math.inf
+                             and size * size <= atol * (previous - size)):
             # converged: take the step without a line search (at rounding level the
             # residual cannot decrease, and backtracking would only burn evaluations)
             U1 += x1
@@ -96,6 +101,7 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
         if max(abs(lam * x1), abs(lam * x2)) <= atol or (R1 == 0.0 and R2 == 0.0):
             ok = True
             break
+        previous = size if lam == 1.0 else math.inf
     # sensitivities at the converged stages: J s = 1, and m - 1 = e2^T J^-1 (h A D 1)
     hd1 = h * kappa * d1
     hd2 = h * kappa * d2
