@@ -642,10 +642,45 @@ def _select(objective, U, P, lam, gU, gP, gL):
     raise ValueError(f"objective: expected one of {OBJECTIVES}, got {objective!r}")
 
 
-def discrete_objective(kinematics, physics, grid, *, objective="efficiency", rtol=1e-13, u0=None):
-    """The objective of the discretised problem without its gradient.
+@dataclass(frozen=True)
+class DiscreteSolution:
+    """The converged periodic solution on a fixed grid (one point): all the adjoint needs.
 
-    Returns (value, U, P, efficiency, status, u0).
+    ``discrete_solution`` makes it; ``objective_gradient(..., solution=...)`` then costs only
+    the adjoint sweep, so a line search can solve at trial points and differentiate only
+    the one it accepts.
+
+    stages : ndarray, shape (2 N,)
+        Radau stages (U1_0, U2_0, U1_1, ...) of the converged sweep.
+    int_u, int_pi : float
+        The Radau-weighted period integrals I_u, I_Pi.
+    status : int
+        0 converged (else the ``_status`` code; the other fields are then nan).
+    u0 : float
+        u(0), the warm start of the next solve.
+    """
+
+    kinematics: object
+    physics: object
+    nodes: np.ndarray
+    stages: np.ndarray
+    int_u: float
+    int_pi: float
+    status: int
+    u0: float
+
+    def outputs(self):
+        """(U, P, lambda) (eqs. U, powerp, lambdap), nan unless converged."""
+        if self.status != CONVERGED:
+            return math.nan, math.nan, math.nan
+        return _physics_outputs(self.int_u, self.int_pi, self.physics)
+
+
+def discrete_solution(kinematics, physics, grid, *, rtol=1e-13, u0=None):
+    """Solve the discretised problem on ``grid`` (one point) by shooting; see ``DiscreteSolution``.
+
+    ``rtol`` sets the nonlinear tolerances (shooting, stage Newton), not the grid;
+    ``u0`` the starting u(0) (default: the fast-motion limit).
     """
     code, params, nodes = _prepare(kinematics, physics, grid)
     N = nodes.size - 1
@@ -656,11 +691,18 @@ def discrete_objective(kinematics, physics, grid, *, objective="efficiency", rto
         code, params, nodes, N, float(physics.inertia_factor[0]), float(physics.mu_n[0]),
         float(physics.mu_s[0]), float(physics.p[0]), float(physics.delta_tau[0]), u0, 0.0, rtol,
         stages)
-    if status != CONVERGED:
-        return math.nan, math.nan, math.nan, math.nan, int(status), u0
-    U, P, lam = _physics_outputs(int_u, int_pi, physics)
+    return DiscreteSolution(kinematics, physics, nodes, stages, int_u, int_pi, int(status), u0)
+
+
+def discrete_objective(kinematics, physics, grid, *, objective="efficiency", rtol=1e-13, u0=None):
+    """The objective of the discretised problem without its gradient.
+
+    Returns (value, U, P, efficiency, status, u0).
+    """
+    sol = discrete_solution(kinematics, physics, grid, rtol=rtol, u0=u0)
+    U, P, lam = sol.outputs()
     value = {"efficiency": lam, "speed": U, "power": P}[objective]
-    return value, U, P, lam, int(status), u0
+    return value, U, P, lam, sol.status, sol.u0
 
 
 def _physics_outputs(int_u, int_pi, physics):
@@ -672,7 +714,8 @@ def _physics_outputs(int_u, int_pi, physics):
     return U, P, lam
 
 
-def objective_gradient(kinematics, physics, grid, *, objective="efficiency", rtol=1e-13, u0=None):
+def objective_gradient(kinematics, physics, grid, *, objective="efficiency", rtol=1e-13, u0=None,
+                       solution=None):
     """Objective of the discretised problem on ``grid`` and its exact gradient (adjoint method).
 
     Parameters
@@ -689,29 +732,30 @@ def objective_gradient(kinematics, physics, grid, *, objective="efficiency", rto
         Tolerance of the nonlinear iterations (shooting, stage Newton), not of the grid.
     u0 : float, optional
         Starting u(0) for the shooting (default: the fast-motion limit).
+    solution : DiscreteSolution, optional
+        ``discrete_solution`` of this kinematics, physics and grid: only the adjoint is run.
 
     Returns
     -------
     GradientResult
     """
     names, _ = family_parameters(kinematics)
-    code, params, nodes = _prepare(kinematics, physics, grid)
+    if solution is None:
+        solution = discrete_solution(kinematics, physics, grid, rtol=rtol, u0=u0)
+    code, params = kinematics.kernel_encoding()
+    params = params[0].copy()
+    nodes, stages = solution.nodes, solution.stages
     N = nodes.size - 1
     T = float(physics.period[0])
     p = float(physics.p[0])
     delta = float(physics.delta[0])
     kappa = float(physics.inertia_factor[0])
     dtau = float(physics.delta_tau[0])
-    if u0 is None:
-        u0 = float(fast_limit_velocity(kinematics, physics)[0])
-    stages = np.empty(2 * N)
-    status, u0, int_u, int_pi = _forward(code, params, nodes, N, kappa, float(physics.mu_n[0]),
-                                         float(physics.mu_s[0]), p, dtau, u0, 0.0, rtol, stages)
     n_out = len(names) + 1
-    if status != CONVERGED:
+    if solution.status != CONVERGED:
         nan = np.full(n_out, np.nan)
         return GradientResult(names + ["period"], math.nan, math.nan, math.nan, nan, nan, nan,
-                              math.nan, nan, int(status), u0, math.nan)
+                              math.nan, nan, solution.status, solution.u0, math.nan)
     n_par = n_family_parameters(code, params)
     grad = np.empty((2, n_par + 2))
     one_minus_M = _adjoint(code, params, nodes, N, kappa, float(physics.mu_n[0]),
@@ -721,7 +765,7 @@ def objective_gradient(kinematics, physics, grid, *, objective="efficiency", rto
     d_int[:, :n_fam] = grad[:, :n_fam]
     # T enters through kappa = T^(2-p) and delta_tau = T delta
     d_int[:, n_fam] = grad[:, n_par] * (2.0 - p) * kappa / T + grad[:, n_par + 1] * delta
-    U, P, lam = _physics_outputs(int_u, int_pi, physics)
+    U, P, lam = solution.outputs()
     gU = d_int[0] / T
     gU[n_fam] -= U / T
     gP = d_int[1] * T ** -(p + 1.0)
@@ -730,7 +774,7 @@ def objective_gradient(kinematics, physics, grid, *, objective="efficiency", rto
     gL = lam * ((p + 1.0) * gU / U - gP / P)
     value, gradient = _select(objective, U, P, lam, gU, gP, gL)
     return GradientResult(names + ["period"], U, P, lam, gU, gP, gL, value, gradient,
-                          int(status), u0, one_minus_M)
+                          solution.status, solution.u0, one_minus_M)
 
 
 def with_period(physics, period):

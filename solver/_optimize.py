@@ -49,7 +49,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ._gradient import (FixedGrid, adaptive_grid, family_parameters, objective_gradient,
+from ._gradient import (FixedGrid, adaptive_grid, discrete_solution, family_parameters,
+                        objective_gradient,
                         speed_at_power, with_family_parameters, with_period)
 from ._kinematics import Fourier, Harmonic, PowerLaw
 
@@ -82,7 +83,9 @@ class OptimizeResult:
     gradient : d value / d parameters (period last, d/dT), exact for the final grid; for
         "speed_at_power" dU/dtheta along P = power and nan for the period (not a variable)
     gradient_norm : projected norm in the optimisation variables (log T for the period)
-    iterations, newton_steps, gradient_evaluations : counts over all grid rounds
+    iterations, newton_steps, gradient_evaluations, solves : counts over all grid rounds
+        (gradient_evaluations: adjoint gradients; solves: periodic solves, one per line-search
+        trial and per gradient, since trial points are solved without their gradient)
     stop_reason : a key of ``STOP_REASONS``; converged : stop_reason == "gradient_tolerance"
     ill_conditioned : bool; condition_number : of the last difference Hessian (nan if none)
     n_steps : steps of the final grid; grid_rounds : grids used; seconds : wall time
@@ -110,6 +113,7 @@ class OptimizeResult:
     grid_rounds: int
     seconds: float
     at_bounds: tuple = ()
+    solves: int = 0
 
 
 @dataclass(frozen=True)
@@ -125,6 +129,8 @@ class _Problem:
     full_start: np.ndarray  # family parameters then T; fixed entries taken from here
     lower: np.ndarray     # bounds of x (family entries; log T unbounded)
     upper: np.ndarray
+    #: adjoint gradients taken (``differentiate``); solves are counted by the iteration
+    counts: dict = field(default_factory=lambda: {"gradients": 0})
 
     def full(self, x):
         full = self.full_start.copy()
@@ -141,17 +147,34 @@ class _Problem:
 
     def evaluate(self, x, u0=None):
         """(f, grad f in x, GradientResult)."""
+        f, trial = self.solve(x, u0)
+        if not math.isfinite(f):
+            return math.inf, None, None
+        return (f,) + self.differentiate(trial)
+
+    def solve(self, x, u0=None):
+        """(f, trial) without the gradient; f = inf where x is outside the family or the
+        solve fails.  ``differentiate(trial)`` then gives (grad f, GradientResult)."""
         full = self.full(x)
         kin = self.kinematics(full)
         if kin is None:
-            return math.inf, None, None
+            return math.inf, None
         phys = with_period(self.physics, full[-1])
-        res = objective_gradient(kin, phys, self.grid, objective=self.objective, u0=u0)
-        if res.status != 0 or not math.isfinite(res.value):
-            return math.inf, None, res
+        sol = discrete_solution(kin, phys, self.grid, u0=u0)
+        U, P, lam = sol.outputs()
+        value = {"efficiency": lam, "speed": U}[self.objective]
+        if sol.status != 0 or not math.isfinite(value):
+            return math.inf, None
+        return -self.sign * value, (full, sol)
+
+    def differentiate(self, trial):
+        self.counts["gradients"] += 1
+        full, sol = trial
+        res = objective_gradient(sol.kinematics, sol.physics, self.grid,
+                                 objective=self.objective, solution=sol)
         g_full = res.gradient.copy()
         g_full[-1] *= full[-1]  # d/dlog T
-        return -self.sign * res.value, -self.sign * g_full[self.free], res
+        return -self.sign * g_full[self.free], res
 
 
 @dataclass(frozen=True)
@@ -171,6 +194,14 @@ class _PowerConstrainedProblem(_Problem):
         full[-1] = self.periods.get(np.asarray(x, dtype=float).tobytes(), full[-1])
         return full
 
+    def solve(self, x, u0=None):
+        # the constraint's root for T needs gradients: nothing to defer
+        f, g, res = self.evaluate(x, u0)
+        return f, (g, res)
+
+    def differentiate(self, trial):
+        return trial  # counted by ``evaluate``
+
     def evaluate(self, x, u0=None):
         full = self.full(x)
         kin = self.kinematics(full)
@@ -180,6 +211,7 @@ class _PowerConstrainedProblem(_Problem):
         res = speed_at_power(kin, with_period(self.physics, guess), self.grid, self.power, u0=u0)
         if res.status != 0 or not math.isfinite(res.value):
             return math.inf, None, res
+        self.counts["gradients"] += 1
         self.periods[np.asarray(x, dtype=float).tobytes()] = res.period
         self.periods["last"] = res.period
         return -self.sign * res.value, -self.sign * res.gradient[self.free], res
@@ -205,7 +237,7 @@ class _State:
     result: object
     iteration: int = 0
     newton_steps: int = 0
-    gradient_evaluations: int = 1
+    solves: int = 1  # periodic solves (each trial point, each gradient's own)
     stop_reason: str = ""
     condition_number: float = math.nan
     ill_conditioned: bool = False
@@ -287,7 +319,7 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
             if cond > max_condition:
                 return replace(state, stop_reason="ill_conditioned", condition_number=cond,
                                ill_conditioned=True,
-                               gradient_evaluations=state.gradient_evaluations + evals)
+                               solves=state.solves + evals)
             if eig.min() > 0:
                 newton = True
                 d = np.zeros_like(x)
@@ -308,43 +340,50 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
     slope = float(d @ g)
     alpha = 1.0
     accepted = None
+    # trial points are solved without their gradient (the adjoint sweep): only the
+    # accepted one is differentiated
     for _ in range(40):
         xt = np.clip(x + alpha * d, problem.lower, problem.upper)
-        ft, gt, rt = problem.evaluate(xt, u0)
+        ft, trial = problem.solve(xt, u0)
         evals += 1
-        if gt is not None and ft <= f + c1 * alpha * slope:
-            accepted = (xt, ft, gt, rt)
+        if ft <= f + c1 * alpha * slope:
+            accepted = (xt, ft) + problem.differentiate(trial)
             break
-        if (newton and alpha == 1.0 and gt is not None and ft <= f + F_NOISE * abs(f)
-                and np.linalg.norm(_projected(problem, xt, gt)) < gnorm):
+        if newton and alpha == 1.0 and ft <= f + F_NOISE * abs(f):
             # near the optimum the decrease of f is below the objective's noise (~1e-13):
             # a full Newton step that reduces the gradient is accepted on that
-            accepted = (xt, ft, gt, rt)
-            break
+            gt, rt = problem.differentiate(trial)
+            if gt is not None and np.linalg.norm(_projected(problem, xt, gt)) < gnorm:
+                accepted = (xt, ft, gt, rt)
+                break
         alpha *= 0.5
     if (accepted is not None and alpha == 1.0 and not newton
             and float((accepted[0] - x) @ (accepted[2] - g)) <= 0.0):
         # the full step was accepted at once along negative curvature, where BFGS cannot
         # learn a step length: extrapolate while f keeps falling
+        best = None
         while 2.0 * alpha * np.linalg.norm(d) <= max_step:
             xt = np.clip(x + 2.0 * alpha * d, problem.lower, problem.upper)
-            ft, gt, rt = problem.evaluate(xt, u0)
+            ft, trial = problem.solve(xt, u0)
             evals += 1
-            if gt is None or ft > accepted[1] or ft > f + c1 * 2.0 * alpha * slope:
+            best_f = accepted[1] if best is None else best[1]
+            if ft > best_f or ft > f + c1 * 2.0 * alpha * slope:
                 break
             alpha *= 2.0
-            accepted = (xt, ft, gt, rt)
+            best = (xt, ft, trial)
+        if best is not None:
+            accepted = best[:2] + problem.differentiate(best[2])
     if accepted is None:
         # no decrease at any step: rounding-level flatness (ill-conditioned) or a bad direction
         flat = abs(slope) * alpha < 1e-14 * max(abs(f), 1e-300)
         reason = "ill_conditioned" if flat else "line_search_failed"
         return replace(state, stop_reason=reason, ill_conditioned=flat, condition_number=cond,
-                       gradient_evaluations=state.gradient_evaluations + evals)
+                       solves=state.solves + evals)
     xt, ft, gt, rt = accepted
     s = xt - x
     if np.linalg.norm(s) <= 1e-14 * (1.0 + np.linalg.norm(x)):
         return replace(state, stop_reason="no_progress", condition_number=cond,
-                       gradient_evaluations=state.gradient_evaluations + evals)
+                       solves=state.solves + evals)
     y = gt - g
     sy = float(s @ y)
     if not newton and sy > 1e-12 * np.linalg.norm(s) * np.linalg.norm(y):
@@ -355,7 +394,7 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
         hinv = V @ hinv @ V.T + rho * np.outer(s, s)
     return _State(x=xt, f=ft, g=gt, hinv=hinv, result=rt, iteration=state.iteration + 1,
                   newton_steps=state.newton_steps + int(newton),
-                  gradient_evaluations=state.gradient_evaluations + evals,
+                  solves=state.solves + evals,
                   condition_number=cond, first_gradient_norm=state.first_gradient_norm,
                   hessian_wait=wait)
 
@@ -464,7 +503,7 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         grid = FixedGrid.uniform(kin, int(grid))
     elif grid is None:
         grid = adaptive_grid(kin, phys, rtol=grid_rtol)
-    totals = dict(iterations=0, newton_steps=0, gradient_evaluations=0)
+    totals = dict(iterations=0, newton_steps=0, gradient_evaluations=0, solves=0)
     state = problem = None
     sign = None
     hinv = None
@@ -497,7 +536,9 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
                           max_condition=max_condition)
         totals["iterations"] += state.iteration
         totals["newton_steps"] += state.newton_steps
-        totals["gradient_evaluations"] += state.gradient_evaluations
+        totals["solves"] += state.solves
+        totals["gradient_evaluations"] += problem.counts["gradients"]
+        problem.counts["gradients"] = 0
         if state.g is None:
             break
         full = problem.full(state.x)
@@ -517,7 +558,7 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
                               math.nan, nan, math.nan, totals["iterations"],
                               totals["newton_steps"], totals["gradient_evaluations"],
                               "solve_failed", False, False, math.nan, grid.n_steps, rounds,
-                              time.perf_counter() - t_start)
+                              time.perf_counter() - t_start, solves=totals["solves"])
     gnorm = float(np.linalg.norm(_projected(problem, state.x, state.g)))
     reason = state.stop_reason or ("gradient_tolerance" if gnorm < gtol else "max_iterations")
     all_names = names + ["period"]
@@ -529,7 +570,8 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         # diagnose why it did not converge (or sits at a bound): the curvature at the end
         H, evals = _difference_hessian(problem, state, np.ones(state.x.size, dtype=bool),
                                        res.u0)
-        totals["gradient_evaluations"] += evals
+        totals["solves"] += evals
+        totals["gradient_evaluations"] += problem.counts["gradients"]
         if H is not None:
             eig = np.abs(np.linalg.eigvalsh(H))
             cond = float(eig.max() / max(eig.min(), 1e-300))
@@ -545,4 +587,4 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         gradient_evaluations=totals["gradient_evaluations"], stop_reason=reason,
         converged=reason == "gradient_tolerance", ill_conditioned=bool(ill),
         condition_number=cond, n_steps=grid.n_steps, grid_rounds=rounds,
-        seconds=time.perf_counter() - t_start, at_bounds=bound_names)
+        seconds=time.perf_counter() - t_start, at_bounds=bound_names, solves=totals["solves"])
