@@ -116,7 +116,8 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
 
 @njit(cache=True)
 def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
-                 u_out, step_u, step_pi, step_m, stages_out=None, stage_guess=None):
+                 u_out, step_u, step_pi, step_m, stages_out=None, stage_guess=None,
+                 kinematics_out=None):
     """Periodic solution for one parameter point on the first N steps of ``grid``.
 
     Writes u at the nodes into ``u_out``, the per-step integrals of u and Pi into
@@ -124,7 +125,8 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     if given, the stage values (U1_0, U2_0, U1_1, ...) of the converged sweep into
     ``stages_out`` (>= 2N,).  ``stage_guess`` (2N,), optional: starting stage values for the
     first sweep (default, or an array of another size: u_n, cold; a step whose Newton fails
-    from the guess retries cold).
+    from the guess retries cold).  ``kinematics_out`` (2, >= 2N), optional: receives phi
+    and dphi/dtau at the stage times (for the adjoint, ``_gradient``).
     Returns (int_u, int_Pi, u0, status, shooting_iterations, stage_iterations).
     """
     phis = np.empty(2 * N)
@@ -136,6 +138,9 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         mid = grid[n] + 0.5 * h
         phis[2 * n], oms[2 * n] = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
         phis[2 * n + 1], oms[2 * n + 1] = angle_and_rate(code, params, grid[n + 1], mid)
+    if kinematics_out is not None:
+        kinematics_out[0, :2 * N] = phis
+        kinematics_out[1, :2 * N] = oms
     guessed = stage_guess is not None and stage_guess.size == 2 * N
     stages = np.empty(2 * N)
     sens = np.empty(2 * N)

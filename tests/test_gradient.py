@@ -13,6 +13,7 @@ import pytest
 
 import solver
 from solver._gradient import (POWER_ROOT_RTOL, FixedGrid, adaptive_grid, discrete_objective,
+                              discrete_solution,
                               family_parameters, force_partials, force_partials_quadrature,
                               objective_gradient,
                               speed_at_power, with_family_parameters, with_period)
@@ -280,6 +281,22 @@ def test_discrete_objective_matches_the_solver_on_one_grid():
     assert st[0] == 0
     np.testing.assert_allclose(res.U, iu[0] / physics.period[0], rtol=1e-11)
     np.testing.assert_allclose(res.P, ip[0] * physics.period[0] ** -1.0, rtol=1e-11)
+
+
+@pytest.mark.parametrize("case", sorted(GRADIENT_CASES))
+def test_gradient_from_a_stored_solution_equals_a_fresh_one(case):
+    # the optimiser's line search solves first and differentiates only the accepted point
+    make, ratio_log2 = GRADIENT_CASES[case]
+    kinematics = make()
+    physics = solver.Physics.from_scaled(2.0 ** ratio_log2, 1.5)
+    grid = FixedGrid.uniform(kinematics, 128)
+    fresh = objective_gradient(kinematics, physics, grid)
+    stored = discrete_solution(kinematics, physics, grid)
+    again = objective_gradient(kinematics, physics, grid, solution=stored)
+    assert fresh.status == again.status == 0
+    np.testing.assert_array_equal(again.gradient, fresh.gradient)
+    assert (again.U, again.P, again.efficiency) == (fresh.U, fresh.P, fresh.efficiency)
+    assert stored.outputs() == (fresh.U, fresh.P, fresh.efficiency)
 
 
 # -- U at fixed P: the gradient along the constraint ---------------------------------------------
