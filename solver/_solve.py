@@ -37,7 +37,7 @@ import time
 from dataclasses import dataclass, fields
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from . import _march, _periodic
 from ._events import event_times, place_events
@@ -297,6 +297,43 @@ def _next_grid(grid, levels, events, corners):
     return place_events(bisect(grid, clipped), events, corners, EVENT_GAP), clipped.any()
 
 
+@njit(cache=True, parallel=True, error_model="numpy")
+def _assess_pairs(grids, n_steps, int_u, int_pi, status, step_u, step_pi, step_m, nodes,
+                  u_floor, rtol, order, may_accept, forced):
+    """Every pair of a ``solve_pairs`` batch (rows 2j: grid G, 2j + 1: B(G)) at once.
+
+    Returns (estimate, accepted, levels): the estimate of the module docstring (inf where
+    either solve failed), whether it is accepted (``may_accept[j]`` and estimate <= rtol),
+    and otherwise the bisection levels of G's steps (``_marked_levels``; steps ``forced``
+    get MAX_BISECTIONS; a failed pair is bisected everywhere once), shape (m, width - 1).
+    """
+    m = n_steps.size // 2
+    estimate = np.full(m, np.inf)
+    accepted = np.zeros(m, dtype=np.bool_)
+    levels = np.zeros((m, grids.shape[1] - 1), dtype=np.int64)
+    for j in prange(m):
+        c = 2 * j
+        f = c + 1
+        N = n_steps[c]
+        if status[c] != CONVERGED or status[f] != CONVERGED:
+            levels[j, :N] = 1
+            continue
+        scale_u = max(abs(int_u[f]), u_floor[j])
+        scale_p = abs(int_pi[f])
+        estimate_u, estimate_p, change_u, change_p = _pair_estimate(
+            step_u[c], step_u[f], step_pi[c], step_pi[f], N, scale_u, scale_p)
+        estimate[j] = max(estimate_u, estimate_p)
+        if may_accept[j] and estimate[j] <= rtol:
+            accepted[j] = True
+            continue
+        hot = _marked_levels(grids[c, :N + 1], change_u, change_p, nodes[c], nodes[f], step_m[c],
+                             scale_u, scale_p if estimate_u <= rtol < estimate_p else 0.0, rtol,
+                             order)
+        for n in range(N):
+            levels[j, n] = MAX_BISECTIONS if forced[j, n] else hot[n]
+    return estimate, accepted, levels
+
+
 def _chatter(stiff_coarse, stiff_fine, u_coarse, h, threshold):
     """The coarse steps where the march chatters (on either grid of the pair), or None when
     the u stalled in them carries at most ``threshold`` of int u: a short chatter (a brief
@@ -454,54 +491,51 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         found = event_times(code, params[active], padded[F], steps[F], ser[F],
                             physics.inertia_factor[active], physics.mu_n[active],
                             physics.mu_s[active], physics.p[active], physics.delta_tau[active])
-        keep = np.ones(m, dtype=bool)
-        for j, i in enumerate(active):
-            jc, jf = 2 * j, 2 * j + 1
-            n_coarse = steps[jc]
-            if ok[j]:
-                scale_u = max(abs(iu[jf]), u_floor[i])
-                scale_p = abs(ip[jf])
-                estimate_u, estimate_p, change_u, change_p = _pair_estimate(
-                    step_u[jc], step_u[jf], step_pi[jc], step_pi[jf], n_coarse, scale_u, scale_p)
-                estimate[i] = max(estimate_u, estimate_p)
-                unresolved = None
-                if stiff is not None:
-                    h = np.diff(coarse[j])
-                    unresolved = _chatter(stiff[jc], stiff[jf], ser[jc], h,
-                                          CHATTER_SHARE * rtol * scale_u)
+        may_accept = np.full(m, level >= 1)
+        forced = np.zeros((m, padded.shape[1] - 1), dtype=bool)
+        if stiff is not None:  # the march: steps too long for stiff friction must be split
+            for j, i in enumerate(active):
+                if ok[j]:
+                    unresolved = _chatter(stiff[2 * j], stiff[2 * j + 1], ser[2 * j],
+                                          np.diff(coarse[j]), CHATTER_SHARE * rtol
+                                          * max(abs(iu[2 * j + 1]), u_floor[i]))
                     if unresolved is not None:
                         last_status[i] = UNSTABLE
-                if level >= 1 and estimate[i] <= rtol and unresolved is None:
-                    status[i] = CONVERGED
-                    keep[j] = False
-                    if return_series:
-                        series[i] = ser[jf, :2 * n_coarse].copy()
-                        series_tau[i] = fine[j][:-1]
+                        forced[j, :unresolved.size] = unresolved
+                        may_accept[j] = False
+        estimate_pass, accepted, levels = _assess_pairs(
+            padded, steps, iu, ip, st, step_u, step_pi, step_m, ser, u_floor[active], rtol,
+            spec.order, may_accept, forced)
+        estimate[active[ok]] = estimate_pass[ok]
+        keep = np.ones(m, dtype=bool)
+        for j, i in enumerate(active):
+            n_coarse = steps[2 * j]
+            if accepted[j]:
+                status[i] = CONVERGED
+                keep[j] = False
+                if return_series:
+                    series[i] = ser[2 * j + 1, :2 * n_coarse].copy()
+                    series_tau[i] = fine[j][:-1]
+                continue
+            if ok[j] and forced[j].any():
+                unresolved = forced[j, :n_coarse]
+                chatter_passes[i] += 1
+                if chatter_passes[i] > MAX_CHATTER_PASSES or _steps_to_resolve(
+                        kinematics, physics, i, coarse[j][:-1][unresolved],
+                        np.diff(coarse[j])[unresolved]) > HOPELESS * max_steps:
+                    keep[j] = False  # cannot resolve sticking within the budget: UNSTABLE
                     continue
-                hot = _marked_levels(coarse[j], change_u, change_p, ser[jc], ser[jf], step_m[jc],
-                                     scale_u, scale_p if estimate_u <= rtol < estimate_p else 0.0,
-                                     rtol, spec.order)
-                if unresolved is not None:  # explicit steps too long for stiff friction
-                    hot[unresolved] = MAX_BISECTIONS
-                    chatter_passes[i] += 1
-                    if chatter_passes[i] > MAX_CHATTER_PASSES or _steps_to_resolve(
-                            kinematics, physics, i, coarse[j][:-1][unresolved],
-                            h[unresolved]) > HOPELESS * max_steps:
-                        keep[j] = False  # cannot resolve sticking within the budget: UNSTABLE
-                        continue
-            else:
-                hot = np.ones(n_coarse, dtype=np.int64)  # a failed solve: refine everywhere
-            new, refined = _next_grid(coarse[j], hot, found[j], corners[i])
+            new, refined = _next_grid(coarse[j], levels[j, :n_coarse], found[j], corners[i])
             if new.size - 1 > max_steps or not refined:
                 keep[j] = False  # out of budget: TOLERANCE_NOT_REACHED or the kernel's reason
                 if return_series and ok[j]:
-                    series[i] = ser[jf, :2 * n_coarse].copy()
+                    series[i] = ser[2 * j + 1, :2 * n_coarse].copy()
                     series_tau[i] = fine[j][:-1]
                 continue
             grids[i] = new
-            if stages is not None and st[jf] == CONVERGED:
-                previous[i] = (fine[j], ser[jf, :2 * n_coarse].copy(),
-                               stages[jf, :4 * n_coarse].copy())
+            if stages is not None and st[2 * j + 1] == CONVERGED:
+                previous[i] = (fine[j], ser[2 * j + 1, :2 * n_coarse].copy(),
+                               stages[2 * j + 1, :4 * n_coarse].copy())
         active = active[keep]
         level += 1
 
