@@ -355,7 +355,13 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
             if gt is not None and np.linalg.norm(_projected(problem, xt, gt)) < gnorm:
                 accepted = (xt, ft, gt, rt)
                 break
-        alpha *= 0.5
+        if math.isfinite(ft) and ft > f + slope * alpha:
+            # the minimiser of the quadratic through f, the slope and ft, kept in
+            # [0.1, 0.5] alpha (Nocedal & Wright 3.5): far fewer cuts than halving when
+            # the step overshoots a sharp valley by orders of magnitude
+            alpha *= min(max(-0.5 * slope * alpha / (ft - f - slope * alpha), 0.1), 0.5)
+        else:
+            alpha *= 0.5
     if (accepted is not None and alpha == 1.0 and not newton
             and float((accepted[0] - x) @ (accepted[2] - g)) <= 0.0):
         # the full step was accepted at once along negative curvature, where BFGS cannot
