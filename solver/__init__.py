@@ -8,9 +8,9 @@ Reference: S. Alben and C. Puritz, "Intermittent sliding locomotion of a
 two-link body" (``shared/paper/intermittent_sliding_two_link.tex``).
 """
 from ._force import force_and_slope, power_density
-from ._gradient import (FixedGrid, GradientResult, adaptive_grid, discrete_objective,
-                        family_parameters, force_partials, objective_gradient,
-                        with_family_parameters)
+from ._gradient import (DiscreteSolution, FixedGrid, GradientResult, adaptive_grid,
+                        discrete_objective, discrete_solution, family_parameters,
+                        force_partials, objective_gradient, with_family_parameters)
 from ._kinematics import Fourier, Harmonic, PowerLaw, period_grid
 from ._limits import fast_limit_velocity, kinematic_speed, quasi_static_velocity
 from ._physics import Physics, physical_from_scaled, scaled_from_physical
@@ -24,7 +24,8 @@ __all__ = [
     "Fourier", "Harmonic", "PowerLaw", "Physics", "SolveResult", "STATUS_REASONS", "METHODS",
     "solve_periodic", "solve_fixed_grid", "force_and_slope", "power_density", "period_grid", "fast_limit_velocity",
     "quasi_static_velocity", "kinematic_speed", "physical_from_scaled", "scaled_from_physical",
-    "FixedGrid", "GradientResult", "adaptive_grid", "discrete_objective", "family_parameters",
+    "FixedGrid", "GradientResult", "adaptive_grid", "discrete_objective", "discrete_solution",
+    "DiscreteSolution", "family_parameters",
     "force_partials", "objective_gradient", "with_family_parameters", "OptimizeResult",
     "optimize_motion",
 ]

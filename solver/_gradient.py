@@ -41,7 +41,8 @@ inputs concentrated on the hard cases the two agree to 1e-11 of the natural scal
 (tests/test_gradient.py), and the closed forms make a gradient ~2.8x cheaper (Kmax = 7,
 1592 steps: 9.8 -> 3.4 ms, with the trigonometric recurrences and the stages taken from
 the shooting's converged sweep; the adjoint sweep alone, with phi and dphi/dtau at the
-stages also taken from the shooting, costs ~0.6 of a forward solve, 3034 steps: 1.3 ms).  ``force_partials_quadrature``: integrals over the
+stages also taken from the shooting, costs ~0.6 of a forward solve, 3034 steps: 1.3 ms).
+``force_partials_quadrature``: integrals over the
 link of the s-derivatives of the integrands, evaluated by composite 10-point
 Gauss-Legendre.  The integrand is analytic in s except at s* +- i eta, where
 w(s*) = 0 and eta = e / |omega| (e^2 = c^2 + delta_tau^2).  The panels are graded

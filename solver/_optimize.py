@@ -20,16 +20,19 @@ Iteration (explicit state: ``_init``, ``_step``, ``_terminate``).
 - BFGS on the free variables (those not held at a bound by an outward gradient),
   the inverse-Hessian update skipped when the curvature condition y.s > 0 fails.
 - Damped line search: the step is first cut to ``max_step`` in the variables, then
-  halved until Armijo's condition holds (a failed solve counts as +inf); a full step
+  cut by quadratic interpolation (to [0.1, 0.5] of itself; halved after a failed
+  solve, which counts as +inf) until Armijo's condition holds.  Trial points are
+  solved without their gradient; only the accepted one is differentiated.  A full step
   accepted at once along negative curvature (y.s <= 0) is extrapolated (doubled)
   while f keeps falling.  A full Newton step is also accepted when f changes by less
   than its noise (1e-12 relative) and the gradient norm falls: close to the optimum
   Armijo cannot resolve the decrease.
 - Near convergence (projected gradient norm below ``newton_switch`` times the first
   one) a Newton step with the Hessian from forward differences of the exact gradient
-  (n gradients: at the step 1e-8 the gradient's own error, not the O(step) truncation,
-  limits either difference, so central ones buy nothing); its inverse also restarts the BFGS approximation.  Not positive
-  definite: BFGS, and no new difference Hessian for ``HESSIAN_WAIT`` iterations.
+  (n gradients: at the step 1e-8 the gradient's own error, not the O(step)
+  truncation, limits either difference, so central ones buy nothing); its inverse
+  also restarts the BFGS approximation.  Not positive definite: BFGS, and no new
+  difference Hessian for ``HESSIAN_WAIT`` iterations.
 - Stop when the projected gradient norm is below ``gtol`` (the paper used 1e-7).
 
 Ill-conditioning.  At p = 2 the ODE in tau no longer depends on T (kappa = T^0)
@@ -51,8 +54,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ._gradient import (FixedGrid, adaptive_grid, discrete_solution, family_parameters,
-                        objective_gradient,
-                        speed_at_power, with_family_parameters, with_period)
+                        objective_gradient, speed_at_power, with_family_parameters,
+                        with_period)
 from ._kinematics import Fourier, Harmonic, PowerLaw
 
 STOP_REASONS = {
