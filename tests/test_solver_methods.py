@@ -288,3 +288,45 @@ def test_paired_solves_match_independent_ones():
     assert np.all(again[3] == 0)
     assert np.allclose(again[0], b[0], rtol=0, atol=1e-9 * vscale.max())
     assert np.allclose(again[1], b[1], rtol=1e-9)
+
+
+def _polished_stages(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau):
+    """The Radau IIA stage equations solved to rounding by plain Newton in Python."""
+    A = solver._periodic.RADAU_A
+    U = np.array([U1, U2])
+    for _ in range(30):
+        (F1, d1), (F2, d2) = (solver.force_and_slope(U[0], phi1, om1, mu_n, mu_s, p, dtau),
+                              solver.force_and_slope(U[1], phi2, om2, mu_n, mu_s, p, dtau))
+        R = U - u_n - h * kappa * A @ np.array([F1, F2])
+        J = np.eye(2) - h * kappa * A * np.array([d1, d2])
+        U = U - np.linalg.solve(J, R)
+    return U
+
+
+def test_stage_newton_stops_within_its_tolerance():
+    # the stage Newton may stop on the contraction estimate theta/(1 - theta)|dx| before a
+    # step falls below atol: the stages it returns must still be within atol of the
+    # solution of the stage equations, also where friction is stiff (h kappa |dF/du| ~ 1e6)
+    from solver._periodic import radau_step
+    rng = np.random.default_rng(3)
+    worst = 0.0
+    checked = 0
+    for _ in range(300):
+        u_n = rng.uniform(-1, 1)
+        phi, omega = rng.uniform(-0.5, 2.0), rng.uniform(-6, 6)
+        mu_n, mu_s = 2.0 ** rng.uniform(-8, 8), 1.0
+        p = rng.choice([0.0, 0.5, 1.5])
+        dtau = 10.0 ** rng.uniform(-8, -2)
+        h, kappa = 10.0 ** rng.uniform(-4, -1), 10.0 ** rng.uniform(-1, 2)
+        args = (h, phi, omega, phi + h * omega, omega, kappa, mu_n, mu_s, p, dtau)
+        R1, R2, *_, ok_ref = radau_step(u_n, u_n, u_n, *args, 1e-15)
+        if not ok_ref:
+            continue
+        ref = _polished_stages(u_n, R1, R2, *args)
+        for atol in (1e-6, 1e-9, 1e-12):
+            U1, U2, *_, ok = radau_step(u_n, u_n, u_n, *args, atol)
+            assert ok
+            worst = max(worst, abs(U1 - ref[0]) / atol, abs(U2 - ref[1]) / atol)
+            checked += 1
+    assert checked > 600
+    assert worst <= 1.0, worst
