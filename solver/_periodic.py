@@ -28,7 +28,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._force import force_and_slope, power_density
+from ._force import force_and_slope_sc, power_density
 from ._kinematics import angle_and_rate
 from ._status import CONVERGED, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED
 
@@ -54,15 +54,17 @@ def stage_jacobian(hd1, hd2):
 
 
 @njit(cache=True)
-def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau, atol):
-    """Solve one Radau IIA step from u_n, starting at the guess (U1, U2).
+def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu_s, p, dtau,
+               atol):
+    """Solve one Radau IIA step from u_n, starting at the guess (U1, U2); sin_i, cos_i are
+    those of phi at the stages, om_i dphi/dtau there.
 
     Returns (U1, U2, s1, s2, m_minus_1, iterations, ok): the stage values, their
     sensitivities dU_i/du_n, du_{n+1}/du_n - 1 and whether Newton converged.
     """
     a11, a12, a21, a22 = 5.0 / 12.0, -1.0 / 12.0, 0.75, 0.25
-    F1, d1 = force_and_slope(U1, phi1, om1, mu_n, mu_s, p, dtau)
-    F2, d2 = force_and_slope(U2, phi2, om2, mu_n, mu_s, p, dtau)
+    F1, d1 = force_and_slope_sc(U1, sin1, cos1, om1, mu_n, mu_s, p, dtau)
+    F2, d2 = force_and_slope_sc(U2, sin2, cos2, om2, mu_n, mu_s, p, dtau)
     R1 = U1 - u_n - h * kappa * (a11 * F1 + a12 * F2)
     R2 = U2 - u_n - h * kappa * (a21 * F1 + a22 * F2)
     ok = False
@@ -88,8 +90,8 @@ def radau_step(u_n, U1, U2, h, phi1, om1, phi2, om2, kappa, mu_n, mu_s, p, dtau,
         for _ in range(40):
             T1 = U1 + lam * x1
             T2 = U2 + lam * x2
-            G1, g1 = force_and_slope(T1, phi1, om1, mu_n, mu_s, p, dtau)
-            G2, g2 = force_and_slope(T2, phi2, om2, mu_n, mu_s, p, dtau)
+            G1, g1 = force_and_slope_sc(T1, sin1, cos1, om1, mu_n, mu_s, p, dtau)
+            G2, g2 = force_and_slope_sc(T2, sin2, cos2, om2, mu_n, mu_s, p, dtau)
             S1 = T1 - u_n - h * kappa * (a11 * G1 + a12 * G2)
             S2 = T2 - u_n - h * kappa * (a21 * G1 + a22 * G2)
             if S1 * S1 + S2 * S2 <= (1.0 - 1e-4 * lam) * norm0 or lam < 1e-9:
@@ -138,6 +140,8 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         mid = grid[n] + 0.5 * h
         phis[2 * n], oms[2 * n] = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
         phis[2 * n + 1], oms[2 * n + 1] = angle_and_rate(code, params, grid[n + 1], mid)
+    sins = np.sin(phis)
+    coss = np.cos(phis)
     if kinematics_out is not None:
         kinematics_out[0, :2 * N] = phis
         kinematics_out[1, :2 * N] = oms
@@ -175,14 +179,14 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
                 U2 = stages[2 * n + 1] + sens[2 * n + 1] * du
             u_start[n] = u
             U1, U2, s1, s2, mm1, its, ok = radau_step(
-                u, U1, U2, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
-                kappa, mu_n, mu_s, p, dtau, atol_stage)
+                u, U1, U2, hs[n], sins[2 * n], coss[2 * n], oms[2 * n], sins[2 * n + 1],
+                coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau, atol_stage)
             stage_its += its
             if not ok and (not first or guessed):
                 # the tangent prediction (or the guess) can miss the basin: retry cold
                 U1, U2, s1, s2, mm1, its, ok = radau_step(
-                    u, u, u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1], oms[2 * n + 1],
-                    kappa, mu_n, mu_s, p, dtau, atol_stage)
+                    u, u, u, hs[n], sins[2 * n], coss[2 * n], oms[2 * n], sins[2 * n + 1],
+                    coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau, atol_stage)
                 stage_its += its
             if not ok:
                 status = STAGE_SOLVE_FAILED if math.isfinite(U2) else NON_FINITE

@@ -318,11 +318,13 @@ def test_stage_newton_stops_within_its_tolerance():
         p = rng.choice([0.0, 0.5, 1.5])
         dtau = 10.0 ** rng.uniform(-8, -2)
         h, kappa = 10.0 ** rng.uniform(-4, -1), 10.0 ** rng.uniform(-1, 2)
-        args = (h, phi, omega, phi + h * omega, omega, kappa, mu_n, mu_s, p, dtau)
+        phi2 = phi + h * omega
+        physics = (kappa, mu_n, mu_s, p, dtau)
+        args = (h, np.sin(phi), np.cos(phi), omega, np.sin(phi2), np.cos(phi2), omega) + physics
         R1, R2, *_, ok_ref = radau_step(u_n, u_n, u_n, *args, 1e-15)
         if not ok_ref:
             continue
-        ref = _polished_stages(u_n, R1, R2, *args)
+        ref = _polished_stages(u_n, R1, R2, h, phi, omega, phi2, omega, *physics)
         for atol in (1e-6, 1e-9, 1e-12):
             U1, U2, *_, ok = radau_step(u_n, u_n, u_n, *args, atol)
             assert ok
