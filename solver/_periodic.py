@@ -10,8 +10,9 @@ rings.  Radau IIA damps it to 0.  Grid nodes sit at the corners of phi.
 Solution of the discrete periodic problem: Newton on the single unknown
 u(0), with the step equations eliminated step by step.  Each step solves the
 2 x 2 stage system by damped Newton (a line search on the residual, and a
-cold restart when the predicted start fails), and
-carries the exact derivative du_{n+1}/du_n along, so the derivative of the
+cold restart when the predicted start fails; it stops when a step, or the error
+left after it as estimated from the observed contraction, is below the stage
+tolerance), and carries the exact derivative du_{n+1}/du_n along, so the derivative of the
 discrete period map (the monodromy M) is exact; M is almost always in
 (0, 1) (friction dissipates; the anisotropic law is not monotone everywhere,
 so single steps can amplify), and 1 - M is accumulated as
