@@ -75,6 +75,10 @@ HESSIAN_STEP = 1e-8
 F_NOISE = 1e-12
 #: BFGS iterations after an indefinite difference Hessian before the next one
 HESSIAN_WAIT = 5
+#: the line search gives up below this fraction of the (damped) step: x + alpha d must
+#: still differ from x, else Armijo "holds" at alpha -> 0 and a non-descent direction
+#: would end as no_progress instead of line_search_failed
+MIN_STEP_FRACTION = 2.0 ** -39
 
 
 @dataclass(frozen=True)
@@ -89,7 +93,9 @@ class OptimizeResult:
     gradient_norm : projected norm in the optimisation variables (log T for the period)
     iterations, newton_steps, gradient_evaluations, solves : counts over all grid rounds
         (gradient_evaluations: adjoint gradients; solves: periodic solves, one per line-search
-        trial and per gradient, since trial points are solved without their gradient)
+        trial and per gradient, since trial points are solved without their gradient).  For
+        "speed_at_power" both count constrained evaluations, each a root search for T with
+        a solve and gradient per root iteration.
     stop_reason : a key of ``STOP_REASONS``; converged : stop_reason == "gradient_tolerance"
     ill_conditioned : bool; condition_number : of the last difference Hessian (nan if none)
     n_steps : steps of the final grid; grid_rounds : grids used; seconds : wall time
@@ -344,7 +350,9 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
     accepted = None
     # trial points are solved without their gradient (the adjoint sweep): only the
     # accepted one is differentiated
-    for _ in range(40):
+    tried = alpha
+    while alpha >= MIN_STEP_FRACTION:
+        tried = alpha
         xt = np.clip(x + alpha * d, problem.lower, problem.upper)
         ft, trial = problem.solve(xt, u0)
         evals += 1
@@ -383,7 +391,7 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
             accepted = best[:2] + problem.differentiate(best[2])
     if accepted is None:
         # no decrease at any step: rounding-level flatness (ill-conditioned) or a bad direction
-        flat = abs(slope) * alpha < 1e-14 * max(abs(f), 1e-300)
+        flat = abs(slope) * tried < 1e-14 * max(abs(f), 1e-300)
         reason = "ill_conditioned" if flat else "line_search_failed"
         return replace(state, stop_reason=reason, ill_conditioned=flat, condition_number=cond,
                        solves=state.solves + evals)

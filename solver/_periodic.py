@@ -12,8 +12,11 @@ u(0), with the step equations eliminated step by step.  Each step solves the
 2 x 2 stage system by damped Newton (a line search on the residual, and a
 cold restart when the predicted start fails; it stops when a step, or the error
 left after it as estimated from the observed contraction, is below the stage
-tolerance), and carries the exact derivative du_{n+1}/du_n along, so the derivative of the
-discrete period map (the monodromy M) is exact; M is almost always in
+tolerance), and carries the derivative du_{n+1}/du_n along, so the derivative of the
+discrete period map (the monodromy M) is Newton's own.  It is formed from the slopes at the
+last evaluated stage iterate, so it is exact up to the final correction: in a 3000-input
+check its relative error was <= 7e-5 at stage tolerance 1e-9 and <= 1.4e-7 at 1e-12
+(the adjoint of ``_gradient`` re-evaluates the slopes at the final stages); M is almost always in
 (0, 1) (friction dissipates; the anisotropic law is not monotone everywhere,
 so single steps can amplify), and 1 - M is accumulated as
 -expm1(sum log m_n) with m_n - 1 formed without cancellation.  While M < 1

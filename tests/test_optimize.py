@@ -91,3 +91,29 @@ def test_direction_negative_minimises_through_u_zero_or_keeps_the_start_sign():
     assert kept.efficiency > first
     down = optimize_motion(start, physics, grid=grid, max_iterations=100, direction=-1)
     assert down.efficiency < first and down.iterations <= 100
+
+
+class _WrongGradient:
+    """f = x^2 + 1 with the gradient's sign flipped: no step along -g descends."""
+
+    lower = np.array([-np.inf])
+    upper = np.array([np.inf])
+
+    def solve(self, x, u0=None):
+        return float(x @ x) + 1.0, x.copy()
+
+    def differentiate(self, x):
+        return -2.0 * x, None
+
+
+def test_a_direction_that_does_not_descend_fails_the_line_search():
+    # halving or interpolating, the search must stop while x + alpha d still differs from
+    # x: below that Armijo "holds" at f itself and the step would be taken as no progress
+    from types import SimpleNamespace
+    from solver._optimize import _State, _step
+    x = np.array([1.0])
+    state = _State(x=x, f=2.0, g=np.array([-2.0]), hinv=np.eye(1),
+                   result=SimpleNamespace(u0=0.0), first_gradient_norm=2.0)
+    out = _step(_WrongGradient(), state, max_step=0.5, newton_switch=0.0, max_condition=1e12)
+    assert out.stop_reason == "line_search_failed"
+    assert out.solves - state.solves <= 40
