@@ -375,7 +375,8 @@ def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol
     dphi/dtau at the stage times (2, 2N).
 
     Returns (status, u0, I_u, I_Pi).  The shooting is the solver's own (``_solve_point``),
-    whose converged sweep gives the stages and the Radau-weighted period integrals.  ``vscale`` <= 0: computed here from the grid.
+    whose converged sweep gives the stages and the Radau-weighted period integrals.
+    ``vscale`` <= 0: computed here from the grid.
     """
     if vscale <= 0.0:  # (1/4) int |dphi/dtau| by the Radau rule: a speed scale for the tolerances
         vscale = 0.0

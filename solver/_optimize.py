@@ -139,8 +139,8 @@ class _Problem:
     full_start: np.ndarray  # family parameters then T; fixed entries taken from here
     lower: np.ndarray     # bounds of x (family entries; log T unbounded)
     upper: np.ndarray
-    #: adjoint gradients taken (``differentiate``); solves are counted by the iteration
-    counts: dict = field(default_factory=lambda: {"gradients": 0})
+    #: work done: periodic solves (``solve``) and adjoint gradients (``differentiate``)
+    counts: dict = field(default_factory=lambda: {"solves": 0, "gradients": 0})
 
     def full(self, x):
         full = self.full_start.copy()
@@ -165,6 +165,7 @@ class _Problem:
     def solve(self, x, u0=None):
         """(f, trial) without the gradient; f = inf where x is outside the family or the
         solve fails.  ``differentiate(trial)`` then gives (grad f, GradientResult)."""
+        self.counts["solves"] += 1
         full = self.full(x)
         kin = self.kinematics(full)
         if kin is None:
@@ -213,6 +214,7 @@ class _PowerConstrainedProblem(_Problem):
         return trial  # counted by ``evaluate``
 
     def evaluate(self, x, u0=None):
+        self.counts["solves"] += 1
         full = self.full(x)
         kin = self.kinematics(full)
         if kin is None:
@@ -247,7 +249,6 @@ class _State:
     result: object
     iteration: int = 0
     newton_steps: int = 0
-    solves: int = 1  # periodic solves (each trial point, each gradient's own)
     stop_reason: str = ""
     condition_number: float = math.nan
     ill_conditioned: bool = False
@@ -278,11 +279,10 @@ def _projected(problem, x, g):
 
 def _difference_hessian(problem, state, free_mask, u0):
     """Forward differences of the exact gradient on the free variables (from ``state.g``),
-    symmetrised; (H, evaluations)."""
+    symmetrised; None if a solve fails."""
     idx = np.flatnonzero(free_mask)
     n = idx.size
     H = np.zeros((n, n))
-    evals = 0
     for j, i in enumerate(idx):
         # small: the regularised Coulomb objective changes its curvature by ~10% over 1e-4
         # and still visibly over 1e-7 (stick-slip features: F_uu ~ 1/delta_tau^2); Newton
@@ -292,11 +292,10 @@ def _difference_hessian(problem, state, free_mask, u0):
         xp = state.x.copy()
         xp[i] += eps
         fp, gp, _ = problem.evaluate(xp, u0)
-        evals += 1
         if gp is None:
-            return None, evals
+            return None
         H[:, j] = (gp[idx] - state.g[idx]) / eps
-    return 0.5 * (H + H.T), evals
+    return 0.5 * (H + H.T)
 
 
 def _init(problem, x0):
@@ -316,18 +315,16 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
     gnorm = float(np.linalg.norm(pg))
     newton = False
     cond = state.condition_number
-    evals = 0
     hinv = state.hinv
     wait = max(state.hessian_wait - 1, 0)
     if gnorm < newton_switch * state.first_gradient_norm and state.hessian_wait == 0:
-        H, evals = _difference_hessian(problem, state, free, u0)
+        H = _difference_hessian(problem, state, free, u0)
         if H is not None:
             eig = np.linalg.eigvalsh(H)
             cond = float(abs(eig).max() / max(abs(eig).min(), 1e-300))
             if cond > max_condition:
                 return replace(state, stop_reason="ill_conditioned", condition_number=cond,
-                               ill_conditioned=True,
-                               solves=state.solves + evals)
+                               ill_conditioned=True)
             if eig.min() > 0:
                 newton = True
                 d = np.zeros_like(x)
@@ -355,7 +352,6 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
         tried = alpha
         xt = np.clip(x + alpha * d, problem.lower, problem.upper)
         ft, trial = problem.solve(xt, u0)
-        evals += 1
         if ft <= f + c1 * alpha * slope:
             accepted = (xt, ft) + problem.differentiate(trial)
             break
@@ -381,7 +377,6 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
         while 2.0 * alpha * np.linalg.norm(d) <= max_step:
             xt = np.clip(x + 2.0 * alpha * d, problem.lower, problem.upper)
             ft, trial = problem.solve(xt, u0)
-            evals += 1
             best_f = accepted[1] if best is None else best[1]
             if ft > best_f or ft > f + c1 * 2.0 * alpha * slope:
                 break
@@ -393,13 +388,11 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
         # no decrease at any step: rounding-level flatness (ill-conditioned) or a bad direction
         flat = abs(slope) * tried < 1e-14 * max(abs(f), 1e-300)
         reason = "ill_conditioned" if flat else "line_search_failed"
-        return replace(state, stop_reason=reason, ill_conditioned=flat, condition_number=cond,
-                       solves=state.solves + evals)
+        return replace(state, stop_reason=reason, ill_conditioned=flat, condition_number=cond)
     xt, ft, gt, rt = accepted
     s = xt - x
     if np.linalg.norm(s) <= 1e-14 * (1.0 + np.linalg.norm(x)):
-        return replace(state, stop_reason="no_progress", condition_number=cond,
-                       solves=state.solves + evals)
+        return replace(state, stop_reason="no_progress", condition_number=cond)
     y = gt - g
     sy = float(s @ y)
     if not newton and sy > 1e-12 * np.linalg.norm(s) * np.linalg.norm(y):
@@ -410,7 +403,6 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
         hinv = V @ hinv @ V.T + rho * np.outer(s, s)
     return _State(x=xt, f=ft, g=gt, hinv=hinv, result=rt, iteration=state.iteration + 1,
                   newton_steps=state.newton_steps + int(newton),
-                  solves=state.solves + evals,
                   condition_number=cond, first_gradient_norm=state.first_gradient_norm,
                   hessian_wait=wait)
 
@@ -421,6 +413,13 @@ def _terminate(problem, state, gtol, max_iterations):
     if float(np.linalg.norm(_projected(problem, state.x, state.g))) < gtol:
         return True
     return state.iteration >= max_iterations
+
+
+def _drain(problem, totals):
+    """Move the problem's work counts into the totals over grid rounds."""
+    totals["solves"] += problem.counts["solves"]
+    totals["gradient_evaluations"] += problem.counts["gradients"]
+    problem.counts.update(solves=0, gradients=0)
 
 
 def _variables(template, physics, start, period_range=(1e-3, 1e4)):
@@ -552,9 +551,7 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
                           max_condition=max_condition)
         totals["iterations"] += state.iteration
         totals["newton_steps"] += state.newton_steps
-        totals["solves"] += state.solves
-        totals["gradient_evaluations"] += problem.counts["gradients"]
-        problem.counts["gradients"] = 0
+        _drain(problem, totals)
         if state.g is None:
             break
         full = problem.full(state.x)
@@ -584,10 +581,8 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
     ill = state.ill_conditioned
     if not ill and (reason != "gradient_tolerance" or bound_names):
         # diagnose why it did not converge (or sits at a bound): the curvature at the end
-        H, evals = _difference_hessian(problem, state, np.ones(state.x.size, dtype=bool),
-                                       res.u0)
-        totals["solves"] += evals
-        totals["gradient_evaluations"] += problem.counts["gradients"]
+        H = _difference_hessian(problem, state, np.ones(state.x.size, dtype=bool), res.u0)
+        _drain(problem, totals)
         if H is not None:
             eig = np.abs(np.linalg.eigvalsh(H))
             cond = float(eig.max() / max(eig.min(), 1e-300))

@@ -19,7 +19,7 @@ the comparison of a grid with its bisection is blind to a corner that both
 sample on the same side.
 
 Cost (``python -m solver.bench``, 2000 harmonic points at rtol 1e-4, 2 cores):
-about 2,300 step-sweeps per point (Radau steps times shooting sweeps, summed over
+about 2,200 step-sweeps per point (Radau steps times shooting sweeps, summed over
 the ~3 grid pairs), ~0.7 us each on one core.  B(G) is solved after G on the same
 thread, from G's u(0) and collocation polynomials (``_periodic.solve_pairs``),
 and the pairs alternate across threads so numba's static split stays balanced.
