@@ -123,7 +123,7 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
 @njit(cache=True)
 def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
                  u_out, step_u, step_pi, step_m, stages_out=None, stage_guess=None,
-                 kinematics_out=None):
+                 kinematics_out=None, weights_out=None):
     """Periodic solution for one parameter point on the first N steps of ``grid``.
 
     Writes u at the nodes into ``u_out``, the per-step integrals of u and Pi into
@@ -132,7 +132,8 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     ``stages_out`` (>= 2N,).  ``stage_guess`` (2N,), optional: starting stage values for the
     first sweep (default, or an array of another size: u_n, cold; a step whose Newton fails
     from the guess retries cold).  ``kinematics_out`` (2, >= 2N), optional: receives phi
-    and dphi/dtau at the stage times (for the adjoint, ``_gradient``).
+    and dphi/dtau at the stage times (for the adjoint, ``_gradient``).  ``weights_out`` (>= N,),
+    optional: receives the node weights of ``node_weights``.
     Returns (int_u, int_Pi, u0, status, shooting_iterations, stage_iterations).
     """
     phis = np.empty(2 * N)
@@ -244,7 +245,34 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         step_m[n] = 1.0 + m_minus_1[n]
     if stages_out is not None and stages_out.size >= 2 * N:
         stages_out[:2 * N] = stages
+    if weights_out is not None:
+        for n in range(N):  # d(step integral of u)/du_n, with dU_i/du_n from the last sweep
+            weights_out[n] = hs[n] * (0.75 * sens[2 * n] + 0.25 * sens[2 * n + 1])
+        node_weights(weights_out[:N], step_m, one_minus_M)
     return int_u, int_pi, u0, CONVERGED, it_out, stage_its
+
+
+@njit(cache=True)
+def node_weights(weights, step_m, one_minus_M):
+    """The sensitivity lambda_n of int_0^1 u dtau of the discrete periodic solution to a
+    jump of u at node n (the discrete adjoint of the shooting, for the error functional int u).
+
+    A jump d at node n is carried on as m_n d, m_{n+1} m_n d, ... and, the solution being
+    periodic, returns as M d after one period, so it adds d / (1 - M) in total there:
+    lambda_n = sum_k q_{n+k} m_n ... m_{n+k-1} / (1 - M) over one period, q_k the derivative
+    of step k's integral of u by u_k.  Backwards: lambda_n = q_n + m_n lambda_{n+1}, started
+    from lambda_0 summed directly.  ``weights`` holds q on entry and lambda on return.
+    """
+    N = weights.size
+    total = 0.0
+    carried = 1.0
+    for k in range(N):
+        total += weights[k] * carried
+        carried *= step_m[k]
+    following = total / one_minus_M
+    for n in range(N - 1, -1, -1):
+        following = weights[n] + step_m[n] * following
+        weights[n] = following
 
 
 @njit(cache=True)
@@ -301,8 +329,9 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
     previous solution where ``old_steps[j]`` > 0 (the old_* rows: its grid, node values and
     stages).  Both guesses are ``_collocation_guess``.  One thread per pair.
 
-    Returns the arrays of ``solve_points`` and the stages of every row (n, 2 (m - 1)),
-    written for the converged rows.
+    Returns the arrays of ``solve_points``, the stages of every row (n, 2 (m - 1)),
+    written for the converged rows, and the node weights (``node_weights``) of the
+    converged bisected rows (n, m - 1; NaN elsewhere).
     """
     n, m = grids.shape
     if n % 2:
@@ -310,6 +339,7 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
     int_u, int_pi, u0_out, status, its, stage_its, step_u, step_pi, step_m, nodes = \
         batch_outputs(n, m)
     stages = np.empty((n, 2 * (m - 1)))
+    weights = np.full((n, m - 1), np.nan)
     for j in prange(n // 2):
         c = 2 * j
         f = c + 1
@@ -334,5 +364,5 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
         int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = _solve_point(
             code, params[f], grids[f], n_steps[f], kappa[f], mu_n[f], mu_s[f], p[f],
             dtau[f], start, vscale[f], rtol, nodes[f], step_u[f], step_pi[f], step_m[f],
-            stages[f], guess_f)
-    return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes, stages
+            stages[f], guess_f, None, weights[f])
+    return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes, stages, weights

@@ -16,11 +16,16 @@ irregularly.  A point is accepted only from the second grid on (a single
 coarse grid can miss a short sticking phase altogether).  The corners of F
 along the solution are nodes of every grid after the first (``_events``):
 the comparison of a grid with its bisection is blind to a corner that both
-sample on the same side.
+sample on the same side.  It is blind as well to a body held at rest on a
+turning point of phi by both grids (``_turning``): before a pair is accepted,
+the steps next to the zeros of dphi/dtau are checked by their defect, weighted
+by the sensitivity of U to it; that estimate is added to E, and where it is
+large nodes are graded toward the turning point.
 
 Cost (``python -m solver.bench``, 2000 harmonic points at rtol 1e-4, 2 cores):
-about 2,200 step-sweeps per point (Radau steps times shooting sweeps, summed over
-the ~3 grid pairs), ~0.7 us each on one core.  B(G) is solved after G on the same
+about 2,400 step-sweeps per point (Radau steps times shooting sweeps, summed over
+the ~3 grid pairs; 10 % of them since the turning-point check, which also costs
+~4 % of the time itself), ~0.7 us each on one core.  B(G) is solved after G on the same
 thread, from G's u(0) and collocation polynomials (``_periodic.solve_pairs``),
 and the pairs alternate across threads so numba's static split stays balanced.
 
@@ -44,6 +49,7 @@ from ._events import event_times, place_events
 from ._kinematics import period_grid
 from ._limits import fast_limit_velocity, kinematic_speed
 from ._status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
+from ._turning import MAX_FLAGGED, grade_towards, turning_point_estimates
 
 METHODS = ("periodic", "march")
 U_FLOOR_FRACTION = 1e-3
@@ -334,6 +340,32 @@ def _assess_pairs(grids, n_steps, int_u, int_pi, status, step_u, step_pi, step_m
     return estimate, accepted, levels
 
 
+def _check_turning_points(code, params, active, padded, steps, int_u, nodes, stages, weights,
+                          physics, u_floor, rtol, estimate, accepted):
+    """``_turning``'s check of the bisected solutions of the pairs Richardson accepts: adds
+    its estimate and withdraws the acceptance where the sum exceeds rtol.
+
+    Returns (estimate, withdrawn, flagged): the pairs whose acceptance it withdraws, and
+    flagged (pairs, MAX_FLAGGED, 3), the nodes to grade toward each turning point
+    (``grade_towards``), NaN where none."""
+    flagged = np.full((active.size, MAX_FLAGGED, 3), np.nan)
+    check = np.flatnonzero(accepted)
+    if check.size == 0:
+        return estimate, check, flagged
+    rows = 2 * check + 1
+    points = active[check]
+    scale_u = np.maximum(np.abs(int_u[rows]), u_floor[points])
+    extra, flagged[check] = turning_point_estimates(
+        code, params[points], padded[rows], steps[rows], nodes[rows], stages[rows],
+        weights[rows], physics.inertia_factor[points], physics.mu_n[points],
+        physics.mu_s[points], physics.p[points], physics.delta_tau[points], scale_u,
+        float(rtol), 4 * MIN_STEP)
+    estimate = estimate.copy()
+    estimate[check] += extra
+    withdrawn = check[estimate[check] > rtol]
+    return estimate, withdrawn, flagged
+
+
 def _chatter(stiff_coarse, stiff_fine, u_coarse, h, threshold):
     """The coarse steps where the march chatters (on either grid of the pair), or None when
     the u stalled in them carries at most ``threshold`` of int u: a short chatter (a brief
@@ -360,21 +392,22 @@ def _run_level(method, code, params, grids, n_steps, physics, u0, vscale, rtol, 
     """Solve the points ``index`` on padded ``grids``.
 
     Returns (int_u, int_pi, u0, status, iterations, step_u, step_pi, step_m, u_nodes,
-    step_stiff, stages); step_stiff (march only, else None) flags the steps that do not
+    step_stiff, stages, weights); step_stiff (march only, else None) flags the steps that do not
     resolve the friction's time scale (chatter, ``_march.step_jumps``).  ``paired``: rows
     2j + 1 bisect rows 2j (``_periodic.solve_pairs`` then starts each from its partner, and
     pair j's coarse grid from ``previous``, the padded (grids, steps, nodes, stages) of an
-    earlier solution; stages: the periodic stages of every row, else None).
+    earlier solution; stages: the periodic stages of every row, weights: the node weights
+    of the bisected rows (``_periodic.node_weights``), else None).
     """
     args = (code, params[index], grids, n_steps, physics.inertia_factor[index],
             physics.mu_n[index], physics.mu_s[index], physics.p[index],
             physics.delta_tau[index], u0[index], np.maximum(vscale[index], 1e-300), float(rtol))
     if method == "periodic" and paired:
         out = _periodic.solve_pairs(*args, *previous)
-        return out[:9] + (None, out[9])
+        return out[:9] + (None,) + out[9:]
     if method == "periodic":
-        return _periodic.solve_points(*args) + (None, None)
-    return _march.march_points(*args, MARCH_MAX_STEPS) + (None,)
+        return _periodic.solve_points(*args) + (None, None, None)
+    return _march.march_points(*args, MARCH_MAX_STEPS) + (None, None)
 
 
 def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e-12):
@@ -475,7 +508,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         # rows alternate coarse, fine: the kernel's static split over threads then gets
         # equal work (coarse rows first would give one thread a third, the other two)
         padded, steps = _pad([g for pair in zip(coarse, fine) for g in pair])
-        iu, ip, u0_new, st, its, step_u, step_pi, step_m, ser, stiff, stages = _run_level(
+        iu, ip, u0_new, st, its, step_u, step_pi, step_m, ser, stiff, stages, weights = _run_level(
             method, code, params, padded, steps, physics, u0, vscale, rtol, np.repeat(active, 2),
             paired=True, previous=_pad_previous([previous[i] for i in active]))
         m = active.size
@@ -506,6 +539,18 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         estimate_pass, accepted, levels = _assess_pairs(
             padded, steps, iu, ip, st, step_u, step_pi, step_m, ser, u_floor[active], rtol,
             spec.order, may_accept, forced)
+        flagged = None
+        if weights is not None:  # periodic: the check at turning points of phi (``_turning``)
+            estimate_pass, withdrawn, flagged = _check_turning_points(
+                code, params, active, padded, steps, iu, ser, stages, weights, physics,
+                u_floor, rtol, estimate_pass, accepted)
+            if withdrawn.size:  # these need Richardson's marking too
+                rows = np.stack([2 * withdrawn, 2 * withdrawn + 1], axis=1).ravel()
+                levels[withdrawn] = _assess_pairs(
+                    padded[rows], steps[rows], iu[rows], ip[rows], st[rows], step_u[rows],
+                    step_pi[rows], step_m[rows], ser[rows], u_floor[active[withdrawn]], rtol,
+                    spec.order, np.zeros(withdrawn.size, dtype=bool), forced[withdrawn])[2]
+                accepted[withdrawn] = False
         estimate[active[ok]] = estimate_pass[ok]
         keep = np.ones(m, dtype=bool)
         for j, i in enumerate(active):
@@ -526,6 +571,10 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                     keep[j] = False  # cannot resolve sticking within the budget: UNSTABLE
                     continue
             new, refined = _next_grid(coarse[j], levels[j, :n_coarse], found[j], corners[i])
+            if flagged is not None and np.isfinite(flagged[j, 0, 0]):
+                graded = grade_towards(new, flagged[j], EVENT_GAP)
+                refined = refined or graded.size > new.size
+                new = graded
             if new.size - 1 > max_steps or not refined:
                 keep[j] = False  # out of budget: TOLERANCE_NOT_REACHED or the kernel's reason
                 if return_series and ok[j]:

@@ -1,0 +1,257 @@
+"""Turning points of phi: a check of the steps next to them that Richardson cannot make.
+
+Where omega = dphi/dtau vanishes (a turning point tau_z of the motion) the links stop
+rotating.  Near it the link velocities are u and ~ omega'(tau_z) (tau - tau_z) s, and
+the force law is homogeneous in the velocity (degree p, up to delta_tau), so F(u, tau)
+changes by O(mu) across a window of width w ~ |u(tau_z)| / |omega'(tau_z)| around tau_z:
+(tau_z, u = 0) is a singular point of eq. (Newtonu).  A step much longer than w that
+samples F inside the window (a node on tau_z, where a Radau stage sees omega = 0 and the
+whole link sliding one way: full friction) makes an O(T^(2-p) mu h) error in u, and its
+implicit stage can stop the body there.  A grid and its bisection then share one wrong
+solution, and their comparison is blind to it.  Measured (harmonic A0 1.0599, A1 0.5407,
+anisotropy 0.119, scaled period 0.088, delta 1e-8): rtol 1e-3 returned U = -0.02308
+with an estimate of 2.5e-4 against the true -0.015694; the grids held u = 4e-10 at
+tau_z = 1/2 where the solution passes at 6.6e-4, and uniform grids stayed trapped up to
+~1,000 steps.
+
+The check, on the solution a refinement pass would accept: for each step within its own
+length of a zero of omega, the defect of its collocation polynomial u_h (through u_n,
+U1, U2 at theta = 0, 1/3, 1),
+
+    D_n = u_{n+1} - u_n - T^(2-p) int_step F(u_h(tau), tau) dtau,
+
+is the error the step makes in u (the collocation conditions make the Radau weights'
+quadrature of that integral exact, so D_n is the quadrature error of F along u_h).  The
+integral is taken by Gauss-Legendre panels graded geometrically toward tau_z down to w/8
+(``step_defect``), so it resolves the window the step does not.  Weighted by the node
+weight lambda_{n+1} (``_periodic.node_weights``, the sensitivity of int u to a jump of u
+there) |D_n lambda_{n+1}| is the step's error in int u, linearised (a dual-weighted
+residual).  Their sum, relative to the norm of U (``_solve``), is added to the error
+estimate; steps holding more than a tenth of rtol get nodes graded toward tau_z.
+The check covers U only (P's error from the same defect is smaller: Pi is dominated by the
+omega terms, and where omega vanishes Pi does too).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ._force import force_and_slope
+from ._kinematics import angle_and_rate
+
+_x4, _w4 = np.polynomial.legendre.leggauss(4)
+GL4_NODES = 0.5 * (_x4 + 1.0)
+GL4_WEIGHTS = 0.5 * _w4
+
+#: panels are graded toward tau_z down to this fraction of the window w
+WINDOW_FRACTION = 0.125
+#: ... and never below this fraction of the step
+MIN_PANEL_FRACTION = 1e-14
+#: a step whose weighted defect exceeds this share of rtol is graded toward tau_z
+FLAG_SHARE = 0.1
+#: at most this many flagged steps per point are returned
+MAX_FLAGGED = 32
+
+
+@njit(cache=True)
+def _rate(code, params, t, side):
+    return angle_and_rate(code, params, t, side)[1]
+
+
+@njit(cache=True)
+def zero_of_rate(code, params, t0, t1, w0, w1, side):
+    """A zero of omega in [t0, t1] given omega(t0) = w0, omega(t1) = w1 of opposite signs
+    (or one of them 0): Illinois regula falsi."""
+    if w0 == 0.0:
+        return t0
+    if w1 == 0.0:
+        return t1
+    a, b, fa, fb = t0, t1, w0, w1
+    c = a
+    last = 0
+    for _ in range(100):
+        c = (a * fb - b * fa) / (fb - fa)
+        if not (a < c < b) or b - a <= 1e-15 * max(1.0, abs(c)):
+            c = min(max(c, a), b)
+            break
+        fc = _rate(code, params, c, side)
+        if fc == 0.0:
+            break
+        if fc * fa < 0.0:
+            b, fb = c, fc
+            if last == -1:
+                fa *= 0.5
+            last = -1
+        else:
+            a, fa = c, fc
+            if last == 1:
+                fb *= 0.5
+            last = 1
+    return c
+
+
+@njit(cache=True)
+def _collocation(theta, u_n, U1, U2):
+    return (3.0 * (theta - 1.0 / 3.0) * (theta - 1.0) * u_n
+            - 4.5 * theta * (theta - 1.0) * U1 + 1.5 * theta * (theta - 1.0 / 3.0) * U2)
+
+
+@njit(cache=True)
+def _panel(code, params, t0, h, a, b, u_n, U1, U2, side, mu_n, mu_s, p, dtau):
+    """int_a^b F(u_h(tau), tau) dtau by 4-point Gauss-Legendre."""
+    total = 0.0
+    for i in range(4):
+        t = a + (b - a) * GL4_NODES[i]
+        phi, om = angle_and_rate(code, params, t, side)
+        u = _collocation((t - t0) / h, u_n, U1, U2)
+        total += GL4_WEIGHTS[i] * force_and_slope(u, phi, om, mu_n, mu_s, p, dtau)[0]
+    return (b - a) * total
+
+
+@njit(cache=True)
+def step_defect(code, params, t0, t1, u_n, U1, U2, tz, kappa, mu_n, mu_s, p, dtau):
+    """D_n of the module docstring for the step [t0, t1] with stages U1, U2, the panels
+    graded toward the point of the step nearest to the zero tz of omega.
+
+    Returns (D_n, number of panels)."""
+    h = t1 - t0
+    side = t0 + 0.5 * h
+    centre = min(max(tz, t0), t1)
+    # window: |u_h| / |omega'| at the zero (omega' by a central difference)
+    eta = 1e-6 * h
+    lo = max(tz - eta, t0)
+    hi = min(tz + eta, t1)
+    slope = abs(_rate(code, params, hi, side) - _rate(code, params, lo, side)) / (hi - lo)
+    u_z = _collocation((centre - t0) / h, u_n, U1, U2)
+    window = max(abs(u_z), dtau) / slope if slope > 0.0 else h
+    smallest = max(WINDOW_FRACTION * window, 0.125 * abs(centre - tz), MIN_PANEL_FRACTION * h)
+    total = 0.0
+    panels = 0
+    for direction in (-1.0, 1.0):
+        far = t1 - centre if direction > 0.0 else centre - t0
+        outer = far
+        while outer > 0.0:
+            inner = 0.5 * outer if 0.5 * outer > smallest else 0.0
+            a = centre + direction * inner
+            b = centre + direction * outer
+            if direction < 0.0:
+                a, b = b, a
+            total += _panel(code, params, t0, h, a, b, u_n, U1, U2, side, mu_n, mu_s, p, dtau)
+            panels += 1
+            outer = inner
+    return (U2 - u_n) - kappa * total, panels
+
+
+@njit(cache=True)
+def _point_check(code, params, grid, N, u_nodes, stages, weights, kappa, mu_n, mu_s, p, dtau,
+                 scale_u, rtol, min_step, flagged):
+    """Returns (estimate, number of flagged steps); flagged rows (tz, target step, reach)."""
+    estimate = 0.0
+    count = 0
+    # zeros of omega: sign changes over each step, omega one-sided from inside the step
+    zeros = np.empty(N + 1)
+    n_zeros = 0
+    for n in range(N):
+        t0 = grid[n]
+        t1 = grid[n + 1]
+        side = 0.5 * (t0 + t1)
+        w0 = _rate(code, params, t0, side)
+        w1 = _rate(code, params, t1, side)
+        if w0 * w1 <= 0.0 and (w0 != 0.0 or w1 != 0.0) and n_zeros < zeros.size:
+            tz = zero_of_rate(code, params, t0, t1, w0, w1, side)
+            if n_zeros == 0 or tz - zeros[n_zeros - 1] > 0.0:
+                zeros[n_zeros] = tz
+                n_zeros += 1
+    if n_zeros == 0:
+        return 0.0, 0
+    k = 0
+    for n in range(N):
+        t0 = grid[n]
+        t1 = grid[n + 1]
+        h = t1 - t0
+        # the nearest zero (zeros are sorted; the period wraps)
+        while k + 1 < n_zeros and zeros[k + 1] <= t0:
+            k += 1
+        best = zeros[k]
+        distance = math.inf
+        for cand in (zeros[k], zeros[min(k + 1, n_zeros - 1)], zeros[0] + 1.0,
+                     zeros[n_zeros - 1] - 1.0):
+            d = max(cand - t1, t0 - cand, 0.0)
+            if d < distance:
+                distance = d
+                best = cand
+        if distance > h:
+            continue
+        defect, _ = step_defect(code, params, t0, t1, u_nodes[n], stages[2 * n],
+                                stages[2 * n + 1], best, kappa, mu_n, mu_s, p, dtau)
+        lam = weights[n + 1] if n + 1 < N else weights[0]
+        share = abs(defect * lam) / scale_u
+        if not math.isfinite(share):
+            share = math.inf
+        estimate += share
+        if share > FLAG_SHARE * rtol and count < flagged.shape[0]:
+            # in the trapped regime D_n ~ h: shrink the step in proportion
+            target = h * min(0.5, FLAG_SHARE * rtol / share)
+            flagged[count, 0] = best - math.floor(best)
+            flagged[count, 1] = max(target, min_step)
+            flagged[count, 2] = distance + h
+            count += 1
+    return estimate, count
+
+
+@njit(cache=True, parallel=True)
+def turning_point_estimates(code, params, grids, n_steps, u_nodes, stages, weights, kappa, mu_n,
+                            mu_s, p, dtau, scale_u, rtol, min_step):
+    """The check of the module docstring for every row of a solved batch.
+
+    grids (n, m), row i valid for n_steps[i] steps; u_nodes (n, >= N), stages (n, >= 2N) and
+    weights (n, >= N) of the converged solutions; kappa = T^(2-p), mu_n, mu_s, p, dtau,
+    scale_u (the norm of int u) : (n,).
+    Returns (estimate (n,), flagged (n, MAX_FLAGGED, 3): rows (tz, target step, reach), NaN
+    padded): estimate is sum |D_n lambda_{n+1}| / scale_u.
+    """
+    n = grids.shape[0]
+    estimate = np.zeros(n)
+    flagged = np.full((n, MAX_FLAGGED, 3), np.nan)
+    for i in prange(n):
+        estimate[i], _ = _point_check(code, params[i], grids[i], n_steps[i], u_nodes[i],
+                                      stages[i], weights[i], kappa[i], mu_n[i], mu_s[i], p[i],
+                                      dtau[i], scale_u[i], rtol, min_step, flagged[i])
+    return estimate, flagged
+
+
+@njit(cache=True)
+def grade_towards(grid, flagged, min_gap):
+    """``grid`` with nodes at tz and tz +- target 2^k (k = 0, 1, ... while within reach of tz)
+    for every flagged row (tz, target, reach); nodes within ``min_gap`` of others are not
+    added."""
+    extra = []
+    for r in range(flagged.shape[0]):
+        tz, target, reach = flagged[r, 0], flagged[r, 1], flagged[r, 2]
+        if not math.isfinite(tz):
+            continue
+        extra.append(tz)
+        d = target
+        while d < reach:
+            for t in (tz - d, tz + d):
+                extra.append(t - math.floor(t))  # the period wraps
+            d *= 2.0
+    if len(extra) == 0:
+        return grid
+    candidates = np.sort(np.array(extra))
+    out = np.empty(grid.size + candidates.size)
+    out[:grid.size] = grid
+    count = grid.size
+    for t in candidates:
+        pos = np.searchsorted(grid, t)
+        near = math.inf
+        if pos < grid.size:
+            near = grid[pos] - t
+        if pos > 0:
+            near = min(near, t - grid[pos - 1])
+        if near > min_gap and (count == grid.size or t - out[count - 1] > min_gap):
+            out[count] = t
+            count += 1
+    return np.sort(out[:count])

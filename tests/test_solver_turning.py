@@ -1,0 +1,162 @@
+"""The turning-point check (``solver._turning``) and the node weights it uses."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+import solver
+from solver._force import force_and_slope
+from solver._kinematics import angle_and_rate, period_grid
+from solver._periodic import _solve_point, radau_step
+from solver._turning import grade_towards, step_defect, turning_point_estimates
+
+
+def _stage_kinematics(code, params, grid):
+    rows = []
+    for n in range(grid.size - 1):
+        t0, t1 = grid[n], grid[n + 1]
+        mid = 0.5 * (t0 + t1)
+        phi1, om1 = angle_and_rate(code, params, t0 + (t1 - t0) / 3.0, mid)
+        phi2, om2 = angle_and_rate(code, params, t1, mid)
+        rows.append((t1 - t0, math.sin(phi1), math.cos(phi1), om1, math.sin(phi2),
+                     math.cos(phi2), om2))
+    return rows
+
+
+def _periodic_int_u_with_jump(rows, physics, node, jump, u0):
+    """int u of the discrete periodic solution with u raised by ``jump`` at ``node``, by a
+    shooting of our own (secant on u(0)) over ``radau_step``."""
+    kappa, mu_n, mu_s, p, dtau = physics
+
+    def sweep(start):
+        u, total = start, 0.0
+        for n, (h, s1, c1, o1, s2, c2, o2) in enumerate(rows):
+            if n == node and n > 0:
+                u += jump
+            U1, U2, *_, ok = radau_step(u, u, u, h, s1, c1, o1, s2, c2, o2, kappa, mu_n, mu_s,
+                                        p, dtau, 1e-15)
+            assert ok
+            total += h * (0.75 * U1 + 0.25 * U2)
+            u = U2
+        return u + (jump if node == 0 else 0.0), total
+
+    a, b = u0, u0 + 1e-3
+    ga, gb = sweep(a)[0] - a, sweep(b)[0] - b
+    for _ in range(60):
+        if gb == ga or abs(gb) < 1e-16:
+            break
+        a, b, ga = b, b - gb * (b - a) / (gb - ga), gb
+        gb = sweep(b)[0] - b
+    return sweep(b)[1]
+
+
+@pytest.mark.parametrize("p,delta", [(0.5, 1e-3), (0.0, 1e-2)])
+def test_node_weights_are_the_sensitivity_of_int_u_to_a_jump(p, delta):
+    kin = solver.Harmonic(1.1, 0.6)
+    phys = solver.Physics.from_scaled(0.3, 1.5, p=p, delta=delta)
+    code, params = kin.kernel_encoding()
+    grid = period_grid(kin, 32)[0]
+    N = grid.size - 1
+    physics = (phys.inertia_factor[0], phys.mu_n[0], phys.mu_s[0], phys.p[0], phys.delta_tau[0])
+    out = [np.empty(N) for _ in range(5)]
+    weights = np.empty(N)
+    *_, u0, status, _, _ = _solve_point(code, params[0], grid, N, *physics, 0.0, 1.0, 1e-13,
+                                        *out[:4], out[4].repeat(2), None, None, weights)
+    assert status == 0
+    rows = _stage_kinematics(code, params[0], grid)
+    jump = 1e-6
+    for node in (0, 5, 17, 31):
+        up = _periodic_int_u_with_jump(rows, physics, node, jump, u0)
+        down = _periodic_int_u_with_jump(rows, physics, node, -jump, u0)
+        fd = (up - down) / (2 * jump)
+        assert abs(weights[node] - fd) <= 1e-6 * abs(fd), (node, weights[node], fd)
+
+
+def _defect_by_quad(code, params, t0, t1, un, U1, U2, tz, physics, window):
+    kappa, mu_n, mu_s, p, dtau = physics
+    h = t1 - t0
+
+    def force(t):
+        x = (t - t0) / h
+        u = 3 * (x - 1 / 3) * (x - 1) * un - 4.5 * x * (x - 1) * U1 + 1.5 * x * (x - 1 / 3) * U2
+        phi, om = angle_and_rate(code, params, t, t0 + 0.5 * h)
+        return force_and_slope(u, phi, om, mu_n, mu_s, p, dtau)[0]
+
+    points = [t for t in (tz - 10 * window, tz - window, tz, tz + window, tz + 10 * window)
+              if t0 < t < t1]
+    edges = [t0, *points, t1]
+    total = sum(quad(force, a, b, limit=400, epsabs=1e-15, epsrel=1e-12)[0]
+                for a, b in zip(edges[:-1], edges[1:]))
+    return (U2 - un) - kappa * total
+
+
+@pytest.mark.parametrize("t0,t1,un,U1,U2", [
+    (0.5 - 1 / 64, 0.5, 1e-3, 6e-4, 1e-9),        # the body stopped on the turning point
+    (0.5 - 1 / 64, 0.5, 7e-4, 6.8e-4, 6.6e-4),    # passing it (window ~3e-5)
+    (0.5 - 1 / 128, 0.5 + 1 / 128, -2e-4, 1e-6, 3e-4),  # the turning point inside the step
+    (0.5, 0.5 + 1 / 32, 0.0, 2e-5, 8e-5),
+])
+def test_step_defect_resolves_the_window_at_a_turning_point(t0, t1, un, U1, U2):
+    kin = solver.Harmonic(1.06, 0.54)
+    phys = solver.Physics.from_scaled(0.119, 0.088, p=0.0, delta=1e-8)
+    code, params = kin.kernel_encoding()
+    physics = (phys.inertia_factor[0], phys.mu_n[0], phys.mu_s[0], phys.p[0], phys.delta_tau[0])
+    window = max(abs(U2), 1e-9) / (4 * math.pi ** 2 * 0.54)
+    got, panels = step_defect(code, params[0], t0, t1, un, U1, U2, 0.5, *physics)
+    want = _defect_by_quad(code, params[0], t0, t1, un, U1, U2, 0.5, physics, window)
+    # relative to the trapped defect kappa mu h; the kinks of F in the window (the zero of the
+    # link's velocity crossing its ends) inside a panel limit the Gauss rule to ~1e-6 of it
+    scale = physics[0] * max(physics[1], physics[2]) * (t1 - t0)
+    assert abs(got - want) <= 1e-5 * scale, (got, want)
+    assert panels <= 120
+
+
+def test_grade_towards_adds_geometric_nodes_around_the_turning_point():
+    grid = np.linspace(0.0, 1.0, 33)
+    flagged = np.full((4, 3), np.nan)
+    flagged[0] = (0.5, 1e-6, 1 / 32 + 1 / 32)
+    flagged[1] = (0.0, 1e-5, 1 / 32)  # wraps around the period
+    out = grade_towards(grid, flagged, 1e-9)
+    assert out[0] == 0.0 and out[-1] == 1.0 and np.all(np.diff(out) > 1e-9)
+    assert set(grid) <= set(out)
+    steps = np.diff(out)
+    near = np.abs(0.5 * (out[:-1] + out[1:]) - 0.5)
+    # every step within reach is at most twice its distance to tau_z (or the target)
+    within = near < 1 / 32
+    assert np.all(steps[within] <= 2 * np.maximum(near[within], 1e-6) + 1e-15)
+    assert steps.min() >= 1e-6 * (1 - 1e-9) and out[1] <= 1e-5 * (1 + 1e-9)
+    assert 1 - out[-2] <= 1e-5 * (1 + 1e-9)
+    assert np.array_equal(grade_towards(grid, np.full((4, 3), np.nan), 1e-9), grid)
+
+
+def test_turning_point_estimate_sees_the_trap_and_not_a_resolved_solution():
+    """The bisected solution of a 64-step grid of the session-4 case is trapped (U off by 47 %);
+    the check sees a large error there and a small one on the accepted adaptive grid."""
+    kin = solver.Harmonic(1.059879, 0.540691)
+    phys = solver.Physics.from_scaled(0.119099, 0.088041, p=0.0, delta=1e-8)
+    code, params = kin.kernel_encoding()
+    physics = (phys.inertia_factor[0], phys.mu_n[0], phys.mu_s[0], phys.p[0], phys.delta_tau[0])
+    V = solver.kinematic_speed(kin)[0]
+    good = solver.solve_periodic(kin, phys, rtol=1e-4, return_series=True)
+    ref_mean_u = good.mean_u[0]
+    estimates = []
+    for grid in (period_grid(kin, 64)[0], np.r_[good.tau[0], 1.0]):
+        N = grid.size - 1
+        nodes, step_u, step_pi, step_m, weights = (np.empty(N) for _ in range(5))
+        stages = np.empty(2 * N)
+        int_u, *_, status, _, _ = _solve_point(code, params[0], grid, N, *physics, 0.0, V, 1e-10,
+                                               nodes, step_u, step_pi, step_m, stages, None,
+                                               None, weights)
+        assert status == 0
+        scale = max(abs(int_u), 1e-3 * V)
+        estimate, flagged = turning_point_estimates(
+            code, params, grid[None], np.array([N]), nodes[None], stages[None], weights[None],
+            *(np.array([x]) for x in physics), np.array([scale]), 1e-4, 1e-7)
+        estimates.append((abs(int_u - ref_mean_u) / scale, estimate[0],
+                          np.isfinite(flagged[0, :, 0]).sum()))
+    (trapped_error, trapped_estimate, trapped_flags), (error, estimate, flags) = estimates
+    assert trapped_error > 0.3 and trapped_estimate > 1e-2 and trapped_flags >= 1
+    assert error < 1e-4 and estimate < 1e-5 and flags == 0
