@@ -359,7 +359,7 @@ def _check_turning_points(code, params, active, padded, steps, int_u, nodes, sta
         code, params[points], padded[rows], steps[rows], nodes[rows], stages[rows],
         weights[rows], physics.inertia_factor[points], physics.mu_n[points],
         physics.mu_s[points], physics.p[points], physics.delta_tau[points], scale_u,
-        float(rtol), 4 * MIN_STEP)
+        float(rtol), 2 * EVENT_GAP)
     estimate = estimate.copy()
     estimate[check] += extra
     withdrawn = check[estimate[check] > rtol]
@@ -541,16 +541,20 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
             spec.order, may_accept, forced)
         flagged = None
         if weights is not None:  # periodic: the check at turning points of phi (``_turning``)
+            estimate_richardson = estimate_pass
             estimate_pass, withdrawn, flagged = _check_turning_points(
                 code, params, active, padded, steps, iu, ser, stages, weights, physics,
                 u_floor, rtol, estimate_pass, accepted)
-            if withdrawn.size:  # these need Richardson's marking too
-                rows = np.stack([2 * withdrawn, 2 * withdrawn + 1], axis=1).ravel()
-                levels[withdrawn] = _assess_pairs(
+            accepted[withdrawn] = False
+            # withdrawn pairs are graded toward their turning points; Richardson's marking
+            # (Doerfler's, its estimate being below rtol) only where that estimate is large
+            marked = withdrawn[estimate_richardson[withdrawn] > 0.5 * rtol]
+            if marked.size:
+                rows = np.stack([2 * marked, 2 * marked + 1], axis=1).ravel()
+                levels[marked] = _assess_pairs(
                     padded[rows], steps[rows], iu[rows], ip[rows], st[rows], step_u[rows],
-                    step_pi[rows], step_m[rows], ser[rows], u_floor[active[withdrawn]], rtol,
-                    spec.order, np.zeros(withdrawn.size, dtype=bool), forced[withdrawn])[2]
-                accepted[withdrawn] = False
+                    step_pi[rows], step_m[rows], ser[rows], u_floor[active[marked]], rtol,
+                    spec.order, np.zeros(marked.size, dtype=bool), forced[marked])[2]
         estimate[active[ok]] = estimate_pass[ok]
         keep = np.ones(m, dtype=bool)
         for j, i in enumerate(active):
