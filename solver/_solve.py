@@ -58,6 +58,10 @@ MAX_BISECTIONS = 4  # per refinement pass and step
 MIN_STEP = 2.0 ** -26
 #: an event this close to a node is taken to be on it (keeps steps above MIN_STEP)
 EVENT_GAP = 4 * MIN_STEP
+#: the smallest step graded toward a turning point of phi (``_turning``): the window there,
+#: ~|u| / |phi''| wide, can be far below MIN_STEP (4e-9 measured at scaled period 2^-4.5)
+#: and only its own geometric grading, a few nodes per halving, needs to resolve it
+TURNING_MIN_STEP = 2.0 ** -36
 #: the march gives up on chatter when resolving it would need this many times its budget
 HOPELESS = 8
 #: ... or when it still chatters after this many passes that refined the chattering steps
@@ -359,7 +363,7 @@ def _check_turning_points(code, params, active, padded, steps, int_u, nodes, sta
         code, params[points], padded[rows], steps[rows], nodes[rows], stages[rows],
         weights[rows], physics.inertia_factor[points], physics.mu_n[points],
         physics.mu_s[points], physics.p[points], physics.delta_tau[points], scale_u,
-        float(rtol), 2 * EVENT_GAP)
+        float(rtol), TURNING_MIN_STEP)
     estimate = estimate.copy()
     estimate[check] += extra
     withdrawn = check[estimate[check] > rtol]
@@ -576,7 +580,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                     continue
             new, refined = _next_grid(coarse[j], levels[j, :n_coarse], found[j], corners[i])
             if flagged is not None and np.isfinite(flagged[j, 0, 0]):
-                graded = grade_towards(new, flagged[j], EVENT_GAP)
+                graded = grade_towards(new, flagged[j], 0.25 * TURNING_MIN_STEP)
                 refined = refined or graded.size > new.size
                 new = graded
             if new.size - 1 > max_steps or not refined:
