@@ -7,7 +7,11 @@ scalings.  Pure numerics, batched over parameter points; no file or dask I/O.
 Reference: S. Alben and C. Puritz, "Intermittent sliding locomotion of a
 two-link body" (``shared/paper/intermittent_sliding_two_link.tex``).
 """
-from ._force import force_and_slope, power_density
+from ._cache import use_source_keyed_cache
+
+use_source_keyed_cache()  # before any kernel is decorated
+
+from ._force import force_and_slope, power_density  # noqa: E402
 from ._gradient import (DiscreteSolution, FixedGrid, GradientResult, adaptive_grid,
                         discrete_objective, discrete_solution, family_parameters,
                         force_partials, objective_gradient, with_family_parameters)
