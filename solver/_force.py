@@ -80,8 +80,9 @@ GL16_WEIGHTS = 0.5 * _w16
 SWITCH_RATIO = 4.0
 #: the series for K(X) is used for |X| above this
 K_SERIES_START = 2.0
-#: floor on e when delta = 0 (p > 0 only): keeps 0 * inf out of the algebra
-E_FLOOR = 1e-150
+#: floor on e when delta = 0 (p > 0 only): keeps 0 * inf out of the algebra (1e-150 did not:
+#: at u = omega = 0, r^(p-3) overflowed and m_2^1 = 0 * inf made dF/du NaN)
+E_FLOOR = 1e-100
 
 
 @njit(cache=True)

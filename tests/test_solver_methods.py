@@ -332,3 +332,24 @@ def test_stage_newton_stops_within_its_tolerance():
             checked += 1
     assert checked > 600
     assert worst <= 1.0, worst
+
+
+def test_stage_newton_converges_at_a_singular_slope():
+    """0 < p < 1 with delta = 0: at a corner of phi where omega -> 0 (exponent 3, concave up)
+    and the body nearly at rest, F ~ -|u|^p sign u has an infinite slope at u = 0 and Newton
+    flipped the stage's sign back and forth for 60 iterations: every grid up to 2048 steps
+    failed (STAGE_SOLVE_FAILED), rtol 1e-3 ended on 8,196 steps and rtol 1e-6 failed.  The
+    reference is a uniform grid of 2^16 steps (2^17 agrees to ~1e-9 of the norm)."""
+    kin = solver.PowerLaw(0.51732343, 0.36901758, 0.34092877, 3.0, True, 2.0, False)
+    phys = solver.Physics.from_scaled(2 ** -0.4, 2 ** 3.03, p=0.5, delta=0.0)
+    mean_u, mean_pi, status = solver.solve_fixed_grid(kin, phys, 2 ** 16)
+    assert status[0] == 0
+    T = phys.period
+    V = solver.kinematic_speed(kin)
+    for rtol in (1e-3, 1e-6):
+        r = solver.solve_periodic(kin, phys, rtol=rtol)
+        assert r.status[0] == 0, rtol
+        error_u = abs(r.U[0] - mean_u[0] / T[0]) * T[0] / max(abs(mean_u[0]), 1e-3 * V[0])
+        error_p = abs(r.P[0] / (mean_pi[0] * T[0] ** -1.5) - 1.0)
+        assert max(error_u, error_p) <= rtol, (rtol, error_u, error_p)
+    assert solver.solve_periodic(kin, phys, rtol=1e-3).n_tau[0] <= 1000
