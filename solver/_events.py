@@ -110,17 +110,24 @@ def _locate(code, params, grid, N, u_nodes, n, k, g0, g1, physics):
         fc = _event_function(k, u0 + x * (slope + curve * x), phi, om)
         if fc == 0.0:
             break
-        if fc * fa < 0.0:
-            b, fb = c, fc
-            if side == -1:
-                fa *= 0.5
-            side = -1
-        else:
-            a, fa = c, fc
-            if side == 1:
-                fb *= 0.5
-            side = 1
+        a, b, fa, fb, side = illinois_update(a, b, fa, fb, c, fc, side)
     return c
+
+
+@njit(cache=True)
+def illinois_update(a, b, fa, fb, c, fc, last):
+    """One bracket update of Illinois regula falsi: the new point c (value fc) replaces the
+    end of [a, b] on its side, and the other end's value is halved when the same end was kept
+    twice running (``last``: -1 when b was replaced, 1 when a was, 0 at the start).
+
+    Returns (a, b, fa, fb, last)."""
+    if fc * fa < 0.0:
+        if last == -1:
+            fa *= 0.5
+        return a, c, fa, fc, -1
+    if last == 1:
+        fb *= 0.5
+    return c, b, fc, fb, 1
 
 
 @njit(cache=True, error_model="numpy")

@@ -48,6 +48,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ._events import illinois_update
 from ._force import force_and_slope
 from ._kinematics import angle_and_rate
 
@@ -99,16 +100,7 @@ def zero_of_rate(code, params, t0, t1, w0, w1, side):
         fc = _rate(code, params, c, side)
         if fc == 0.0:
             break
-        if fc * fa < 0.0:
-            b, fb = c, fc
-            if last == -1:
-                fa *= 0.5
-            last = -1
-        else:
-            a, fa = c, fc
-            if last == 1:
-                fb *= 0.5
-            last = 1
+        a, b, fa, fb, last = illinois_update(a, b, fa, fb, c, fc, last)
     return c
 
 
