@@ -7,9 +7,9 @@ scalings.  Pure numerics, batched over parameter points; no file or dask I/O.
 Reference: S. Alben and C. Puritz, "Intermittent sliding locomotion of a
 two-link body" (``shared/paper/intermittent_sliding_two_link.tex``).
 """
-from ._cache import use_source_keyed_cache
+from ._cache import restore_cache_dir, use_source_keyed_cache
 
-use_source_keyed_cache()  # before any kernel is decorated
+_numba_cache_dir = use_source_keyed_cache()  # before any kernel is decorated
 
 from ._force import force_and_slope, power_density  # noqa: E402
 from ._gradient import (DiscreteSolution, FixedGrid, GradientResult, adaptive_grid,
@@ -20,7 +20,9 @@ from ._limits import fast_limit_velocity, kinematic_speed, quasi_static_velocity
 from ._physics import Physics, physical_from_scaled, scaled_from_physical
 from ._optimize import OptimizeResult, optimize_motion
 from ._solve import METHODS, SolveResult, solve_fixed_grid, solve_periodic
-from ._status import STATUS_REASONS
+from ._status import STATUS_REASONS  # noqa: E402
+
+restore_cache_dir(_numba_cache_dir)  # other packages' kernels keep their own
 
 __version__ = "0.1.0"
 

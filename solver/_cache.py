@@ -1,4 +1,4 @@
-"""numba's on-disk cache, keyed on the solver's sources.
+"""numba's on-disk cache for the solver's kernels, keyed on the solver's sources.
 
 numba (``cache=True``) invalidates a cached kernel only when its own file changes, not when
 a kernel it calls, in another module, does: a stale cached ``_gradient._forward`` kept the
@@ -7,12 +7,17 @@ freshly compiled kernels of the same signature too (measured: a test of ``radau_
 new behaviour failed after the gradient tests had run, and passed alone or after the cache
 was cleared; numba PR 8396, dependency-aware invalidation, is not merged).  Keying the
 cache directory on a hash of every source file of the package makes any edit start a
-fresh cache.  An explicit NUMBA_CACHE_DIR is kept, with the hash as a subdirectory.
+fresh cache.  numba fixes a kernel's cache directory when it is decorated, so the key is
+set while the solver's modules are imported and the previous setting restored after: other
+packages' kernels keep theirs.  A configured cache directory (NUMBA_CACHE_DIR) is the base;
+an unwritable one (a read-only install) falls back to ~/.cache/twolink-numba, keyed too
+(numba's own fallbacks are not keyed).
 """
 from __future__ import annotations
 
 import hashlib
 import os
+import tempfile
 from pathlib import Path
 
 import numba
@@ -27,8 +32,27 @@ def source_digest(package=Path(__file__).parent):
     return digest.hexdigest()[:16]
 
 
+def _writable(directory):
+    try:
+        os.makedirs(directory, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=directory):
+            return True
+    except OSError:
+        return False
+
+
 def use_source_keyed_cache():
     """Point numba's cache at a directory named by ``source_digest``; call it before the
-    kernels are decorated (numba resolves the directory then)."""
-    base = os.environ.get("NUMBA_CACHE_DIR") or str(Path(__file__).parent / "__pycache__")
-    numba.config.CACHE_DIR = os.path.join(base, f"numba-{source_digest()}")
+    kernels are decorated.  Returns the previous setting, for ``restore_cache_dir``."""
+    previous = numba.config.CACHE_DIR
+    name = f"numba-{source_digest()}"
+    path = os.path.join(previous or str(Path(__file__).parent / "__pycache__"), name)
+    if not _writable(path):
+        path = os.path.join(os.path.expanduser("~"), ".cache", "twolink-numba", name)
+    numba.config.CACHE_DIR = path
+    return previous
+
+
+def restore_cache_dir(previous):
+    """Give numba back the cache directory ``use_source_keyed_cache`` replaced."""
+    numba.config.CACHE_DIR = previous

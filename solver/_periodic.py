@@ -74,7 +74,7 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
     ok = False
     it = 0
     previous = math.inf  # size of the previous full Newton step (inf: none yet, or damped)
-    flipped1 = False  # the previous Newton step flipped the stage's sign
+    flipped1 = False  # the previous iterate changed the stage's sign (0 < p < 1, delta = 0 only)
     flipped2 = False
     # p = 0: the line search handles the regularised sign; p >= 1: F is C^1 in u; delta > 0:
     # the slope is finite (cutting there too made the shooting of 10 of 300 points at p = 0.5
@@ -103,14 +103,10 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
         # even one that overshoots once, shrinks faster and is not cut).  Not at p = 0,
         # where cutting the flips of the regularised sign cost 14 % more step-sweeps
         cut = 1.0
-        flip1 = singular and U1 * (U1 + x1) < 0.0
-        flip2 = singular and U2 * (U2 + x2) < 0.0
-        if flip1 and flipped1 and abs(U1 + x1) > 0.5 * abs(U1):
+        if flipped1 and U1 * (U1 + x1) < 0.0 and abs(U1 + x1) > 0.5 * abs(U1):
             cut = min(cut, -0.5 * U1 / x1)
-        if flip2 and flipped2 and abs(U2 + x2) > 0.5 * abs(U2):
+        if flipped2 and U2 * (U2 + x2) < 0.0 and abs(U2 + x2) > 0.5 * abs(U2):
             cut = min(cut, -0.5 * U2 / x2)
-        flipped1 = flip1
-        flipped2 = flip2
         if cut < 1.0:
             x1 *= cut
             x2 *= cut
@@ -126,6 +122,9 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
             if S1 * S1 + S2 * S2 <= (1.0 - 1e-4 * lam) * norm0 or lam < 1e-9:
                 break
             lam *= 0.5
+        # (the iterate's own sign changes: a cut step that stays on its side is not one)
+        flipped1 = singular and U1 * T1 < 0.0
+        flipped2 = singular and U2 * T2 < 0.0
         U1, U2, F1, F2, d1, d2, R1, R2 = T1, T2, G1, G2, g1, g2, S1, S2
         if not (math.isfinite(U1) and math.isfinite(U2)):
             break

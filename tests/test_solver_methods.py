@@ -1,4 +1,6 @@
 """Both periodic solvers: order of accuracy, mutual agreement, the paper's invariances and limits."""
+import math
+
 import numpy as np
 import pytest
 
@@ -353,3 +355,38 @@ def test_stage_newton_converges_at_a_singular_slope():
         error_p = abs(r.P[0] / (mean_pi[0] * T[0] ** -1.5) - 1.0)
         assert max(error_u, error_p) <= rtol, (rtol, error_u, error_p)
     assert solver.solve_periodic(kin, phys, rtol=1e-3).n_tau[0] <= 1000
+
+
+def test_stage_newton_at_an_infinite_slope_converges_to_the_roots():
+    """radau_step at omega = 0 (F = -K |u|^p sign u, p = 0.5, delta = 0) from many starts,
+    against the stage roots by nested brentq.  The first version of the flip cut accepted
+    unconverged stages here (348 of 1064 cases the old Newton had solved, up to 6e7 atol off:
+    it cut again after a cut step that had not flipped); the old Newton failed 470."""
+    from scipy.optimize import brentq
+    from solver._force import force_and_slope_sc
+    from solver._periodic import radau_step
+    S, C = math.sin(0.6), math.cos(0.6)
+    mu_n, mu_s, p, dtau, kappa, atol = 2.0, 1.0, 0.5, 0.0, 1.0, 1e-10
+
+    def force(u):
+        return force_and_slope_sc(u, S, C, 0.0, mu_n, mu_s, p, dtau)[0]
+
+    def roots(u_n, h):
+        def first(U2):
+            return brentq(lambda U1: U1 - u_n - h * (5 / 12 * force(U1) - force(U2) / 12),
+                          -10.0, 10.0, xtol=1e-300, rtol=1e-15, maxiter=500)
+        U2 = brentq(lambda U2: U2 - u_n - h * (0.75 * force(first(U2)) + 0.25 * force(U2)),
+                    -10.0, 10.0, xtol=1e-300, rtol=1e-15, maxiter=500)
+        return first(U2), U2
+
+    cases = 0
+    for h in (0.05, 1.0, 3.0):
+        for u_n in (*np.geomspace(1e-8, 1.0, 7), *-np.geomspace(1e-8, 1.0, 7)):
+            want = roots(u_n, h)
+            for guess in (u_n, 0.3, -0.3, 1e-3, -1e-3):
+                U1, U2, *_, ok = radau_step(u_n, guess, guess, h, S, C, 0.0, S, C, 0.0, kappa,
+                                            mu_n, mu_s, p, dtau, atol)
+                assert ok, (h, u_n, guess)
+                assert max(abs(U1 - want[0]), abs(U2 - want[1])) <= 10 * atol, (h, u_n, guess)
+                cases += 1
+    assert cases == 210
