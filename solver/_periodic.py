@@ -128,8 +128,10 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
         U1, U2, F1, F2, d1, d2, R1, R2 = T1, T2, G1, G2, g1, g2, S1, S2
         if not (math.isfinite(U1) and math.isfinite(U2)):
             break
-        # (size: the Newton step before any cut, so a cut step is not taken for convergence)
-        if lam * size <= atol or (R1 == 0.0 and R2 == 0.0):
+        # (size: the Newton step before any cut, so a cut step is not taken for convergence;
+        # a line search that bottomed out is not convergence either: its step is tiny
+        # because no decrease was found, not because the stages are solved)
+        if (lam * size <= atol and lam >= 1e-9) or (R1 == 0.0 and R2 == 0.0):
             ok = True
             break
         previous = size if lam == 1.0 and cut == 1.0 else math.inf
