@@ -328,6 +328,14 @@ def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, v
 
 
 @njit(cache=True)
+def collocation_value(theta, u_n, U1, U2):
+    """The quadratic collocation polynomial of a Radau step at theta = (t - t_n) / h_n:
+    through (0, u_n), (1/3, U1), (1, U2)."""
+    return (3.0 * (theta - 1.0 / 3.0) * (theta - 1.0) * u_n
+            - 4.5 * theta * (theta - 1.0) * U1 + 1.5 * theta * (theta - 1.0 / 3.0) * U2)
+
+
+@njit(cache=True)
 def _collocation_guess(grid, N, old_grid, old_N, old_nodes, old_stages, guess):
     """Stage values on ``grid`` from a solution on another grid of the period: at each stage
     time, the quadratic collocation polynomial of the old step that contains it (through
@@ -340,9 +348,8 @@ def _collocation_guess(grid, N, old_grid, old_N, old_nodes, old_stages, guess):
             while k < old_N - 1 and old_grid[k + 1] < t:
                 k += 1
             theta = (t - old_grid[k]) / (old_grid[k + 1] - old_grid[k])
-            guess[2 * n + q] = (3.0 * (theta - 1.0 / 3.0) * (theta - 1.0) * old_nodes[k]
-                                - 4.5 * theta * (theta - 1.0) * old_stages[2 * k]
-                                + 1.5 * theta * (theta - 1.0 / 3.0) * old_stages[2 * k + 1])
+            guess[2 * n + q] = collocation_value(theta, old_nodes[k], old_stages[2 * k],
+                                                 old_stages[2 * k + 1])
 
 
 @njit(cache=True, parallel=True)

@@ -51,6 +51,7 @@ from numba import njit, prange
 from ._events import illinois_update
 from ._force import force_and_slope
 from ._kinematics import angle_and_rate
+from ._periodic import collocation_value
 
 _x4, _w4 = np.polynomial.legendre.leggauss(4)
 GL4_NODES = 0.5 * (_x4 + 1.0)
@@ -105,19 +106,13 @@ def zero_of_rate(code, params, t0, t1, w0, w1, side):
 
 
 @njit(cache=True)
-def _collocation(theta, u_n, U1, U2):
-    return (3.0 * (theta - 1.0 / 3.0) * (theta - 1.0) * u_n
-            - 4.5 * theta * (theta - 1.0) * U1 + 1.5 * theta * (theta - 1.0 / 3.0) * U2)
-
-
-@njit(cache=True)
 def _panel(code, params, t0, h, a, b, u_n, U1, U2, side, mu_n, mu_s, p, dtau):
     """int_a^b F(u_h(tau), tau) dtau by 4-point Gauss-Legendre."""
     total = 0.0
     for i in range(4):
         t = a + (b - a) * GL4_NODES[i]
         phi, om = angle_and_rate(code, params, t, side)
-        u = _collocation((t - t0) / h, u_n, U1, U2)
+        u = collocation_value((t - t0) / h, u_n, U1, U2)
         total += GL4_WEIGHTS[i] * force_and_slope(u, phi, om, mu_n, mu_s, p, dtau)[0]
     return (b - a) * total
 
@@ -213,7 +208,8 @@ def _turning_points(code, params, grid, N, u_nodes, stages, dtau, out):
         for k in range(1, SAMPLES):
             a = abs(values[k])
             if a < abs(values[k - 1]) and a < abs(values[k + 1]):
-                u = _collocation((times[k] - t0) / h, u_nodes[n], stages[2 * n], stages[2 * n + 1])
+                u = collocation_value((times[k] - t0) / h, u_nodes[n], stages[2 * n],
+                                      stages[2 * n + 1])
                 if a <= TANGENCY * max(abs(u), dtau) and _add_turning_point(
                         code, params, grid, n, u_nodes, stages, dtau, times[k], out, count):
                     count += 1
@@ -226,7 +222,7 @@ def _add_turning_point(code, params, grid, n, u_nodes, stages, dtau, tz, out, co
     if count >= out.shape[0] or (count > 0 and tz <= out[count - 1, 0]):
         return False
     h = grid[n + 1] - grid[n]
-    u = _collocation((tz - grid[n]) / h, u_nodes[n], stages[2 * n], stages[2 * n + 1])
+    u = collocation_value((tz - grid[n]) / h, u_nodes[n], stages[2 * n], stages[2 * n + 1])
     out[count, 0] = tz
     out[count, 1] = window_width(code, params, tz, max(abs(u), dtau))
     return True
