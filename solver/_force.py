@@ -142,6 +142,21 @@ def k_odd(x, p):
 
 
 @njit(cache=True)
+def radial_power(r2, p):
+    """r^(p-1) from r^2: by square roots at the paper's p = 0, 0.5, 1, 1.5, where ``pow``
+    made the 8-point rule ~4x slower (128 against 33 ns per p = 0 evaluation)."""
+    if p == 0.0:
+        return 1.0 / math.sqrt(r2)
+    if p == 1.0:
+        return 1.0
+    if p == 0.5:
+        return 1.0 / math.sqrt(math.sqrt(r2))
+    if p == 1.5:
+        return math.sqrt(math.sqrt(r2))
+    return r2 ** (0.5 * (p - 1.0))
+
+
+@njit(cache=True)
 def _moments_quadrature(a, b, e2, p):
     """(m00, m10, m20, m01, m11, m21) by 8-point Gauss-Legendre on s in [0, 1/2]."""
     m00 = m10 = m20 = m01 = m11 = m21 = 0.0
@@ -150,12 +165,8 @@ def _moments_quadrature(a, b, e2, p):
         wt = 0.5 * GL8_WEIGHTS[i]
         w = a + b * s
         r2 = w * w + e2
-        if p == 1.0:
-            g0 = 1.0
-            g1 = 1.0 / r2
-        else:
-            g0 = r2 ** (0.5 * (p - 1.0))
-            g1 = g0 / r2
+        g0 = radial_power(r2, p)
+        g1 = g0 / r2
         m00 += wt * g0
         m10 += wt * w * g0
         m20 += wt * w * w * g0

@@ -73,7 +73,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ._force import E_FLOOR, _setup as _force_setup, link_moments
+from ._force import E_FLOOR, _setup as _force_setup, link_moments, radial_power
 from ._kinematics import (FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, angle_and_rate,
                           period_grid)
 from ._limits import fast_limit_velocity
@@ -123,15 +123,8 @@ def _panel(s_c, w_c, lo, hi, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
         w = w_c + omega * t
         w_om = s - 0.25 * S * S
         r2 = w * w + e2
-        if p == 1.0:
-            g0 = 1.0
-            g1 = 0.0
-        elif p == 0.0:  # Coulomb: a square root instead of a power
-            g0 = 1.0 / math.sqrt(r2)
-            g1 = -g0 / r2
-        else:
-            g0 = r2 ** (0.5 * (p - 1.0))
-            g1 = (p - 1.0) * g0 / r2  # d(r^(p-1)) / d(r^2 / 2)
+        g0 = radial_power(r2, p)
+        g1 = (p - 1.0) * g0 / r2  # d(r^(p-1)) / d(r^2 / 2)
         # d(r^2/2) along each variable
         q_u = w * w_u + c * c_u
         q_phi = w * w_phi + c * c_phi
