@@ -256,6 +256,19 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         status = NOT_PERIODIC  # converged onto the edge of the bracket: no fixed point inside
     if status != CONVERGED:
         return math.nan, math.nan, u0, status, it_out, stage_its
+    # the converged sweep starts |d| <= tol_fix short of the fixed point, d = g / (1 - M):
+    # shift it along the sweep to first order (the offset left is O(d^2)).  Unshifted, d
+    # carried into int u about one for one, and tol_fix is a full rtol of the smallest norm
+    # of int u (1e-3 V); the bisected grid starts from its coarse partner's u(0), so both
+    # shared the offset and Richardson did not see it (a Fourier point was 25x over its
+    # estimate at rtol 1e-6)
+    shift = g / one_minus_M
+    u0 += shift
+    for n in range(N):
+        u_start[n] += shift
+        stages[2 * n] += sens[2 * n] * shift
+        stages[2 * n + 1] += sens[2 * n + 1] * shift
+        shift *= 1.0 + m_minus_1[n]
     # quadrature of the converged sweep with the Radau weights (order 3)
     int_u = 0.0
     int_pi = 0.0
