@@ -21,7 +21,7 @@ from numba import njit, prange
 
 from ._force import force_and_slope, power_density
 from ._kinematics import angle_and_rate
-from ._periodic import batch_outputs
+from ._periodic import batch_outputs, node_weights
 from ._status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
 
 #: Heun's method (explicit trapezoidal RK2).
@@ -59,11 +59,16 @@ def step_jumps(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
 
 @njit(cache=True)
 def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
-                 max_steps, u_out, step_u, step_pi, step_m, step_stiff):
+                 max_steps, u_out, step_u, step_pi, step_m, step_stiff, stages, weights):
     """March on the first N steps of ``grid``; per-step integrals into ``step_u``, ``step_pi``.
 
     ``step_stiff[n]`` flags the steps of the last period that chatter through a
-    sticking phase (consecutive ``step_jumps``).  Returns (int_u, int_Pi, u0, status, periods).
+    sticking phase (consecutive ``step_jumps``).  ``stages`` (>= 2N) and ``weights`` (>= N)
+    receive what the turning-point check (``_turning``) needs: pseudo-stages
+    (u_n + (u_{n+1} - u_n) / 3, u_{n+1}), on which the check's quadratic through
+    theta = 0, 1/3, 1 is the linear interpolant of the march, and the node weights of
+    ``_periodic.node_weights`` for the trapezoidal integral of u.
+    Returns (int_u, int_Pi, u0, status, periods).
     """
     phis = np.empty(2 * N)
     oms = np.empty(2 * N)
@@ -76,7 +81,9 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
         phis[2 * n + 1], oms[2 * n + 1] = angle_and_rate(code, params, grid[n + 1], mid)
     nodes = np.empty(N + 1)
     ms = np.empty(N)
-    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
+    # |u(0) - fixed point| <= tol_fix: a shift of u(0) carries about one for one into int u,
+    # whose norm can be as small as 1e-3 V (``_solve``), so this is 1 % of rtol there
+    tol_fix = max(1e-5 * rtol, 1e-13) * vscale
     bound = 1e3 * vscale + 1.0
     max_periods = max(max_steps // N, 3)
     u = u_init
@@ -139,7 +146,25 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
         nxt = step_stiff[n + 1] if n + 1 < N else first
         step_stiff[n] = cur and (prev or nxt)
         prev = cur
+    _check_inputs(nodes, ms, hs, N, stages, weights)
     return int_u, int_pi, nodes[0], CONVERGED, period
+
+
+@njit(cache=True)
+def _check_inputs(nodes, ms, hs, N, stages, weights):
+    """Pseudo-stages and node weights of a marched period (see ``_march_point``): the
+    trapezoidal integral h_n (u_n + u_{n+1}) / 2 has d/du_n = h_n (1 + m_n) / 2."""
+    log_m = 0.0
+    sign_m = 1.0
+    for n in range(N):
+        stages[2 * n] = nodes[n] + (nodes[n + 1] - nodes[n]) / 3.0
+        stages[2 * n + 1] = nodes[n + 1]
+        weights[n] = 0.5 * hs[n] * (1.0 + ms[n])
+        if ms[n] < 0.0:
+            sign_m = -sign_m
+        log_m += math.log(abs(ms[n])) if ms[n] != 0.0 else -math.inf
+    one_minus_M = -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
+    node_weights(weights[:N], ms[:N], one_minus_M)
 
 
 @njit(cache=True, parallel=True)
@@ -150,9 +175,12 @@ def march_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u_ini
     int_u, int_pi, u0_out, status, periods, _, step_u, step_pi, step_m, nodes = \
         batch_outputs(n, m)
     stiff = np.zeros((n, m - 1), dtype=np.bool_)
+    stages = np.full((n, 2 * (m - 1)), np.nan)
+    weights = np.full((n, m - 1), np.nan)
     for i in prange(n):
         int_u[i], int_pi[i], u0_out[i], status[i], periods[i] = _march_point(
             code, params[i], grids[i], n_steps[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
             u_init[i], vscale[i], rtol, max_steps, nodes[i], step_u[i], step_pi[i], step_m[i],
-            stiff[i])
-    return int_u, int_pi, u0_out, status, periods, step_u, step_pi, step_m, nodes, stiff
+            stiff[i], stages[i], weights[i])
+    return (int_u, int_pi, u0_out, status, periods, step_u, step_pi, step_m, nodes, stiff,
+            stages, weights)

@@ -400,8 +400,9 @@ def _run_level(method, code, params, grids, n_steps, physics, u0, vscale, rtol, 
     resolve the friction's time scale (chatter, ``_march.step_jumps``).  ``paired``: rows
     2j + 1 bisect rows 2j (``_periodic.solve_pairs`` then starts each from its partner, and
     pair j's coarse grid from ``previous``, the padded (grids, steps, nodes, stages) of an
-    earlier solution; stages: the periodic stages of every row, weights: the node weights
-    of the bisected rows (``_periodic.node_weights``), else None).
+    earlier solution); stages: the stages of every row (the march's pseudo-stages,
+    ``_march._check_inputs``), weights: the node weights (``_periodic.node_weights``) of the
+    bisected rows (the march: of every row), for the turning-point check.
     """
     args = (code, params[index], grids, n_steps, physics.inertia_factor[index],
             physics.mu_n[index], physics.mu_s[index], physics.p[index],
@@ -411,7 +412,7 @@ def _run_level(method, code, params, grids, n_steps, physics, u0, vscale, rtol, 
         return out[:9] + (None,) + out[9:]
     if method == "periodic":
         return _periodic.solve_points(*args) + (None, None, None)
-    return _march.march_points(*args, MARCH_MAX_STEPS) + (None, None)
+    return _march.march_points(*args, MARCH_MAX_STEPS)
 
 
 def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e-12):
@@ -590,7 +591,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                     series_tau[i] = fine[j][:-1]
                 continue
             grids[i] = new
-            if stages is not None and st[2 * j + 1] == CONVERGED:
+            if method == "periodic" and st[2 * j + 1] == CONVERGED:
                 previous[i] = (fine[j], ser[2 * j + 1, :2 * n_coarse].copy(),
                                stages[2 * j + 1, :4 * n_coarse].copy())
         active = active[keep]

@@ -32,7 +32,13 @@ so it resolves the window the step does not (to ~1e-6 of T^(2-p) mu h at a simpl
 kinks of F inside a panel limit it to ~1e-3 of D_n at a triple zero).  Weighted by the node
 weight lambda_{n+1} (``_periodic.node_weights``, the sensitivity of int u to a jump of u
 there) |D_n lambda_{n+1}| is the step's error in int u, linearised (a dual-weighted
-residual).  Their sum, relative to the norm of U (``_solve``), is added to the error
+residual).  The march passes pseudo-stages on which u_h is its linear interpolant
+(``_march._check_inputs``); D_n is then the defect of that interpolant, which also holds
+Heun's ordinary local error (counted by Richardson too: twice, conservatively).  Measured on
+a clapping Fourier point whose march was 16 rtol off at rtol 1e-7 with nothing flagged: the
+check estimated 1.5-3x its true errors.
+
+The sum of |D_n lambda_{n+1}|, relative to the norm of U (``_solve``), is added to the error
 estimate; the steps holding the most of it (each above FLAG_SHARE rtol, and the largest
 until the rest is below FLAG_REST rtol) get nodes graded toward tau_z.
 

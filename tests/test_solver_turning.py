@@ -185,3 +185,27 @@ def test_turning_point_estimate_sees_the_trap_and_not_a_resolved_solution():
     (trapped_error, trapped_estimate, trapped_flags), (error, estimate, flags) = estimates
     assert trapped_error > 0.3 and trapped_estimate > 1e-2 and trapped_flags >= 1
     assert error < 1e-5 and estimate < 1e-6 and flags == 0
+
+
+# A clapping Fourier point with six turning points of phi, at each of which the solution
+# passes at |u| 3.5e-7 .. 2.6e-5 (windows of 1.7e-9 .. 1.1e-7): the march's grids were
+# trapped there (16 rtol off at rtol 1e-7, 20 at 1e-6) until it ran the check too.
+CLAPPING_A = [-0.3549, 0.7815, 0.3671, -0.5895]
+CLAPPING_B = [0.0, -0.3601, -0.3695]
+
+
+def _clapping_point():
+    kin = solver.Fourier(A=[CLAPPING_A], B=[CLAPPING_B])
+    phys = solver.Physics.from_scaled(1.324, 0.0568, p=0.0, delta=1e-5)
+    return kin, phys, solver.kinematic_speed(kin)[0]
+
+
+def test_march_runs_the_turning_point_check():
+    """The march at rtol 1e-6 against the periodic method at 1e-8 (within 0.01 of 1e-6 of an
+    independent DOP853 reference with nodes graded into the windows)."""
+    kin, phys, V = _clapping_point()
+    ref = solver.solve_periodic(kin, phys, rtol=1e-7)
+    march = solver.solve_periodic(kin, phys, method="march", rtol=1e-6)
+    assert ref.status[0] == 0 and march.status[0] == 0
+    scale = max(abs(ref.mean_u[0]), 1e-3 * V)
+    assert abs(march.mean_u[0] - ref.mean_u[0]) / scale <= 1e-6
