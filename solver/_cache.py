@@ -11,16 +11,22 @@ fresh cache.  numba fixes a kernel's cache directory when it is decorated, so th
 set while the solver's modules are imported and the previous setting restored after: other
 packages' kernels keep theirs.  A configured cache directory (NUMBA_CACHE_DIR) is the base;
 an unwritable one (a read-only install) falls back to ~/.cache/twolink-numba, keyed too
-(numba's own fallbacks are not keyed).
+(numba's own fallbacks are not keyed).  Every edit leaves a directory behind (~8 MB): all
+but the KEEP_CACHES most recently used are removed when a new one is made.
 """
 from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import numba
+
+#: source-keyed cache directories kept (the current one and the most recently used others:
+#: switching between a few versions, as in an A/B timing, does not recompile)
+KEEP_CACHES = 4
 
 
 def source_digest(package=Path(__file__).parent):
@@ -46,11 +52,25 @@ def use_source_keyed_cache():
     kernels are decorated.  Returns the previous setting, for ``restore_cache_dir``."""
     previous = numba.config.CACHE_DIR
     name = f"numba-{source_digest()}"
-    path = os.path.join(previous or str(Path(__file__).parent / "__pycache__"), name)
-    if not _writable(path):
-        path = os.path.join(os.path.expanduser("~"), ".cache", "twolink-numba", name)
+    for base in (previous or str(Path(__file__).parent / "__pycache__"),
+                 os.path.join(os.path.expanduser("~"), ".cache", "twolink-numba")):
+        path = os.path.join(base, name)
+        fresh = not os.path.isdir(path)
+        if _writable(path):
+            os.utime(path)  # marks it used, for prune_caches
+            if fresh:
+                prune_caches(base, KEEP_CACHES)
+            break
     numba.config.CACHE_DIR = path
     return previous
+
+
+def prune_caches(base, keep):
+    """Remove all but the ``keep`` most recently used ``numba-*`` directories in ``base``."""
+    caches = sorted((p for p in Path(base).glob("numba-*") if p.is_dir()),
+                    key=lambda p: p.stat().st_mtime, reverse=True)
+    for stale in caches[keep:]:
+        shutil.rmtree(stale, ignore_errors=True)
 
 
 def restore_cache_dir(previous):
