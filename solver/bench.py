@@ -1,7 +1,7 @@
 """Throughput benchmark of the ``periodic`` solver against a scipy baseline.
 
 Run as ``python -m solver.bench [--points 2000] [--baseline-points 20] [--seed 0]
-[--baseline-cap 20]``.  Everything is measured in one run, on one machine, so
+[--baseline-cap 20] [--repeats 3]``.  Everything is measured in one run, on one machine, so
 the ratios printed are like for like.
 
 What is measured
@@ -10,12 +10,13 @@ What is measured
    drawn with ``--seed``: anisotropy ratio mu_n / mu_s = 2^U(-8, 8), scaled
    period 2^U(-3, 3), A0 ~ U(0, pi/2], A1 / A0 ~ U(0, 1], p = 0,
    delta = 1e-5 (``Physics.from_scaled``, so sqrt(mu_n mu_s) = 1).
-2. Solver throughput.  After a JIT warm-up on 4 points (not timed), one call of
-   ``solve_periodic(method="periodic")`` on all points at rtol = 1e-4 and one
-   at rtol = 1e-7.  Reported: solves/s = points / wall time (failed points
-   included in the count and the time), failures (status != 0), median and
-   maximum final grid size n_tau, wall time.  The solver runs on all cores
-   (numba ``prange`` over points).
+2. Solver throughput.  After a JIT warm-up on 4 points (not timed), ``--repeats``
+   calls of ``solve_periodic(method="periodic")`` on all points at rtol = 1e-4 and
+   as many at rtol = 1e-7.  Reported: solves/s = points / median wall time (failed
+   points included in the count and the time; the median because a shared VM's wall
+   times varied by +-25 % from run to run), failures (status != 0), median and
+   maximum final grid size n_tau, every call's wall time.  The solver runs on all
+   cores (numba ``prange`` over points).
 3. Baseline.  What a user would write with scipy: for a random subsample of
    ``--baseline-points`` points, ``solve_ivp(method="LSODA")`` integrates the
    augmented state y = [u, int u dtau, int Pi dtau] of u' = T^(2-p) F(u, tau)
@@ -50,7 +51,8 @@ Output
 Human-readable lines, then as the last line one JSON object with the keys
 ``solves_per_s_rtol_1e-4``, ``solves_per_s_rtol_1e-7``,
 ``baseline_solves_per_s``, ``speedup``, ``failures`` (both rtol runs),
-``failures_rtol_1e-4``, ``failures_rtol_1e-7``, ``cores``, ``points``,
+``failures_rtol_1e-4``, ``failures_rtol_1e-7``, ``cores``, ``points``, ``repeats``,
+``seconds_rtol_1e-4_runs``, ``seconds_rtol_1e-7_runs``,
 ``baseline_points``, ``median_rel_error_periodic``,
 ``median_rel_error_baseline``, ``numba_speedup_force_kernel`` and a few more
 (baseline tolerance and failures, reference failures, the fully interpreted
@@ -101,18 +103,22 @@ def subset(kinematics, physics, index):
 
 # ----------------------------------------------------------------------------- periodic solver
 
-def time_periodic(kinematics, physics, rtol):
-    """One batched ``solve_periodic`` call; returns (SolveResult, wall seconds)."""
-    start = time.perf_counter()
-    result = solver.solve_periodic(kinematics, physics, method="periodic", rtol=rtol)
-    return result, time.perf_counter() - start
+def time_periodic(kinematics, physics, rtol, repeats=1):
+    """``repeats`` batched ``solve_periodic`` calls (the solver is deterministic: every call
+    returns the same result); returns (SolveResult, median wall seconds, every call's)."""
+    runs = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = solver.solve_periodic(kinematics, physics, method="periodic", rtol=rtol)
+        runs.append(time.perf_counter() - start)
+    return result, float(np.median(runs)), runs
 
 
-def periodic_summary(result, seconds):
+def periodic_summary(result, seconds, runs):
     n = result.status.shape[0]
     return dict(solves_per_s=n / seconds, failures=int(np.count_nonzero(result.status != 0)),
                 median_n_tau=float(np.median(result.n_tau)), max_n_tau=int(result.n_tau.max()),
-                seconds=seconds)
+                seconds=seconds, runs=runs)
 
 
 def status_counts(result):
@@ -352,12 +358,14 @@ def build_parser():
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--baseline-cap", type=float, default=20.0,
                         help="wall-time cap per baseline point [s]")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="timed calls of the periodic solver per rtol (median reported)")
     parser.add_argument("--interpreted-kernel-rate", type=int, default=None,
                         help=argparse.SUPPRESS)  # internal: used by no_jit_rate
     return parser
 
 
-def benchmark(n_points, n_baseline, seed, cap):
+def benchmark(n_points, n_baseline, seed, cap, repeats=3):
     wall_start = time.perf_counter()
     rng = np.random.default_rng(seed)
     kinematics, physics, table = draw_points(n_points, rng)
@@ -368,16 +376,17 @@ def benchmark(n_points, n_baseline, seed, cap):
 
     periodic = {}
     for rtol in RTOLS:
-        result, seconds = time_periodic(kinematics, physics, rtol)
-        periodic[rtol] = (result, periodic_summary(result, seconds))
+        result, seconds, runs = time_periodic(kinematics, physics, rtol, repeats)
+        periodic[rtol] = (result, periodic_summary(result, seconds, runs))
         s = periodic[rtol][1]
         print(f"periodic rtol {rtol:.0e}: {s['solves_per_s']:.2f} solves/s, "
               f"{s['failures']} failures {status_counts(result)}, n_tau median "
-              f"{s['median_n_tau']:.0f} max {s['max_n_tau']}, {s['seconds']:.2f} s", flush=True)
+              f"{s['median_n_tau']:.0f} max {s['max_n_tau']}, {s['seconds']:.2f} s (median of "
+              f"{repeats}: {', '.join(f'{r:.2f}' for r in runs)} s)", flush=True)
 
     index = np.sort(rng.choice(n_points, size=min(n_baseline, n_points), replace=False))
     kin_sub, phys_sub = subset(kinematics, physics, index)
-    reference, ref_seconds = time_periodic(kin_sub, phys_sub, REFERENCE_RTOL)
+    reference, ref_seconds, _ = time_periodic(kin_sub, phys_sub, REFERENCE_RTOL)
     ref_failures = int(np.count_nonzero(reference.status != 0))
     print(f"reference: periodic rtol {REFERENCE_RTOL:.0e} on {len(index)} points, "
           f"{ref_failures} failures {status_counts(reference)}, {ref_seconds:.2f} s", flush=True)
@@ -419,6 +428,9 @@ def benchmark(n_points, n_baseline, seed, cap):
         "failures_rtol_1e-7": slow["failures"],
         "cores": os.cpu_count(),
         "points": n_points,
+        "repeats": repeats,
+        "seconds_rtol_1e-4_runs": fast["runs"],
+        "seconds_rtol_1e-7_runs": slow["runs"],
         "baseline_points": int(len(index)),
         "median_rel_error_periodic": base["median_periodic"],
         "median_rel_error_baseline": base["median_baseline"],
@@ -446,10 +458,11 @@ def main(argv=None):
     if args.interpreted_kernel_rate is not None:
         print(interpreted_rate(args.interpreted_kernel_rate, args.seed))
         return 0
-    if args.points < WARMUP_POINTS or args.baseline_points < 1:
-        print("--points must be >= 4 and --baseline-points >= 1", file=sys.stderr)
+    if args.points < WARMUP_POINTS or args.baseline_points < 1 or args.repeats < 1:
+        print("--points must be >= 4, --baseline-points and --repeats >= 1", file=sys.stderr)
         return 2
-    report = benchmark(args.points, args.baseline_points, args.seed, args.baseline_cap)
+    report = benchmark(args.points, args.baseline_points, args.seed, args.baseline_cap,
+                       args.repeats)
     print(json.dumps({k: _json_value(v) for k, v in report.items()}))
     return 0
 
