@@ -1,6 +1,7 @@
 """Benchmark: one Kmax = 7 optimisation, adjoint BFGS/Newton against scipy BFGS with differences.
 
-``python -m solver.bench_optimize [--seed S] [--kmax K] [--ratio-log2 R]``
+``python -m solver.bench_optimize [--seed S] [--seeds N] [--kmax K] [--ratio-log2 R]
+[--repeats 3]``
 
 Both optimisers see the same objective: -|lambda| of the discretised problem on one
 fixed grid (the adaptive grid of the start at rtol 1e-6), in the same variables
@@ -8,7 +9,9 @@ fixed grid (the adaptive grid of the start at rtol 1e-6), in the same variables
 (0, 1), the rest zero; scaled period 2).  The baseline is
 ``scipy.optimize.minimize(method="BFGS")`` with its own finite-difference gradient.
 Prints seconds per optimisation, gradient evaluations per second and the final
-objective of both, then one JSON line.
+objective of both, then one JSON line.  Each optimiser is run ``--repeats`` times (both
+are deterministic) and its median time is reported: wall times on a shared VM varied by
++-25 % from run to run.
 
 Which local optimum a BFGS run ends in depends on its path, so from one start either
 optimiser can end higher.  ``--seeds N`` repeats the comparison from N starts (seeds S,
@@ -32,8 +35,24 @@ from ._optimize import _Problem, _variables, optimize_motion
 from ._physics import Physics
 
 
-def compare(seed, kmax, ratio_log2, gtol):
-    """One start: our optimiser and scipy's BFGS with differences on the same objective."""
+def _timed(run, repeats):
+    """(result of the last of ``repeats`` calls of the deterministic ``run``, median seconds,
+    every call's seconds)."""
+    runs = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = run()
+        runs.append(time.perf_counter() - start)
+    return result, float(np.median(runs)), runs
+
+
+def _runs(runs):
+    return "median of " + ", ".join(f"{r:.2f}" for r in runs) if len(runs) > 1 else "1 run"
+
+
+def compare(seed, kmax, ratio_log2, gtol, repeats=1):
+    """One start: our optimiser and scipy's BFGS with differences on the same objective,
+    each timed ``repeats`` times (median)."""
     rng = np.random.default_rng(seed)
     A = np.zeros((1, kmax + 1))
     A[0, :2] = rng.uniform(0.0, 1.0, 2)
@@ -45,10 +64,9 @@ def compare(seed, kmax, ratio_log2, gtol):
     print(f"seed {seed}: Kmax = {kmax}, mu_n/mu_s = 2^{ratio_log2:g}, start A0 = {A[0, 0]:.4f}, "
           f"A1 = {A[0, 1]:.4f}, fixed grid of {grid.n_steps} steps")
 
-    start = time.perf_counter()
-    ours = optimize_motion(template, physics, grid=grid, gtol=gtol, max_iterations=2000)
-    seconds = time.perf_counter() - start
-    print(f"  adjoint BFGS/Newton: {seconds:.2f} s, {ours.iterations} iterations "
+    ours, seconds, runs = _timed(lambda: optimize_motion(
+        template, physics, grid=grid, gtol=gtol, max_iterations=2000), repeats)
+    print(f"  adjoint BFGS/Newton: {seconds:.2f} s ({_runs(runs)}), {ours.iterations} iterations "
           f"({ours.newton_steps} Newton), {ours.solves} solves and {ours.gradient_evaluations} "
           f"adjoint gradients ({ours.gradient_evaluations / seconds:.1f}/s), "
           f"|grad| = {ours.gradient_norm:.2e}, "
@@ -74,13 +92,18 @@ def compare(seed, kmax, ratio_log2, gtol):
 
     x0 = full[free].copy()
     x0[-1] = math.log(full[-1])
-    start = time.perf_counter()
-    base = scipy.optimize.minimize(fun, x0, method="BFGS", options={"gtol": gtol,
-                                                                     "maxiter": 2000})
-    baseline_seconds = time.perf_counter() - start
+
+    def baseline():
+        counts["objective"] = 0
+        state["u0"] = None
+        return scipy.optimize.minimize(fun, x0, method="BFGS", options={"gtol": gtol,
+                                                                         "maxiter": 2000})
+
+    base, baseline_seconds, runs = _timed(baseline, repeats)
     baseline_objective = -sign * base.fun
     n_grad = getattr(base, "njev", base.nit + 1)
-    print(f"  scipy BFGS + differences: {baseline_seconds:.2f} s, {base.nit} iterations, "
+    print(f"  scipy BFGS + differences: {baseline_seconds:.2f} s ({_runs(runs)}), "
+          f"{base.nit} iterations, "
           f"{counts['objective']} objective evaluations (~{n_grad / baseline_seconds:.1f} "
           f"gradients/s), stop: {base.message}, lambda = {baseline_objective:.10f}")
     speedup = baseline_seconds / seconds
@@ -98,10 +121,14 @@ def main(argv=None):
     parser.add_argument("--kmax", type=int, default=7)
     parser.add_argument("--ratio-log2", type=float, default=-4.0)
     parser.add_argument("--gtol", type=float, default=1e-7)
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="timed runs of each optimiser per start (median reported)")
     args = parser.parse_args(argv)
     if args.seeds < 1:
         parser.error(f"--seeds: must be >= 1, got {args.seeds}")
-    runs = [compare(args.seed + k, args.kmax, args.ratio_log2, args.gtol)
+    if args.repeats < 1:
+        parser.error(f"--repeats: must be >= 1, got {args.repeats}")
+    runs = [compare(args.seed + k, args.kmax, args.ratio_log2, args.gtol, args.repeats)
             for k in range(args.seeds)]
     if len(runs) == 1:
         print(json.dumps(runs[0]))
