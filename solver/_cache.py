@@ -11,13 +11,17 @@ fresh cache.  numba fixes a kernel's cache directory when it is decorated, so th
 set while the solver's modules are imported and the previous setting restored after: other
 packages' kernels keep theirs.  A configured cache directory (NUMBA_CACHE_DIR) is the base;
 an unwritable one (a read-only install) falls back to ~/.cache/twolink-numba, keyed too
-(numba's own fallbacks are not keyed).  Every edit leaves a directory behind (~8 MB): all
-but the KEEP_CACHES most recently used are removed when a new one is made.
+(numba's own fallbacks are not keyed).  Every edit leaves a directory behind (~8 MB): in
+the two default locations (not in a configured NUMBA_CACHE_DIR, which other packages and
+checkouts may share) all but the KEEP_CACHES most recently used are removed when a new one
+is made.  A process still running an older version whose directory is removed recompiles
+what it needs again.
 """
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -47,29 +51,47 @@ def _writable(directory):
         return False
 
 
+def package_cache_base():
+    """The default base of the cache directories: the package's ``__pycache__``."""
+    return str(Path(__file__).parent / "__pycache__")
+
+
 def use_source_keyed_cache():
     """Point numba's cache at a directory named by ``source_digest``; call it before the
     kernels are decorated.  Returns the previous setting, for ``restore_cache_dir``."""
     previous = numba.config.CACHE_DIR
     name = f"numba-{source_digest()}"
-    for base in (previous or str(Path(__file__).parent / "__pycache__"),
-                 os.path.join(os.path.expanduser("~"), ".cache", "twolink-numba")):
+    fallback = os.path.join(os.path.expanduser("~"), ".cache", "twolink-numba")
+    for base, ours in ((previous, False), (package_cache_base(), True), (fallback, True)):
+        if not base:
+            continue
         path = os.path.join(base, name)
         fresh = not os.path.isdir(path)
         if _writable(path):
             os.utime(path)  # marks it used, for prune_caches
-            if fresh:
+            if fresh and ours:
                 prune_caches(base, KEEP_CACHES)
             break
     numba.config.CACHE_DIR = path
     return previous
 
 
+_CACHE_NAME = re.compile(r"numba-[0-9a-f]{16}")
+
+
 def prune_caches(base, keep):
-    """Remove all but the ``keep`` most recently used ``numba-*`` directories in ``base``."""
-    caches = sorted((p for p in Path(base).glob("numba-*") if p.is_dir()),
-                    key=lambda p: p.stat().st_mtime, reverse=True)
-    for stale in caches[keep:]:
+    """Remove all but the ``keep`` most recently used source-keyed directories
+    (``numba-<16 hex digits>``) in ``base``; entries that vanish meanwhile (another process
+    pruning too) are skipped."""
+    caches = []
+    for path in Path(base).iterdir():
+        if _CACHE_NAME.fullmatch(path.name):
+            try:
+                caches.append((path.stat().st_mtime, path))
+            except OSError:
+                continue
+    caches.sort(reverse=True)
+    for _, stale in caches[keep:]:
         shutil.rmtree(stale, ignore_errors=True)
 
 
