@@ -235,9 +235,10 @@ def bisect_all(grid):
 
 def _size_classes(points, grids):
     """``points`` split into classes whose grids differ in size by up to a factor 2, smaller
-    classes merged into the next until they hold MIN_CLASS_POINTS; each class keeps the
-    points' order (the kernels split their rows statically over threads: sorted by size,
-    one thread would get the small grids and the other the large)."""
+    classes merged into the next until they hold MIN_CLASS_POINTS (a remainder of the
+    largest into the last); each class keeps the points' order (the kernels split their
+    rows statically over threads: sorted by size, one thread would get the small grids and
+    the other the large)."""
     sizes = np.array([grids[i].size - 1 for i in points])
     octave = np.floor(np.log2(sizes)).astype(np.int64)
     classes = []
@@ -247,7 +248,9 @@ def _size_classes(points, grids):
         if members.size >= MIN_CLASS_POINTS:
             classes.append(points[np.sort(members)])
             members = np.zeros(0, dtype=np.int64)
-    if members.size:
+    if members.size and classes:  # the largest grids: to the last class, not a thread alone
+        classes[-1] = np.sort(np.concatenate([classes[-1], points[members]]))
+    elif members.size:
         classes.append(points[np.sort(members)])
     return classes
 
