@@ -45,7 +45,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import _march, _periodic
-from ._events import event_times, place_events
+from ._events import event_times, place_events, unresolved_events
 from ._kinematics import period_grid
 from ._limits import fast_limit_velocity, kinematic_speed
 from ._status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
@@ -395,6 +395,25 @@ def _check_turning_points(code, params, active, padded, steps, int_u, nodes, sta
     return estimate, withdrawn, flagged
 
 
+def _check_events(code, params, bucket, padded, steps, int_u, nodes, events, physics, u_floor,
+                  rtol, estimate, accepted):
+    """``_events.unresolved_events`` for the bisected solutions of the accepted pairs: adds
+    its estimate and withdraws the acceptance where the sum exceeds rtol.
+
+    Returns (estimate, withdrawn, event_steps): the pairs withdrawn, and for every pair the
+    bisected grid's steps holding the events counted (-1 elsewhere)."""
+    F = slice(1, None, 2)
+    points = params[bucket]
+    scale_u = np.maximum(np.abs(int_u[F]), u_floor[bucket])
+    extra, event_steps = unresolved_events(
+        code, points, padded[F], np.where(accepted, steps[F], 0), nodes[F], events,
+        physics.inertia_factor[bucket], physics.mu_n[bucket], physics.mu_s[bucket],
+        physics.p[bucket], physics.delta_tau[bucket], scale_u, EVENT_GAP)
+    estimate = np.where(accepted, estimate + extra, estimate)
+    withdrawn = np.flatnonzero(accepted & (estimate > rtol))
+    return estimate, withdrawn, event_steps
+
+
 def _chatter(stiff_coarse, stiff_fine, u_coarse, h, threshold):
     """The coarse steps where the march chatters (on either grid of the pair), or None when
     the u stalled in them carries at most ``threshold`` of int u: a short chatter (a brief
@@ -587,10 +606,18 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                         padded[rows], steps[rows], iu[rows], ip[rows], st[rows], step_u[rows],
                         step_pi[rows], step_m[rows], ser[rows], u_floor[bucket[marked]], rtol,
                         spec.order, np.zeros(marked.size, dtype=bool), forced[marked])[2]
-            # the next grids' events (an accepted pair has no next grid: 0 steps searched)
-            found = event_times(code, params[bucket], padded[F], np.where(accepted, 0, steps[F]),
-                                ser[F], physics.inertia_factor[bucket], physics.mu_n[bucket],
+            found = event_times(code, params[bucket], padded[F], steps[F], ser[F],
+                                physics.inertia_factor[bucket], physics.mu_n[bucket],
                                 physics.mu_s[bucket], physics.p[bucket], physics.delta_tau[bucket])
+            # events off the nodes of an accepted pair: their error is added, and where that
+            # withdraws the pair its steps holding them are bisected (and they become nodes)
+            estimate_pass, withdrawn, event_steps = _check_events(
+                code, params, bucket, padded, steps, iu, ser, found, physics, u_floor, rtol,
+                estimate_pass, accepted)
+            accepted[withdrawn] = False
+            for j in withdrawn:
+                held = event_steps[j][event_steps[j] >= 0] // 2  # B(G)'s step -> G's
+                levels[j, held] = np.maximum(levels[j, held], 1)
             estimate[bucket[ok]] = estimate_pass[ok]
             keep = np.ones(m, dtype=bool)
             for j, i in enumerate(bucket):
