@@ -20,7 +20,10 @@ sample on the same side.  It is blind as well to a body held at rest on a
 turning point of phi by both grids (``_turning``): before a pair is accepted,
 the steps next to the zeros of dphi/dtau are checked by their defect, weighted
 by the sensitivity of U to it; that estimate is added to E, and where it is
-large nodes are graded toward the turning point.
+large nodes are graded toward the turning point.  Nor does it see an event of the
+solution that lies off the nodes at the same distance d from a node both grids share
+(a stop in a step loses the same triangle of u on both): J d^2 / 2, J the jump of u' there,
+is added to E as well (``_events.unresolved_events``).
 
 Cost (``python -m solver.bench``, 2000 harmonic points at rtol 1e-4, 2 cores):
 about 2,400 step-sweeps per point (Radau steps times shooting sweeps, summed over
