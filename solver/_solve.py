@@ -74,6 +74,9 @@ HOPELESS = 8
 MAX_CHATTER_PASSES = 3
 #: chatter matters when u stalled in it carries this share of rtol of int u
 CHATTER_SHARE = 0.1
+#: the split steps of ``_events.split_step_error`` are solved to this fraction of rtol
+#: (times the norm of int u)
+SPLIT_STEP_TOLERANCE = 1e-9
 #: a refinement pass solves the points in classes of similar grid size (``_size_classes``),
 #: each of at least this many points where the sizes allow
 MIN_CLASS_POINTS = 32
@@ -402,19 +405,25 @@ def _check_turning_points(code, params, active, padded, steps, int_u, nodes, sta
 
 
 def _check_events(code, params, bucket, padded, steps, int_u, nodes, events, physics, u_floor,
-                  rtol, estimate, accepted):
-    """``_events.unresolved_events`` for the bisected solutions of the accepted pairs: adds
-    its estimate and withdraws the acceptance where the sum exceeds rtol.
+                  rtol, estimate, accepted, stages=None, weights=None):
+    """``_events.unresolved_events`` for the bisected solutions of the accepted pairs (with
+    the Radau ``stages`` and node ``weights``, its split-step term too): adds its estimate
+    and withdraws the acceptance where the sum exceeds rtol.
 
     Returns (estimate, withdrawn, event_steps): the pairs withdrawn, and for every pair the
     bisected grid's steps holding the events counted (-1 elsewhere)."""
     F = slice(1, None, 2)
     points = params[bucket]
     scale_u = np.maximum(np.abs(int_u[F]), u_floor[bucket])
+    if stages is None:
+        stages, weights = np.zeros((0, 0)), np.zeros((0, 0))
+    else:
+        stages, weights = stages[F], weights[F]
     extra, event_steps = unresolved_events(
         code, points, padded[F], np.where(accepted, steps[F], 0), nodes[F], events,
         physics.inertia_factor[bucket], physics.mu_n[bucket], physics.mu_s[bucket],
-        physics.p[bucket], physics.delta_tau[bucket], scale_u, EVENT_GAP)
+        physics.p[bucket], physics.delta_tau[bucket], scale_u, EVENT_GAP, stages, weights,
+        SPLIT_STEP_TOLERANCE * rtol)
     estimate = np.where(accepted, estimate + extra, estimate)
     withdrawn = np.flatnonzero(accepted & (estimate > rtol))
     return estimate, withdrawn, event_steps
@@ -619,7 +628,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
             # withdraws the pair its steps holding them are bisected (and they become nodes)
             estimate_pass, withdrawn, event_steps = _check_events(
                 code, params, bucket, padded, steps, iu, ser, found, physics, u_floor, rtol,
-                estimate_pass, accepted)
+                estimate_pass, accepted, stages if method == "periodic" else None, weights)
             accepted[withdrawn] = False
             for j in withdrawn:
                 held = event_steps[j][event_steps[j] >= 0] // 2  # B(G)'s step -> G's
