@@ -23,7 +23,9 @@ by the sensitivity of U to it; that estimate is added to E, and where it is
 large nodes are graded toward the turning point.  Nor does it see an event of the
 solution that lies off the nodes at the same distance d from a node both grids share
 (a stop in a step loses the same triangle of u on both): J d^2 / 2, J the jump of u' there,
-is added to E as well (``_events.unresolved_events``).
+or, for the periodic method, the change of the step split at the event weighted by the node
+weight where that is larger (it also sees a corner of u'), is added to E as well
+(``_events.unresolved_events``).
 
 Cost (``python -m solver.bench``, 2000 harmonic points at rtol 1e-4, 2 cores):
 about 2,400 step-sweeps per point (Radau steps times shooting sweeps, summed over
