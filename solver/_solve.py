@@ -608,7 +608,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
                 padded, steps, iu, ip, st, step_u, step_pi, step_m, ser, u_floor[bucket], rtol,
                 spec.order, may_accept, forced)
             flagged = None
-            if weights is not None:  # periodic: the check at turning points of phi (``_turning``)
+            if weights is not None:  # the check at turning points of phi (``_turning``)
                 estimate_richardson = estimate_pass
                 estimate_pass, withdrawn, flagged = _check_turning_points(
                     code, params, bucket, padded, steps, iu, ser, stages, weights, physics,
