@@ -73,9 +73,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ._force import E_FLOOR, _setup as _force_setup, link_moments, radial_power
-from ._kinematics import (FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, angle_and_rate,
-                          period_grid)
+from ._force import E_FLOOR, _setup_sc, link_moments, radial_power
+from ._kinematics import FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, period_grid
 from ._limits import fast_limit_velocity
 from ._periodic import _solve_point, stage_jacobian
 from ._physics import Physics
@@ -175,7 +174,8 @@ def _graded_side(s_c, w_c, end, rho, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
 def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
     """F, Pi and their partial derivatives in u, phi, omega and delta_tau.
 
-    Parameters as ``force_and_slope``; returns as ``force_partials_quadrature``.
+    Parameters as ``force_and_slope``; returns as ``force_partials_quadrature``
+    (``force_partials_into`` without the allocation, from sin and cos of phi).
 
     Closed forms from the link moments of ``_force`` (the forward solve's own): for
     theta in (u, phi, delta_tau) the normal velocity's derivative w_theta is constant
@@ -197,11 +197,21 @@ def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
     columns are always the closed forms (F_u equals ``force_and_slope``'s slope to rounding:
     the adjoint's Jacobian is the derivative of what the forward residual evaluates).
     """
-    S, C, a, b, c, e2 = _force_setup(u, phi, omega, delta_tau, p)
+    out = np.empty(10)
+    force_partials_into(u, math.sin(phi), math.cos(phi), phi, omega, mu_n, mu_s, p, delta_tau,
+                        out)
+    return out
+
+
+@njit(cache=True)
+def force_partials_into(u, S, C, phi, omega, mu_n, mu_s, p, delta_tau, out):
+    """``force_partials`` written into ``out`` (10,), with S = sin(phi), C = cos(phi) given:
+    the adjoint calls it twice a step, and the allocation and the sine and cosine were ~1/3
+    of its cost."""
+    S, C, a, b, c, e2 = _setup_sc(u, S, C, omega, delta_tau, p)
     m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)
     m31 = m10 - e2 * m11
     q = p - 1.0
-    out = np.empty(10)
     out[0] = 2.0 * (mu_n * S * m10 - mu_s * C * c * m00)
     out[5] = 2.0 * (mu_n * m20 + mu_s * c * c * m00)
     c_phi = -S * u + 0.25 * omega * (C * C - S * S)
@@ -227,7 +237,8 @@ def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
         quadrature = force_partials_quadrature(u, phi, omega, mu_n, mu_s, p, delta_tau)
         out[3] = quadrature[3]
         out[8] = quadrature[8]
-    return out
+
+
 
 
 @njit(cache=True)
@@ -365,18 +376,12 @@ def step_length_partials(code, params, h, tau_phase, dh):
 def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol, stages,
              stage_kinematics):
     """Periodic solution on ``grid`` (N steps); writes the converged stages (2N,) and phi,
-    dphi/dtau at the stage times (2, 2N).
+    dphi/dtau, sin phi, cos phi at the stage times (4, 2N).
 
     Returns (status, u0, I_u, I_Pi).  The shooting is the solver's own (``_solve_point``),
     whose converged sweep gives the stages and the Radau-weighted period integrals.
-    ``vscale`` <= 0: computed here from the grid.
+    ``vscale`` <= 0: computed from the grid (``_solve_point``).
     """
-    if vscale <= 0.0:  # (1/4) int |dphi/dtau| by the Radau rule: a speed scale for the tolerances
-        vscale = 0.0
-        for n in range(N):
-            h, _, om1, _, om2 = _stage_kinematics(code, params, grid, n)
-            vscale += 0.25 * h * (0.75 * abs(om1) + 0.25 * abs(om2))
-        vscale = max(vscale, 1e-300)
     scratch = np.empty((4, N))
     int_u, int_pi, u0, status, _, _ = _solve_point(
         code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol, scratch[0],
@@ -385,20 +390,10 @@ def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol
 
 
 @njit(cache=True)
-def _stage_kinematics(code, params, grid, n):
-    """Step n's length and (phi, dphi/dtau) at its Radau stage times t_n + h/3 and t_{n+1}."""
-    h = grid[n + 1] - grid[n]
-    mid = grid[n] + 0.5 * h
-    phi1, om1 = angle_and_rate(code, params, grid[n] + h / 3.0, mid)
-    phi2, om2 = angle_and_rate(code, params, grid[n + 1], mid)
-    return h, phi1, om1, phi2, om2
-
-
-@njit(cache=True)
 def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_kinematics,
              grad):
-    """Gradients of the period integrals from the converged stages (and phi, dphi/dtau
-    there, ``_forward``'s).
+    """Gradients of the period integrals from the converged stages (and phi, dphi/dtau,
+    sin phi, cos phi there: ``_forward``'s).
 
     ``grad`` has shape (2, n_par + 2): rows I_u and I_Pi; columns the family
     parameters, then kappa, then delta_tau (each held independent of the others).
@@ -409,17 +404,17 @@ def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_ki
     n_par = grad.shape[1] - 2
     jac = np.empty((N, 4))      # J11, J12, J21, J22
     sens = np.empty((N, 2))     # J^-1 1 = (dU1/du_n, dU2/du_n)
-    rhs = np.empty((N, 2, 2))   # [step, functional, stage]: dI/dx
     part = np.empty((N, 2, 10))  # force_partials at the two stages
     log_m = 0.0
     sign_m = 1.0
-    phis = stage_kinematics[0]
-    oms = stage_kinematics[1]
+    phis, oms, sins, coss = (stage_kinematics[0], stage_kinematics[1], stage_kinematics[2],
+                             stage_kinematics[3])
     for n in range(N):
         h = grid[n + 1] - grid[n]
-        part[n, 0] = force_partials(stages[2 * n], phis[2 * n], oms[2 * n], mu_n, mu_s, p, dtau)
-        part[n, 1] = force_partials(stages[2 * n + 1], phis[2 * n + 1], oms[2 * n + 1], mu_n,
-                                    mu_s, p, dtau)
+        for j in range(2):
+            i = 2 * n + j
+            force_partials_into(stages[i], sins[i], coss[i], phis[i], oms[i], mu_n, mu_s, p,
+                                dtau, part[n, j])
         # F_u of force_partials is the closed-form slope of the forward residual
         hd1 = h * kappa * part[n, 0, 1]
         hd2 = h * kappa * part[n, 1, 1]
@@ -435,19 +430,19 @@ def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_ki
             log_m += math.log(-1.0 - mm1) if mm1 < -1.0 else -math.inf
         else:
             log_m += math.log1p(mm1)
-        rhs[n, 0, 0] = h * b1
-        rhs[n, 0, 1] = h * b2
-        rhs[n, 1, 0] = h * b1 * part[n, 0, 6]
-        rhs[n, 1, 1] = h * b2 * part[n, 1, 6]
     one_minus_M = -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
 
-    # sigma_0 = A_0 / (1 - M), A_n = c_n + m_n A_{n+1}, A_N = 0
-    sigma0 = np.zeros(2)
-    for f in range(2):
-        A = 0.0
-        for n in range(N - 1, -1, -1):
-            A = sens[n, 0] * rhs[n, f, 0] + sens[n, 1] * rhs[n, f, 1] + sens[n, 1] * A
-        sigma0[f] = A / one_minus_M
+    # sigma_0 = A_0 / (1 - M), A_n = c_n + m_n A_{n+1}, A_N = 0, for both functionals: the
+    # right-hand side g_n of step n is h (b1, b2) for I_u and h (b1 Pi_u1, b2 Pi_u2) for I_Pi
+    sigma_u = 0.0
+    sigma_p = 0.0
+    for n in range(N - 1, -1, -1):
+        h = grid[n + 1] - grid[n]
+        s1, s2 = sens[n, 0], sens[n, 1]
+        sigma_u = h * (s1 * b1 + s2 * b2) + s2 * sigma_u
+        sigma_p = h * (s1 * b1 * part[n, 0, 6] + s2 * b2 * part[n, 1, 6]) + s2 * sigma_p
+    sigma_u /= one_minus_M
+    sigma_p /= one_minus_M
 
     for k in range(grad.shape[1]):
         grad[0, k] = 0.0
@@ -457,46 +452,56 @@ def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_ki
     dphi2 = np.empty(n_par)
     dom2 = np.empty(n_par)
     dh = np.empty(n_par)
-    sigma_next = sigma0.copy()
+    moving = code == POWER_LAW  # only the power law's steps move with a parameter (tau0)
     for n in range(N - 1, -1, -1):
         h = grid[n + 1] - grid[n]
+        hk = h * kappa
         mid = grid[n] + 0.5 * h
         angle_partials(code, params, grid[n] + h / 3.0, mid, dphi1, dom1)
         angle_partials(code, params, grid[n + 1], mid, dphi2, dom2)
-        step_length_partials(code, params, h, mid, dh)
         J11, J12, J21, J22 = jac[n, 0], jac[n, 1], jac[n, 2], jac[n, 3]
         det = J11 * J22 - J12 * J21
         P1 = part[n, 0]
         P2 = part[n, 1]
-        U1 = stages[2 * n]
-        U2 = stages[2 * n + 1]
-        for f in range(2):
-            r1 = rhs[n, f, 0]
-            r2 = rhs[n, f, 1] + sigma_next[f]
-            l1 = (J22 * r1 - J21 * r2) / det
-            l2 = (-J12 * r1 + J11 * r2) / det
-            sigma_next[f] = l1 + l2
-            q1 = a11 * l1 + a21 * l2  # A^T l
-            q2 = a12 * l1 + a22 * l2
-            qF = q1 * P1[0] + q2 * P2[0]
-            hk = h * kappa
-            # dI/dtheta = dI/dtheta|_x + d(h kappa)/dtheta (q.F) + h kappa sum_j q_j dF_j/dtheta
-            if f == 0:
-                direct_h = b1 * U1 + b2 * U2
-            else:
-                direct_h = b1 * P1[5] + b2 * P2[5]
+        # l_n from J_n^T l_n = g_n + e_2 sigma_{n+1}; q = A^T l; then
+        # dI/dtheta = dI/dtheta|_x + d(h kappa)/dtheta (q.F) + h kappa sum_j q_j dF_j/dtheta,
+        # collected as coefficients of dphi_j, domega_j and dh for the parameter loop
+        r1 = h * b1
+        r2 = h * b2 + sigma_u
+        l1 = (J22 * r1 - J21 * r2) / det
+        l2 = (-J12 * r1 + J11 * r2) / det
+        sigma_u = l1 + l2
+        q1 = a11 * l1 + a21 * l2
+        q2 = a12 * l1 + a22 * l2
+        qF = q1 * P1[0] + q2 * P2[0]
+        h_u = b1 * stages[2 * n] + b2 * stages[2 * n + 1] + kappa * qF
+        phi1_u, om1_u = hk * q1 * P1[2], hk * q1 * P1[3]
+        phi2_u, om2_u = hk * q2 * P2[2], hk * q2 * P2[3]
+        grad[0, n_par] += h * qF
+        grad[0, n_par + 1] += hk * (q1 * P1[4] + q2 * P2[4])
+
+        r1 = h * b1 * P1[6]
+        r2 = h * b2 * P2[6] + sigma_p
+        l1 = (J22 * r1 - J21 * r2) / det
+        l2 = (-J12 * r1 + J11 * r2) / det
+        sigma_p = l1 + l2
+        q1 = a11 * l1 + a21 * l2
+        q2 = a12 * l1 + a22 * l2
+        qF = q1 * P1[0] + q2 * P2[0]
+        h_p = b1 * P1[5] + b2 * P2[5] + kappa * qF
+        phi1_p, om1_p = hk * q1 * P1[2] + h * b1 * P1[7], hk * q1 * P1[3] + h * b1 * P1[8]
+        phi2_p, om2_p = hk * q2 * P2[2] + h * b2 * P2[7], hk * q2 * P2[3] + h * b2 * P2[8]
+        grad[1, n_par] += h * qF
+        grad[1, n_par + 1] += hk * (q1 * P1[4] + q2 * P2[4]) + h * (b1 * P1[9] + b2 * P2[9])
+
+        for k in range(n_par):
+            grad[0, k] += phi1_u * dphi1[k] + om1_u * dom1[k] + phi2_u * dphi2[k] + om2_u * dom2[k]
+            grad[1, k] += phi1_p * dphi1[k] + om1_p * dom1[k] + phi2_p * dphi2[k] + om2_p * dom2[k]
+        if moving:
+            step_length_partials(code, params, h, mid, dh)
             for k in range(n_par):
-                dF1 = P1[2] * dphi1[k] + P1[3] * dom1[k]
-                dF2 = P2[2] * dphi2[k] + P2[3] * dom2[k]
-                g = dh[k] * (direct_h + kappa * qF) + hk * (q1 * dF1 + q2 * dF2)
-                if f == 1:
-                    g += h * (b1 * (P1[7] * dphi1[k] + P1[8] * dom1[k])
-                              + b2 * (P2[7] * dphi2[k] + P2[8] * dom2[k]))
-                grad[f, k] += g
-            grad[f, n_par] += h * qF
-            grad[f, n_par + 1] += hk * (q1 * P1[4] + q2 * P2[4])
-            if f == 1:
-                grad[f, n_par + 1] += h * (b1 * P1[9] + b2 * P2[9])
+                grad[0, k] += h_u * dh[k]
+                grad[1, k] += h_p * dh[k]
     return one_minus_M
 
 
@@ -653,8 +658,8 @@ class DiscreteSolution:
 
     stages : ndarray, shape (2 N,)
         Radau stages (U1_0, U2_0, U1_1, ...) of the converged sweep.
-    stage_kinematics : ndarray, shape (2, 2 N)
-        phi and dphi/dtau at the stage times.
+    stage_kinematics : ndarray, shape (4, 2 N)
+        phi, dphi/dtau, sin phi and cos phi at the stage times.
     int_u, int_pi : float
         The Radau-weighted period integrals I_u, I_Pi.
     status : int
@@ -691,7 +696,7 @@ def discrete_solution(kinematics, physics, grid, *, rtol=1e-13, u0=None):
     if u0 is None:
         u0 = float(fast_limit_velocity(kinematics, physics)[0])
     stages = np.empty(2 * N)
-    stage_kinematics = np.empty((2, 2 * N))
+    stage_kinematics = np.empty((4, 2 * N))
     status, u0, int_u, int_pi = _forward(
         code, params, nodes, N, float(physics.inertia_factor[0]), float(physics.mu_n[0]),
         float(physics.mu_s[0]), float(physics.p[0]), float(physics.delta_tau[0]), u0, 0.0, rtol,

@@ -158,8 +158,10 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     if given, the stage values (U1_0, U2_0, U1_1, ...) of the converged sweep into
     ``stages_out`` (>= 2N,).  ``stage_guess`` (2N,), optional: starting stage values for the
     first sweep (default, or an array of another size: u_n, cold; a step whose Newton fails
-    from the guess retries cold).  ``kinematics_out`` (2, >= 2N), optional: receives phi
-    and dphi/dtau at the stage times (for the adjoint, ``_gradient``).  ``weights_out`` (>= N,),
+    from the guess retries cold).  ``kinematics_out`` (2 or 4, >= 2N), optional: receives phi
+    and dphi/dtau at the stage times, and with 4 rows also sin phi and cos phi there (for
+    the adjoint, ``_gradient``).  ``vscale`` <= 0: the speed scale is computed here,
+    (1/4) int |dphi/dtau| by the Radau rule.  ``weights_out`` (>= N,),
     optional: receives the node weights of ``node_weights``.
     Returns (int_u, int_Pi, u0, status, shooting_iterations, stage_iterations).
     """
@@ -177,6 +179,14 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     if kinematics_out is not None:
         kinematics_out[0, :2 * N] = phis
         kinematics_out[1, :2 * N] = oms
+        if kinematics_out.shape[0] >= 4:
+            kinematics_out[2, :2 * N] = sins
+            kinematics_out[3, :2 * N] = coss
+    if vscale <= 0.0:  # (1/4) int |dphi/dtau| by the Radau rule: a speed scale for the tolerances
+        vscale = 0.0
+        for n in range(N):
+            vscale += 0.25 * hs[n] * (0.75 * abs(oms[2 * n]) + 0.25 * abs(oms[2 * n + 1]))
+        vscale = max(vscale, 1e-300)
     guessed = stage_guess is not None and stage_guess.size == 2 * N
     stages = np.empty(2 * N)
     sens = np.empty(2 * N)
