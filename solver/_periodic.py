@@ -32,7 +32,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._force import force_and_slope_sc, power_density
+from ._force import force_and_slope_sc, power_density_sc
 from ._kinematics import angle_and_rate
 from ._status import CONVERGED, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED
 
@@ -293,8 +293,9 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     for n in range(N):
         U1 = stages[2 * n]
         U2 = stages[2 * n + 1]
-        P1 = power_density(U1, phis[2 * n], oms[2 * n], mu_n, mu_s, p, dtau)
-        P2 = power_density(U2, phis[2 * n + 1], oms[2 * n + 1], mu_n, mu_s, p, dtau)
+        P1 = power_density_sc(U1, sins[2 * n], coss[2 * n], oms[2 * n], mu_n, mu_s, p, dtau)
+        P2 = power_density_sc(U2, sins[2 * n + 1], coss[2 * n + 1], oms[2 * n + 1], mu_n, mu_s,
+                              p, dtau)
         step_u[n] = hs[n] * (0.75 * U1 + 0.25 * U2)
         step_pi[n] = hs[n] * (0.75 * P1 + 0.25 * P2)
         int_u += step_u[n]
