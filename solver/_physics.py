@@ -81,6 +81,19 @@ class Physics:
     def scaled_period(self):
         return scaled_from_physical(self.period, self.mu_n, self.mu_s, self.p)[1]
 
+    def with_period(self, period):
+        """These physics with every point's period replaced by ``period`` (scalar or
+        (n_points,)); only the new period is checked (the rest was, at construction): an
+        optimiser's line search makes one per trial point."""
+        T = np.broadcast_to(np.asarray(period, dtype=float), self.period.shape).copy()
+        if not np.all(np.isfinite(T) & (T > 0)):
+            raise ValueError("period: T must be finite and > 0")
+        new = object.__new__(Physics)
+        for name in ("mu_n", "mu_s", "p", "delta"):
+            object.__setattr__(new, name, getattr(self, name))
+        object.__setattr__(new, "period", T)
+        return new
+
     def take(self, index):
         return Physics(self.period[index], self.mu_n[index], self.mu_s[index], self.p[index],
                        self.delta[index])

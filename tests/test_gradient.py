@@ -283,6 +283,18 @@ def test_discrete_objective_matches_the_solver_on_one_grid():
     np.testing.assert_allclose(res.P, ip[0] * physics.period[0] ** -1.0, rtol=1e-11)
 
 
+def test_with_period_checks_the_period_and_keeps_the_rest():
+    physics = solver.Physics.from_scaled(2.0 ** -4, 1.5, p=0.5, delta=1e-4)
+    moved = with_period(physics, 3.0)
+    assert moved.period.tolist() == [3.0]
+    for name in ("mu_n", "mu_s", "p", "delta"):
+        assert getattr(moved, name).tolist() == getattr(physics, name).tolist()
+    assert moved.inertia_factor[0] == 3.0 ** 1.5
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match="period"):
+            with_period(physics, bad)
+
+
 def test_gradient_from_a_stored_solution_uses_its_stage_kinematics():
     # the optimiser's line search solves first and differentiates only the accepted point;
     # the adjoint then takes phi and dphi/dtau at the stages from the stored solution
@@ -297,6 +309,9 @@ def test_gradient_from_a_stored_solution_uses_its_stage_kinematics():
                                rtol=0, atol=1e-14)
     np.testing.assert_allclose(stored.stage_kinematics[1],
                                -0.4 * 2 * np.pi * np.sin(2 * np.pi * t), rtol=0, atol=1e-13)
+    phi = stored.stage_kinematics[0]
+    np.testing.assert_allclose(stored.stage_kinematics[2], np.sin(phi), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(stored.stage_kinematics[3], np.cos(phi), rtol=0, atol=1e-15)
     again = objective_gradient(kinematics, physics, grid, solution=stored)
     fresh = objective_gradient(kinematics, physics, grid)
     np.testing.assert_array_equal(again.gradient, fresh.gradient)
