@@ -257,9 +257,9 @@ def _radau_from(u_n, t0, t1, code, params, kappa, mu_n, mu_s, p, dtau, atol):
     mid = 0.5 * (t0 + t1)
     phi1, om1 = angle_and_rate(code, params, t0 + h / 3.0, mid)
     phi2, om2 = angle_and_rate(code, params, t1, mid)
-    U1, U2, _, _, _, _, ok = radau_step(u_n, u_n, u_n, h, math.sin(phi1), math.cos(phi1), om1,
-                                        math.sin(phi2), math.cos(phi2), om2, kappa, mu_n, mu_s,
-                                        p, dtau, atol)
+    U1, U2, _, _, _, _, _, _, _, _, ok = radau_step(
+        u_n, u_n, u_n, h, math.sin(phi1), math.cos(phi1), om1, math.sin(phi2), math.cos(phi2),
+        om2, kappa, mu_n, mu_s, p, dtau, atol)
     return h * (0.75 * U1 + 0.25 * U2), U2, ok
 
 

@@ -292,13 +292,38 @@ def force_and_slope_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
     """``force_and_slope`` from S = sin(phi), C = cos(phi): a stage's Newton iterations
     evaluate F at one phi several times, and sin and cos were ~15 % of an evaluation."""
     S, C, a, b, c, e2 = _setup_sc(u, S, C, omega, delta_tau, p)
-    m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)
+    return _force_and_slope_from(S, C, c, mu_n, mu_s, p, *link_moments(a, b, e2, p))
+
+
+@njit(cache=True)
+def _force_and_slope_from(S, C, c, mu_n, mu_s, p, m00, m10, m20, m01, m11, m21):
     F = 2.0 * (mu_n * S * m10 - mu_s * C * c * m00)
     slope = -(mu_n * S * S + mu_s * C * C) * m00
     if p != 1.0:
         slope += (p - 1.0) * (-mu_n * S * S * m21 + (mu_n + mu_s) * S * C * c * m11
                               - mu_s * C * C * c * c * m01)
     return F, 2.0 * slope
+
+
+@njit(cache=True)
+def force_slope_power_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
+    """``force_and_slope_sc`` and the power density Pi (``power_density``) with dPi/du, from
+    the same link moments: the stage Newton iterations carry Pi along, so a converged sweep
+    needs no separate power pass (it was a quarter of all evaluations).
+
+    dPi/du differentiates Pi = 2 (mu_n m_2^0 + mu_s c^2 m_0^0) term by term, with the
+    moment derivatives of ``_gradient.force_partials`` for theta = u (w_u = -S, c_u = C).
+    """
+    S, C, a, b, c, e2 = _setup_sc(u, S, C, omega, delta_tau, p)
+    m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)
+    F, slope = _force_and_slope_from(S, C, c, mu_n, mu_s, p, m00, m10, m20, m01, m11, m21)
+    q = p - 1.0
+    cC = c * C
+    d00 = q * (cC * m01 - S * m11)
+    d20 = -2.0 * S * m10 + q * (cC * m21 - S * (m10 - e2 * m11))
+    power = 2.0 * (mu_n * m20 + mu_s * c * c * m00)
+    power_u = 2.0 * (mu_n * d20 + mu_s * (2.0 * cC * m00 + c * c * d00))
+    return F, slope, power, power_u
 
 
 @njit(cache=True)

@@ -32,7 +32,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._force import force_and_slope_sc, power_density_sc
+from ._force import force_slope_power_sc
 from ._kinematics import angle_and_rate
 from ._status import CONVERGED, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED
 
@@ -63,12 +63,15 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
     """Solve one Radau IIA step from u_n, starting at the guess (U1, U2); sin_i, cos_i are
     those of phi at the stages, om_i dphi/dtau there.
 
-    Returns (U1, U2, s1, s2, m_minus_1, iterations, ok): the stage values, their
-    sensitivities dU_i/du_n, du_{n+1}/du_n - 1 and whether Newton converged.
+    Returns (U1, U2, s1, s2, m_minus_1, iterations, Pi1, Pi2, Pi_u1, Pi_u2, ok): the stage
+    values, their sensitivities dU_i/du_n, du_{n+1}/du_n - 1, the power density at the
+    stages with its u-derivative, and whether Newton converged.  Pi comes with every
+    evaluation of F (``force_slope_power_sc``); where the last Newton step is taken without
+    one, Pi moves with it to first order (the step is below ``atol``).
     """
     a11, a12, a21, a22 = 5.0 / 12.0, -1.0 / 12.0, 0.75, 0.25
-    F1, d1 = force_and_slope_sc(U1, sin1, cos1, om1, mu_n, mu_s, p, dtau)
-    F2, d2 = force_and_slope_sc(U2, sin2, cos2, om2, mu_n, mu_s, p, dtau)
+    F1, d1, P1, Pu1 = force_slope_power_sc(U1, sin1, cos1, om1, mu_n, mu_s, p, dtau)
+    F2, d2, P2, Pu2 = force_slope_power_sc(U2, sin2, cos2, om2, mu_n, mu_s, p, dtau)
     R1 = U1 - u_n - h * kappa * (a11 * F1 + a12 * F2)
     R2 = U2 - u_n - h * kappa * (a21 * F1 + a22 * F2)
     ok = False
@@ -93,6 +96,8 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
             # residual cannot decrease, and backtracking would only burn evaluations)
             U1 += x1
             U2 += x2
+            P1 += Pu1 * x1
+            P2 += Pu2 * x2
             ok = True
             break
         # A stage whose sign Newton flips back and forth sits next to a root at zero velocity
@@ -115,8 +120,8 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
         for _ in range(40):
             T1 = U1 + lam * x1
             T2 = U2 + lam * x2
-            G1, g1 = force_and_slope_sc(T1, sin1, cos1, om1, mu_n, mu_s, p, dtau)
-            G2, g2 = force_and_slope_sc(T2, sin2, cos2, om2, mu_n, mu_s, p, dtau)
+            G1, g1, Q1, Qu1 = force_slope_power_sc(T1, sin1, cos1, om1, mu_n, mu_s, p, dtau)
+            G2, g2, Q2, Qu2 = force_slope_power_sc(T2, sin2, cos2, om2, mu_n, mu_s, p, dtau)
             S1 = T1 - u_n - h * kappa * (a11 * G1 + a12 * G2)
             S2 = T2 - u_n - h * kappa * (a21 * G1 + a22 * G2)
             if S1 * S1 + S2 * S2 <= (1.0 - 1e-4 * lam) * norm0 or lam < 1e-9:
@@ -126,6 +131,7 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
         flipped1 = singular and U1 * T1 < 0.0
         flipped2 = singular and U2 * T2 < 0.0
         U1, U2, F1, F2, d1, d2, R1, R2 = T1, T2, G1, G2, g1, g2, S1, S2
+        P1, P2, Pu1, Pu2 = Q1, Q2, Qu1, Qu2
         if not (math.isfinite(U1) and math.isfinite(U2)):
             break
         # (size: the Newton step before any cut, so a cut step is not taken for convergence;
@@ -144,7 +150,7 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
     v1 = a11 * hd1 + a12 * hd2
     v2 = a21 * hd1 + a22 * hd2
     m_minus_1 = (-J21 * v1 + J11 * v2) / det
-    return U1, U2, s1, s2, m_minus_1, it, ok
+    return U1, U2, s1, s2, m_minus_1, it, P1, P2, Pu1, Pu2, ok
 
 
 @njit(cache=True)
@@ -189,6 +195,8 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         vscale = max(vscale, 1e-300)
     guessed = stage_guess is not None and stage_guess.size == 2 * N
     stages = np.empty(2 * N)
+    powers = np.empty(2 * N)  # Pi and dPi/du at the stages, from the stage iterations
+    powers_u = np.empty(2 * N)
     sens = np.empty(2 * N)
     m_minus_1 = np.empty(N)
     u_start = np.empty(N)
@@ -228,13 +236,13 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
                 U1 = stages[2 * n] + sens[2 * n] * du
                 U2 = stages[2 * n + 1] + sens[2 * n + 1] * du
             u_start[n] = u
-            U1, U2, s1, s2, mm1, its, ok = radau_step(
+            U1, U2, s1, s2, mm1, its, P1, P2, Pu1, Pu2, ok = radau_step(
                 u, U1, U2, hs[n], sins[2 * n], coss[2 * n], oms[2 * n], sins[2 * n + 1],
                 coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau, atol_stage)
             stage_its += its
             if not ok and (not first or guessed or n > 0):
                 # the tangent prediction (or the guess) can miss the basin: retry cold
-                U1, U2, s1, s2, mm1, its, ok = radau_step(
+                U1, U2, s1, s2, mm1, its, P1, P2, Pu1, Pu2, ok = radau_step(
                     u, u, u, hs[n], sins[2 * n], coss[2 * n], oms[2 * n], sins[2 * n + 1],
                     coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau, atol_stage)
                 stage_its += its
@@ -243,6 +251,10 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
                 return math.nan, math.nan, u0, status, it_out, stage_its
             stages[2 * n] = U1
             stages[2 * n + 1] = U2
+            powers[2 * n] = P1
+            powers[2 * n + 1] = P2
+            powers_u[2 * n] = Pu1
+            powers_u[2 * n + 1] = Pu2
             sens[2 * n] = s1
             sens[2 * n + 1] = s2
             m_minus_1[n] = mm1
@@ -284,8 +296,9 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     u0 += shift
     for n in range(N):
         u_start[n] += shift
-        stages[2 * n] += sens[2 * n] * shift
-        stages[2 * n + 1] += sens[2 * n + 1] * shift
+        for i in (2 * n, 2 * n + 1):
+            stages[i] += sens[i] * shift
+            powers[i] += powers_u[i] * sens[i] * shift
         shift *= 1.0 + m_minus_1[n]
     # quadrature of the converged sweep with the Radau weights (order 3)
     int_u = 0.0
@@ -293,9 +306,8 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     for n in range(N):
         U1 = stages[2 * n]
         U2 = stages[2 * n + 1]
-        P1 = power_density_sc(U1, sins[2 * n], coss[2 * n], oms[2 * n], mu_n, mu_s, p, dtau)
-        P2 = power_density_sc(U2, sins[2 * n + 1], coss[2 * n + 1], oms[2 * n + 1], mu_n, mu_s,
-                              p, dtau)
+        P1 = powers[2 * n]
+        P2 = powers[2 * n + 1]
         step_u[n] = hs[n] * (0.75 * U1 + 0.25 * U2)
         step_pi[n] = hs[n] * (0.75 * P1 + 0.25 * P2)
         int_u += step_u[n]

@@ -73,6 +73,25 @@ def test_slope_matches_central_differences(p):
         assert abs(slope - fd) <= 1e-6 * (abs(fd) + 1.0)
 
 
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.0, 1.5])
+def test_power_carried_by_the_stage_iterations(p):
+    # the stage Newton iterations evaluate F, dF/du, Pi and dPi/du together: the first three
+    # are the standalone kernels' to the bit, dPi/du matches central differences of Pi
+    from solver._force import force_slope_power_sc
+    rng = np.random.default_rng(11)
+    for _ in range(40):
+        u, phi, omega = rng.normal(), rng.uniform(-1, 4), rng.normal() * 3
+        dt = 10.0 ** rng.uniform(-8, -2)
+        F, slope, Pi, Pi_u = force_slope_power_sc(u, math.sin(phi), math.cos(phi), omega, 0.4,
+                                                  1.3, p, dt)
+        assert (F, slope) == force_and_slope(u, phi, omega, 0.4, 1.3, p, dt)
+        assert Pi == power_density(u, phi, omega, 0.4, 1.3, p, dt)
+        h = 1e-6 * max(abs(u), 1.0)
+        fd = (power_density(u + h, phi, omega, 0.4, 1.3, p, dt)
+              - power_density(u - h, phi, omega, 0.4, 1.3, p, dt)) / (2 * h)
+        assert abs(Pi_u - fd) <= 1e-6 * (abs(fd) + 1.0), (u, phi, omega, dt)
+
+
 def test_force_is_continuous_across_the_quadrature_switch():
     # omega sweeps through the closed-form / Gauss-Legendre switch at fixed u
     omegas = np.geomspace(1e-7, 1e1, 4001)
