@@ -67,7 +67,9 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
     values, their sensitivities dU_i/du_n, du_{n+1}/du_n - 1, the power density at the
     stages with its u-derivative, and whether Newton converged.  Pi comes with every
     evaluation of F (``force_slope_power_sc``); where the last Newton step is taken without
-    one, Pi moves with it to first order (the step is below ``atol``).
+    one, Pi moves with it to first order (the convergence test bounds that step by about
+    sqrt(atol times the previous one); in the solver the carried int Pi was within 2e-10
+    relative of Pi evaluated at the final stages).
     """
     a11, a12, a21, a22 = 5.0 / 12.0, -1.0 / 12.0, 0.75, 0.25
     F1, d1, P1, Pu1 = force_slope_power_sc(U1, sin1, cos1, om1, mu_n, mu_s, p, dtau)
@@ -163,8 +165,9 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     ``step_u``, ``step_pi``, the step derivatives du_{n+1}/du_n into ``step_m`` and,
     if given, the stage values (U1_0, U2_0, U1_1, ...) of the converged sweep into
     ``stages_out`` (>= 2N,).  ``stage_guess`` (2N,), optional: starting stage values for the
-    first sweep (default, or an array of another size: u_n, cold; a step whose Newton fails
-    from the guess retries cold).  ``kinematics_out`` (2 or 4, >= 2N), optional: receives phi
+    first sweep (default, or an array of another size: the previous step's collocation
+    polynomial extrapolated, u_n at the first step; a step whose Newton fails from its start
+    retries from u_n, then from rest).  ``kinematics_out`` (2 or 4, >= 2N), optional: receives phi
     and dphi/dtau at the stage times, and with 4 rows also sin phi and cos phi there (for
     the adjoint, ``_gradient``).  ``vscale`` <= 0: the speed scale is computed here,
     (1/4) int |dphi/dtau| by the Radau rule.  ``weights_out`` (>= N,),
@@ -244,6 +247,13 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
                 # the tangent prediction (or the guess) can miss the basin: retry cold
                 U1, U2, s1, s2, mm1, its, P1, P2, Pu1, Pu2, ok = radau_step(
                     u, u, u, hs[n], sins[2 * n], coss[2 * n], oms[2 * n], sins[2 * n + 1],
+                    coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau, atol_stage)
+                stage_its += its
+            if not ok and u != 0.0:
+                # a step into a stop can defeat both (measured: a burst-and-coast power law at
+                # its corner, 60 iterations from each; from rest, 6): retry from rest
+                U1, U2, s1, s2, mm1, its, P1, P2, Pu1, Pu2, ok = radau_step(
+                    u, 0.0, 0.0, hs[n], sins[2 * n], coss[2 * n], oms[2 * n], sins[2 * n + 1],
                     coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau, atol_stage)
                 stage_its += its
             if not ok:

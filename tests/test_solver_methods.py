@@ -357,6 +357,30 @@ def test_stage_newton_converges_at_a_singular_slope():
     assert solver.solve_periodic(kin, phys, rtol=1e-3).n_tau[0] <= 1000
 
 
+def test_stage_newton_retries_from_rest_where_a_step_stops_the_body():
+    """A burst-and-coast power law on 64 uniform steps: at the corner tau0 (omega from -8.75
+    to ~0) the body stops within a step, and the stage Newton failed from the extrapolated
+    collocation guess and from u_n alike (60 iterations each; STAGE_SOLVE_FAILED), while
+    from rest it converges.  The solution must not depend on the nonlinear tolerance beyond
+    it, and int Pi must equal the Radau rule over power_density at the returned stages."""
+    from solver._gradient import FixedGrid, discrete_solution
+    kin = solver.PowerLaw(1.2, 0.35, 0.8, 10.0, False, 3.0, True)
+    phys = solver.Physics.from_scaled(2.0 ** -8, 2.0 ** 4, p=0.0, delta=1e-8)
+    grid = FixedGrid.uniform(kin, 64)
+    tight = discrete_solution(kin, phys, grid, rtol=1e-13)
+    assert tight.status == 0
+    loose = discrete_solution(kin, phys, grid, rtol=1e-4)
+    assert loose.status == 0
+    assert abs(loose.int_u - tight.int_u) <= 1e-7 * abs(tight.int_u)
+    h = np.diff(tight.nodes)
+    phi, omega = tight.stage_kinematics[0], tight.stage_kinematics[1]
+    pi = [solver.power_density(u, a, w, phys.mu_n[0], phys.mu_s[0], 0.0, phys.delta_tau[0])
+          for u, a, w in zip(tight.stages, phi, omega)]
+    pi = np.reshape(pi, (-1, 2))
+    assert np.isclose(np.sum(h * (0.75 * pi[:, 0] + 0.25 * pi[:, 1])), tight.int_pi,
+                      rtol=1e-12, atol=0.0)
+
+
 def test_stage_newton_at_an_infinite_slope_converges_to_the_roots():
     """radau_step at omega = 0 (F = -K |u|^p sign u, p = 0.5, delta = 0) from many starts,
     against the stage roots by nested brentq.  The first version of the flip cut accepted
