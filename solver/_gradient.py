@@ -769,9 +769,12 @@ def objective_gradient(kinematics, physics, grid, *, objective="efficiency", rto
                               math.nan, nan, solution.status, solution.u0, math.nan)
     n_par = n_family_parameters(code, params)
     grad = np.empty((2, n_par + 2))
+    stage_kinematics = solution.stage_kinematics
+    if stage_kinematics.shape[0] < 4:  # a solution stored with phi and dphi/dtau only
+        phi = stage_kinematics[0]
+        stage_kinematics = np.vstack([stage_kinematics[:2], np.sin(phi), np.cos(phi)])
     one_minus_M = _adjoint(code, params, nodes, N, kappa, float(physics.mu_n[0]),
-                           float(physics.mu_s[0]), p, dtau, stages,
-                           solution.stage_kinematics, grad)
+                           float(physics.mu_s[0]), p, dtau, stages, stage_kinematics, grad)
     n_fam = len(names)  # the harmonic encoding carries B1 = 0: drop its column
     d_int = np.empty((2, n_out))
     d_int[:, :n_fam] = grad[:, :n_fam]

@@ -85,12 +85,16 @@ class Physics:
         """These physics with every point's period replaced by ``period`` (scalar or
         (n_points,)); only the new period is checked (the rest was, at construction): an
         optimiser's line search makes one per trial point."""
-        T = np.broadcast_to(np.asarray(period, dtype=float), self.period.shape).copy()
+        T = np.asarray(period, dtype=float)
+        if T.ndim > 1 or T.size not in (1, len(self)):
+            raise ValueError(f"period: expected a scalar or {len(self)} values, got shape "
+                             f"{T.shape}")
+        T = np.broadcast_to(T.reshape(-1), self.period.shape).copy()
         if not np.all(np.isfinite(T) & (T > 0)):
             raise ValueError("period: T must be finite and > 0")
-        new = object.__new__(Physics)
+        new = object.__new__(type(self))
         for name in ("mu_n", "mu_s", "p", "delta"):
-            object.__setattr__(new, name, getattr(self, name))
+            object.__setattr__(new, name, getattr(self, name).copy())
         object.__setattr__(new, "period", T)
         return new
 

@@ -5,6 +5,7 @@ law), with nonlinear tolerances at rounding level, along random directions, and
 Richardson-extrapolated (steps eps and eps/2) so that their own error (~1e-10) is far
 below the asserted 1e-6.
 """
+import dataclasses
 import math
 
 import mpmath as mp
@@ -290,9 +291,11 @@ def test_with_period_checks_the_period_and_keeps_the_rest():
     for name in ("mu_n", "mu_s", "p", "delta"):
         assert getattr(moved, name).tolist() == getattr(physics, name).tolist()
     assert moved.inertia_factor[0] == 3.0 ** 1.5
-    for bad in (0.0, -1.0, math.nan, math.inf):
+    for bad in (0.0, -1.0, math.nan, math.inf, [1.0, 2.0]):
         with pytest.raises(ValueError, match="period"):
             with_period(physics, bad)
+    moved.mu_n[0] = 7.0  # its own arrays: the source is untouched
+    assert physics.mu_n[0] != 7.0
 
 
 def test_gradient_from_a_stored_solution_uses_its_stage_kinematics():
@@ -316,6 +319,10 @@ def test_gradient_from_a_stored_solution_uses_its_stage_kinematics():
     fresh = objective_gradient(kinematics, physics, grid)
     np.testing.assert_array_equal(again.gradient, fresh.gradient)
     assert stored.outputs() == (fresh.U, fresh.P, fresh.efficiency)
+    # a solution stored with phi and dphi/dtau only (the layout before sin and cos were kept)
+    two_rows = dataclasses.replace(stored, stage_kinematics=stored.stage_kinematics[:2].copy())
+    older = objective_gradient(kinematics, physics, grid, solution=two_rows)
+    np.testing.assert_allclose(older.gradient, fresh.gradient, rtol=1e-13, atol=0.0)
 
 
 # -- U at fixed P: the gradient along the constraint ---------------------------------------------
