@@ -390,6 +390,14 @@ def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol
 
 
 @njit(cache=True)
+def _transposed_stage_solve(J11, J12, J21, J22, det, r1, r2):
+    """l from J_n^T l = (r1, r2): returns (sigma = l1 + l2, q = A^T l)."""
+    l1 = (J22 * r1 - J21 * r2) / det
+    l2 = (-J12 * r1 + J11 * r2) / det
+    return (l1 + l2, (5.0 / 12.0) * l1 + 0.75 * l2, (-1.0 / 12.0) * l1 + 0.25 * l2)
+
+
+@njit(cache=True)
 def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_kinematics,
              grad):
     """Gradients of the period integrals from the converged stages (and phi, dphi/dtau,
@@ -466,13 +474,8 @@ def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_ki
         # l_n from J_n^T l_n = g_n + e_2 sigma_{n+1}; q = A^T l; then
         # dI/dtheta = dI/dtheta|_x + d(h kappa)/dtheta (q.F) + h kappa sum_j q_j dF_j/dtheta,
         # collected as coefficients of dphi_j, domega_j and dh for the parameter loop
-        r1 = h * b1
-        r2 = h * b2 + sigma_u
-        l1 = (J22 * r1 - J21 * r2) / det
-        l2 = (-J12 * r1 + J11 * r2) / det
-        sigma_u = l1 + l2
-        q1 = a11 * l1 + a21 * l2
-        q2 = a12 * l1 + a22 * l2
+        sigma_u, q1, q2 = _transposed_stage_solve(J11, J12, J21, J22, det, h * b1,
+                                                  h * b2 + sigma_u)
         qF = q1 * P1[0] + q2 * P2[0]
         h_u = b1 * stages[2 * n] + b2 * stages[2 * n + 1] + kappa * qF
         phi1_u, om1_u = hk * q1 * P1[2], hk * q1 * P1[3]
@@ -480,13 +483,8 @@ def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_ki
         grad[0, n_par] += h * qF
         grad[0, n_par + 1] += hk * (q1 * P1[4] + q2 * P2[4])
 
-        r1 = h * b1 * P1[6]
-        r2 = h * b2 * P2[6] + sigma_p
-        l1 = (J22 * r1 - J21 * r2) / det
-        l2 = (-J12 * r1 + J11 * r2) / det
-        sigma_p = l1 + l2
-        q1 = a11 * l1 + a21 * l2
-        q2 = a12 * l1 + a22 * l2
+        sigma_p, q1, q2 = _transposed_stage_solve(J11, J12, J21, J22, det, h * b1 * P1[6],
+                                                  h * b2 * P2[6] + sigma_p)
         qF = q1 * P1[0] + q2 * P2[0]
         h_p = b1 * P1[5] + b2 * P2[5] + kappa * qF
         phi1_p, om1_p = hk * q1 * P1[2] + h * b1 * P1[7], hk * q1 * P1[3] + h * b1 * P1[8]
