@@ -56,7 +56,7 @@ from numba import njit, prange
 
 from ._events import illinois_update
 from ._force import force_and_slope
-from ._kinematics import angle_and_rate
+from ._kinematics import FOURIER, angle_and_rate
 from ._periodic import collocation_value
 
 _x4, _w4 = np.polynomial.legendre.leggauss(4)
@@ -178,6 +178,20 @@ def window_width(code, params, tz, level):
 
 
 @njit(cache=True)
+def rate_slope_bound(code, params):
+    """A bound on |d omega / d tau| over the period: sum_k (2 pi k)^2 (|A_k| + |B_k|) for the
+    Fourier encoding; inf for the power law (omega' is unbounded at a corner for exponents
+    below 2)."""
+    if code != FOURIER:
+        return math.inf
+    K = int(params[0])
+    bound = 0.0
+    for k in range(1, K + 1):
+        bound += (2.0 * math.pi * k) ** 2 * (abs(params[1 + k]) + abs(params[K + 1 + k]))
+    return bound
+
+
+@njit(cache=True)
 def _differ(a, b):
     """omega changes sign (or vanishes) between the values a and b."""
     return a == 0.0 or b == 0.0 or (a < 0.0) != (b < 0.0)
@@ -193,12 +207,24 @@ def _turning_points(code, params, grid, N, u_nodes, stages, dtau, out):
     count = 0
     values = np.empty(SAMPLES + 1)
     times = np.empty(SAMPLES + 1)
+    slope = rate_slope_bound(code, params)
     for n in range(N):
         t0 = grid[n]
         h = grid[n + 1] - t0
         side = t0 + 0.5 * h
-        for k in range(SAMPLES + 1):
-            times[k] = t0 + h * k / SAMPLES if k < SAMPLES else grid[n + 1]
+        times[0] = t0
+        times[SAMPLES] = grid[n + 1]
+        values[0] = _rate(code, params, t0, side)
+        values[SAMPLES] = _rate(code, params, grid[n + 1], side)
+        # |omega| >= (|omega(t0)| + |omega(t1)| - slope h) / 2 on the step: where that stays
+        # above TANGENCY |u| (|u| on the step <= 2 max |u_n|, |U1|, |U2|: the collocation
+        # quadratic's Lebesgue constant is ~1.7), the samples could find nothing
+        u_bound = 2.0 * max(abs(u_nodes[n]), abs(stages[2 * n]), abs(stages[2 * n + 1]))
+        if abs(values[0]) + abs(values[SAMPLES]) - slope * h > 2.0 * TANGENCY * max(u_bound,
+                                                                                  dtau):
+            continue
+        for k in range(1, SAMPLES):
+            times[k] = t0 + h * k / SAMPLES
             values[k] = _rate(code, params, times[k], side)
         found = False
         for k in range(SAMPLES):

@@ -209,3 +209,22 @@ def test_march_runs_the_turning_point_check():
     assert ref.status[0] == 0 and march.status[0] == 0
     scale = max(abs(ref.mean_u[0]), 1e-3 * V)
     assert abs(march.mean_u[0] - ref.mean_u[0]) / scale <= 1e-6
+
+
+def test_rate_slope_bound_bounds_the_rate_of_omega():
+    # the turning-point search skips a step whose end values of omega keep |omega| above
+    # TANGENCY |u| given this bound on |omega'|: it must hold everywhere on the period
+    from solver._turning import rate_slope_bound
+    rng = np.random.default_rng(5)
+    tau = np.linspace(0.0, 1.0, 20001)
+    for K in (1, 3, 7):
+        kin = solver.Fourier(rng.normal(0.0, 0.5, (1, K + 1)), rng.normal(0.0, 0.5, (1, K)))
+        code, params = kin.kernel_encoding()
+        omega = np.array([angle_and_rate(code, params[0], t, t)[1] for t in tau])
+        steepest = np.max(np.abs(np.diff(omega)) / np.diff(tau))
+        bound = rate_slope_bound(code, params[0])
+        assert steepest <= bound
+        assert steepest >= 0.2 * bound  # and not uselessly loose (random phases)
+    pl = solver.PowerLaw(1.2, 0.35, 0.8, 1.5, False, 3.0, True)
+    code, params = pl.kernel_encoding()
+    assert rate_slope_bound(code, params[0]) == np.inf  # omega' unbounded at the corner
