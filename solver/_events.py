@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._force import force_and_slope
-from ._kinematics import angle_and_rate
+from ._kinematics import FOURIER, angle_and_rate
 from ._periodic import radau_step
 
 #: a step whose g = u + omega S / 4 ends within this many delta_tau of zero without changing
@@ -166,7 +166,9 @@ def _point_events(code, params, grid, N, u_nodes, physics, out):
                 if math.isfinite(t):
                     out[count] = t
                     count += 1
-        if n + 1 < N:
+        if n + 1 < N and code == FOURIER:  # no corners: the next step sees the same values
+            prev[:] = cur
+        elif n + 1 < N:
             phi, om = angle_and_rate(code, params, t1, t1 + 0.5 * (grid[n + 2] - t1))
             _event_functions(u1, phi, om, prev)
     return count
