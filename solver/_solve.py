@@ -35,9 +35,10 @@ converged sweep needs no power pass: that pass had been a quarter of the evaluat
 ~37 % of the wall time outside the sweeps (event search ~6 %, the turning-point check ~6 %,
 the rest Python: grids, padding; profile of a 1.35 s solve).  B(G) is solved after G on
 the same thread, from G's u(0) and collocation polynomials (``_periodic.solve_pairs``), and
-the pairs alternate across threads so numba's static split stays balanced.  A pass batches its points by
-size class of their grids (``_size_classes``): one batch padded every row to the longest
-grid (at rtol 1e-7, 31 M steps to 139 M cells), which had cost ~40 % of the wall time.
+the pairs alternate across threads so numba's static split stays balanced.  A pass
+batches its points by size class of their grids (``_size_classes``): one batch padded every
+row to the longest grid (at rtol 1e-7, 31 M steps to 139 M cells), which had cost ~40 % of
+the wall time.
 
 Error norm.  For P (always > 0) the error is relative.  U can vanish (for
 example at isotropic friction and p = 1), so its error is measured relative
