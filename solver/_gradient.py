@@ -77,7 +77,8 @@ from numba import njit
 from ._force import E_FLOOR, _setup_sc, link_moments, radial_power
 from ._kinematics import FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, period_grid
 from ._limits import fast_limit_velocity
-from ._periodic import _solve_point, stage_jacobian
+from ._periodic import (_solve_point, monodromy_factor, one_minus_monodromy,
+                        stage_jacobian)
 from ._status import CONVERGED
 
 _x10, _w10 = np.polynomial.legendre.leggauss(10)
@@ -433,12 +434,8 @@ def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_ki
         v1 = a11 * hd1 + a12 * hd2
         v2 = a21 * hd1 + a22 * hd2
         mm1 = (-J21 * v1 + J11 * v2) / det  # m_n - 1 without cancellation
-        if mm1 <= -1.0:
-            sign_m = -sign_m
-            log_m += math.log(-1.0 - mm1) if mm1 < -1.0 else -math.inf
-        else:
-            log_m += math.log1p(mm1)
-    one_minus_M = -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
+        log_m, sign_m = monodromy_factor(log_m, sign_m, mm1)
+    one_minus_M = one_minus_monodromy(log_m, sign_m)
 
     # sigma_0 = A_0 / (1 - M), A_n = c_n + m_n A_{n+1}, A_N = 0, for both functionals: the
     # right-hand side g_n of step n is h (b1, b2) for I_u and h (b1 Pi_u1, b2 Pi_u2) for I_Pi

@@ -21,7 +21,7 @@ from numba import njit, prange
 
 from ._force import force_and_slope, power_density
 from ._kinematics import angle_and_rate
-from ._periodic import batch_outputs, node_weights
+from ._periodic import batch_outputs, monodromy_factor, node_weights, one_minus_monodromy
 from ._status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
 
 #: Heun's method (explicit trapezoidal RK2).
@@ -160,11 +160,8 @@ def _check_inputs(nodes, ms, hs, N, stages, weights):
         stages[2 * n] = nodes[n] + (nodes[n + 1] - nodes[n]) / 3.0
         stages[2 * n + 1] = nodes[n + 1]
         weights[n] = 0.5 * hs[n] * (1.0 + ms[n])
-        if ms[n] < 0.0:
-            sign_m = -sign_m
-        log_m += math.log(abs(ms[n])) if ms[n] != 0.0 else -math.inf
-    one_minus_M = -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
-    node_weights(weights[:N], ms[:N], one_minus_M)
+        log_m, sign_m = monodromy_factor(log_m, sign_m, ms[n] - 1.0)
+    node_weights(weights[:N], ms[:N], one_minus_monodromy(log_m, sign_m))
 
 
 @njit(cache=True, parallel=True)

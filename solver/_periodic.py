@@ -58,6 +58,21 @@ def stage_jacobian(hd1, hd2):
 
 
 @njit(cache=True)
+def monodromy_factor(log_m, sign_m, m_minus_1):
+    """(log |M|, sign M) of the monodromy M = prod m_n with one more step factor m_n, given
+    as m_n - 1 (formed without cancellation; log1p keeps it near m_n = 1)."""
+    if m_minus_1 <= -1.0:  # a step that reverses perturbations: track the sign of M
+        return log_m + (math.log(-1.0 - m_minus_1) if m_minus_1 < -1.0 else -math.inf), -sign_m
+    return log_m + math.log1p(m_minus_1), sign_m
+
+
+@njit(cache=True)
+def one_minus_monodromy(log_m, sign_m):
+    """1 - M from ``monodromy_factor``'s (log |M|, sign M), without cancellation at M ~ 1."""
+    return -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
+
+
+@njit(cache=True)
 def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu_s, p, dtau,
                atol):
     """Solve one Radau IIA step from u_n, starting at the guess (U1, U2); sin_i, cos_i are
@@ -268,15 +283,11 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
             sens[2 * n] = s1
             sens[2 * n + 1] = s2
             m_minus_1[n] = mm1
-            if mm1 <= -1.0:  # a step that reverses perturbations: track the sign of M
-                sign_m = -sign_m
-                log_m += math.log(-1.0 - mm1) if mm1 < -1.0 else -math.inf
-            else:
-                log_m += math.log1p(mm1)
+            log_m, sign_m = monodromy_factor(log_m, sign_m, mm1)
             u = U2
         first = False
         g = u - u0
-        one_minus_M = -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
+        one_minus_M = one_minus_monodromy(log_m, sign_m)
         if not (math.isfinite(g) and one_minus_M != 0.0 and math.isfinite(one_minus_M)):
             return math.nan, math.nan, u0, NON_FINITE, it_out, stage_its
         if abs(g) <= tol_fix * abs(one_minus_M):
