@@ -332,13 +332,6 @@ def power_density(u, phi, omega, mu_n, mu_s, p, delta_tau):
 
     The mean power is P = T^-(p+1) int_0^1 Pi dtau.
     """
-    return power_density_sc(u, math.sin(phi), math.cos(phi), omega, mu_n, mu_s, p, delta_tau)
-
-
-@njit(cache=True)
-def power_density_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
-    """``power_density`` from S = sin(phi), C = cos(phi) (the quadrature of a converged
-    sweep has them; sin and cos were ~30 % of an evaluation)."""
-    S, C, a, b, c, e2 = _setup_sc(u, S, C, omega, delta_tau, p)
+    S, C, a, b, c, e2 = _setup(u, phi, omega, delta_tau, p)
     m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)
     return 2.0 * (mu_n * m20 + mu_s * c * c * m00)
