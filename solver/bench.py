@@ -103,15 +103,22 @@ def subset(kinematics, physics, index):
 
 # ----------------------------------------------------------------------------- periodic solver
 
-def time_periodic(kinematics, physics, rtol, repeats=1):
-    """``repeats`` batched ``solve_periodic`` calls (the solver is deterministic: every call
-    returns the same result); returns (SolveResult, median wall seconds, every call's)."""
+def repeat_timed(run, repeats):
+    """(result of the last of ``repeats`` calls of the deterministic ``run``, median seconds,
+    every call's seconds): the median because a shared VM's wall times vary by +-25 %."""
     runs = []
     for _ in range(repeats):
         start = time.perf_counter()
-        result = solver.solve_periodic(kinematics, physics, method="periodic", rtol=rtol)
+        result = run()
         runs.append(time.perf_counter() - start)
     return result, float(np.median(runs)), runs
+
+
+def time_periodic(kinematics, physics, rtol, repeats=1):
+    """``repeats`` batched ``solve_periodic`` calls (the solver is deterministic: every call
+    returns the same result); returns (SolveResult, median wall seconds, every call's)."""
+    return repeat_timed(lambda: solver.solve_periodic(kinematics, physics, method="periodic",
+                                                      rtol=rtol), repeats)
 
 
 def periodic_summary(result, seconds, runs):

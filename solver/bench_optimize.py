@@ -24,7 +24,6 @@ import argparse
 import json
 import math
 import sys
-import time
 
 import numpy as np
 import scipy.optimize
@@ -33,17 +32,7 @@ from ._gradient import adaptive_grid, discrete_objective, with_family_parameters
 from ._kinematics import Fourier
 from ._optimize import _Problem, _variables, optimize_motion
 from ._physics import Physics
-
-
-def _timed(run, repeats):
-    """(result of the last of ``repeats`` calls of the deterministic ``run``, median seconds,
-    every call's seconds)."""
-    runs = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        result = run()
-        runs.append(time.perf_counter() - start)
-    return result, float(np.median(runs)), runs
+from .bench import repeat_timed
 
 
 def _runs(runs):
@@ -64,7 +53,7 @@ def compare(seed, kmax, ratio_log2, gtol, repeats=1):
     print(f"seed {seed}: Kmax = {kmax}, mu_n/mu_s = 2^{ratio_log2:g}, start A0 = {A[0, 0]:.4f}, "
           f"A1 = {A[0, 1]:.4f}, fixed grid of {grid.n_steps} steps")
 
-    ours, seconds, runs = _timed(lambda: optimize_motion(
+    ours, seconds, runs = repeat_timed(lambda: optimize_motion(
         template, physics, grid=grid, gtol=gtol, max_iterations=2000), repeats)
     print(f"  adjoint BFGS/Newton: {seconds:.2f} s ({_runs(runs)}), {ours.iterations} iterations "
           f"({ours.newton_steps} Newton), {ours.solves} solves and {ours.gradient_evaluations} "
@@ -99,7 +88,7 @@ def compare(seed, kmax, ratio_log2, gtol, repeats=1):
         return scipy.optimize.minimize(fun, x0, method="BFGS", options={"gtol": gtol,
                                                                          "maxiter": 2000})
 
-    base, baseline_seconds, runs = _timed(baseline, repeats)
+    base, baseline_seconds, runs = repeat_timed(baseline, repeats)
     baseline_objective = -sign * base.fun
     n_grad = getattr(base, "njev", base.nit + 1)
     print(f"  scipy BFGS + differences: {baseline_seconds:.2f} s ({_runs(runs)}), "
