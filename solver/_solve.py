@@ -531,170 +531,312 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
     if not (np.isfinite(rtol) and 0 < rtol < 1):
         raise ValueError(f"rtol: must lie in (0, 1), got {rtol}")
-    spec = _SPECS[method]
-    max_steps = max_steps_per_period or spec.max_steps_per_period
     n = len(kinematics)
     if len(physics) not in (1, n):
         raise ValueError(f"physics: length {len(physics)} does not match the kinematics' {n} points")
     if len(physics) == 1 and n > 1:
         physics = physics.take(np.zeros(n, dtype=int))
     start = time.perf_counter()
-    code, params = kinematics.kernel_encoding()
-    vscale = kinematic_speed(kinematics)
-    u_floor = U_FLOOR_FRACTION * vscale
-
-    int_u = np.full(n, np.nan)
-    int_pi = np.full(n, np.nan)
-    status = np.full(n, TOLERANCE_NOT_REACHED, dtype=np.int8)
-    estimate = np.full(n, np.inf)
-    iterations = np.zeros(n, dtype=np.int64)
-    n_tau = np.zeros(n, dtype=np.int64)
-    series = [None] * n if return_series else None
-    series_tau = [None] * n if return_series else None
-
-    still = vscale > 0
-    status[~still] = NO_MOTION
-    int_u[~still] = 0.0
-    int_pi[~still] = 0.0
-    estimate[~still] = 0.0
-    active = np.flatnonzero(still)
-    if method == "periodic":
-        u0 = np.zeros(n)
-        if active.size:
-            u0[active] = fast_limit_velocity(kinematics.take(active), physics.take(active))
-    else:
-        u0 = np.zeros(n)  # from rest
-
-    grids = list(period_grid(kinematics, spec.first_steps))
-    corners = kinematics.corners()
-    chatter_passes = np.zeros(n, dtype=np.int64)
-    previous = [None] * n  # (grid, node values, stages) of the last fine solution
-    last_status = np.full(n, CONVERGED, dtype=np.int8)
+    run = _Refinement(kinematics, physics, method, rtol, return_series,
+                      max_steps_per_period or _SPECS[method].max_steps_per_period)
+    active = run.active
     level = 0
     while active.size:
-        survivors = []
         # one batch per size class: rows are padded to the batch's longest grid, and one
         # batch over all points padded 2000 rows of ~31 M steps to 139 M at rtol 1e-7
-        for bucket in _size_classes(active, grids):
-            coarse = [grids[i] for i in bucket]
-            fine = [bisect_all(g) for g in coarse]
-            # rows alternate coarse, fine: the kernel's static split over threads then gets
-            # equal work (coarse rows first would give one thread a third, the other two)
-            padded, steps = _pad([g for pair in zip(coarse, fine) for g in pair])
-            (iu, ip, u0_new, st, its, step_u, step_pi, step_m, ser, stiff, stages,
-             weights) = _run_level(method, code, params, padded, steps, physics, u0, vscale,
-                                   rtol, np.repeat(bucket, 2), paired=True,
-                                   previous=_pad_previous([previous[i] for i in bucket]))
-            m = bucket.size
-            C, F = slice(0, None, 2), slice(1, None, 2)
-            iterations[bucket] += its[C] + its[F]
-            ok = (st[C] == CONVERGED) & (st[F] == CONVERGED)
-            last_status[bucket] = np.where(st[F] != CONVERGED, st[F], st[C])
-            fine_ok = st[F] == CONVERGED
-            u0[bucket[fine_ok]] = u0_new[F][fine_ok]
-            int_u[bucket] = np.where(ok, iu[F], np.nan)
-            int_pi[bucket] = np.where(ok, ip[F], np.nan)
-            n_tau[bucket] = steps[F]
-            may_accept = np.full(m, level >= 1)
-            forced = np.zeros((m, padded.shape[1] - 1), dtype=bool)
-            if stiff is not None:  # the march: steps too long for stiff friction must be split
-                for j, i in enumerate(bucket):
-                    if ok[j]:
-                        unresolved = _chatter(stiff[2 * j], stiff[2 * j + 1], ser[2 * j],
-                                              np.diff(coarse[j]), CHATTER_SHARE * rtol
-                                              * max(abs(iu[2 * j + 1]), u_floor[i]))
-                        if unresolved is not None:
-                            last_status[i] = UNSTABLE
-                            forced[j, :unresolved.size] = unresolved
-                            may_accept[j] = False
-            estimate_pass, accepted, levels = _assess_pairs(
-                padded, steps, iu, ip, st, step_u, step_pi, step_m, ser, u_floor[bucket], rtol,
-                spec.order, may_accept, forced)
-            flagged = None
-            if weights is not None:  # the check at turning points of phi (``_turning``)
-                estimate_richardson = estimate_pass
-                estimate_pass, withdrawn, flagged = _check_turning_points(
-                    code, params, bucket, padded, steps, iu, ser, stages, weights, physics,
-                    u_floor, rtol, estimate_pass, accepted)
-                accepted[withdrawn] = False
-                # withdrawn pairs are graded toward their turning points; Richardson's marking
-                # (Doerfler's, its estimate being below rtol) only where that estimate is large
-                marked = withdrawn[estimate_richardson[withdrawn] > 0.5 * rtol]
-                if marked.size:
-                    rows = np.stack([2 * marked, 2 * marked + 1], axis=1).ravel()
-                    levels[marked] = _assess_pairs(
-                        padded[rows], steps[rows], iu[rows], ip[rows], st[rows], step_u[rows],
-                        step_pi[rows], step_m[rows], ser[rows], u_floor[bucket[marked]], rtol,
-                        spec.order, np.zeros(marked.size, dtype=bool), forced[marked])[2]
-            found = event_times(code, params[bucket], padded[F], steps[F], ser[F],
-                                physics.inertia_factor[bucket], physics.mu_n[bucket],
-                                physics.mu_s[bucket], physics.p[bucket], physics.delta_tau[bucket])
-            # events off the nodes of an accepted pair: their error is added, and where that
-            # withdraws the pair its steps holding them are bisected (and they become nodes)
-            estimate_pass, withdrawn, event_steps = _check_events(
-                code, params, bucket, padded, steps, iu, ser, found, physics, u_floor, rtol,
-                estimate_pass, accepted, stages if method == "periodic" else None, weights)
-            accepted[withdrawn] = False
-            for j in withdrawn:
-                held = event_steps[j][event_steps[j] >= 0] // 2  # B(G)'s step -> G's
-                levels[j, held] = np.maximum(levels[j, held], 1)
-            estimate[bucket[ok]] = estimate_pass[ok]
-            keep = np.ones(m, dtype=bool)
-            for j, i in enumerate(bucket):
-                n_coarse = steps[2 * j]
-                if accepted[j]:
-                    status[i] = CONVERGED
-                    keep[j] = False
-                    if return_series:
-                        series[i] = ser[2 * j + 1, :2 * n_coarse].copy()
-                        series_tau[i] = fine[j][:-1]
-                    continue
-                if ok[j] and forced[j].any():
-                    unresolved = forced[j, :n_coarse]
-                    chatter_passes[i] += 1
-                    if chatter_passes[i] > MAX_CHATTER_PASSES or _steps_to_resolve(
-                            kinematics, physics, i, coarse[j][:-1][unresolved],
-                            np.diff(coarse[j])[unresolved]) > HOPELESS * max_steps:
-                        keep[j] = False  # cannot resolve sticking within the budget: UNSTABLE
-                        continue
-                new, refined = _next_grid(coarse[j], levels[j, :n_coarse], found[j], corners[i])
-                if flagged is not None and np.isfinite(flagged[j, 0, 0]):
-                    graded = grade_towards(new, flagged[j], 0.25 * TURNING_MIN_STEP)
-                    refined = refined or graded.size > new.size
-                    new = graded
-                if new.size - 1 > max_steps or not refined:
-                    keep[j] = False  # out of budget: TOLERANCE_NOT_REACHED or the kernel's reason
-                    if return_series and ok[j]:
-                        series[i] = ser[2 * j + 1, :2 * n_coarse].copy()
-                        series_tau[i] = fine[j][:-1]
-                    continue
-                grids[i] = new
-                if method == "periodic" and st[2 * j + 1] == CONVERGED:
-                    previous[i] = (fine[j], ser[2 * j + 1, :2 * n_coarse].copy(),
-                                   stages[2 * j + 1, :4 * n_coarse].copy())
-            survivors.append(bucket[keep])
+        survivors = [run.refine(bucket, level) for bucket in _size_classes(active, run.grids)]
         active = np.sort(np.concatenate(survivors))
         level += 1
+    return run.result(time.perf_counter() - start)
 
-    failed = status != CONVERGED
-    # report the kernel's own reason where the last grid failed outright
-    kernel_failed = failed & (last_status != CONVERGED) & (status != NO_MOTION)
-    status[kernel_failed] = last_status[kernel_failed]
-    keep_nan = failed & (status != NO_MOTION)
-    int_u[keep_nan] = np.nan
-    int_pi[keep_nan] = np.nan
-    out = _outputs(int_u, int_pi, physics)
-    if np.any(~still):
-        out["efficiency"][~still] = np.nan
-        out["scaled_efficiency"][~still] = np.nan
-        out["relative_efficiency"][~still] = np.nan
-    u_arr = tau_arr = None
-    if return_series:
-        u_arr = [s if s is not None else np.array([]) for s in series]
-        tau_arr = [s if s is not None else np.array([]) for s in series_tau]
-        if len({len(s) for s in u_arr}) == 1:
-            u_arr, tau_arr = np.array(u_arr), np.array(tau_arr)
-    return SolveResult(
-        **out, status=status, converged=status == CONVERGED, error_estimate=estimate,
-        iterations=iterations, n_tau=n_tau, u=u_arr, tau=tau_arr,
-        seconds=time.perf_counter() - start, method=method)
+
+@njit(cache=True)
+def _pair_rows(coarse, steps):
+    """Rows 2j: the grids G of ``coarse`` (row j valid for ``steps[j]`` steps); rows 2j + 1:
+    their bisections B(G) (``bisect_all``); padded with 1.  Returns (rows, steps per row).
+
+    Coarse and fine rows alternate so that the kernels' static split over threads gets equal
+    work (coarse rows first would give one thread a third, the other two)."""
+    m, width = coarse.shape
+    rows = np.ones((2 * m, 2 * width - 1))
+    pair_steps = np.empty(2 * m, dtype=np.int64)
+    for j in range(m):
+        N = steps[j]
+        for k in range(N + 1):
+            rows[2 * j, k] = coarse[j, k]
+            rows[2 * j + 1, 2 * k] = coarse[j, k]
+        for k in range(N):
+            rows[2 * j + 1, 2 * k + 1] = 0.5 * (coarse[j, k] + coarse[j, k + 1])
+        pair_steps[2 * j] = N
+        pair_steps[2 * j + 1] = 2 * N
+    return rows, pair_steps
+
+
+@njit(cache=True)
+def _next_grids(rows, steps, levels, events, corners, flagged, pairs):
+    """The next grids of the ``pairs`` of a pass: G (``rows[2j]``) bisected by ``levels[j]``
+    with nodes on ``events[j]`` (``_next_grid``), then graded toward the turning points
+    ``flagged[j]`` (``grade_towards``; none where its first entry is NaN).
+
+    Returns (nodes of all new grids concatenated, offsets (pairs.size + 1,), refined): grid k
+    is nodes[offsets[k]:offsets[k + 1]]; refined[k] is False where nothing changed."""
+    grids = []
+    refined = np.zeros(pairs.size, dtype=np.bool_)
+    offsets = np.zeros(pairs.size + 1, dtype=np.int64)
+    for k in range(pairs.size):
+        j = pairs[k]
+        N = steps[2 * j]
+        new, changed = _next_grid(rows[2 * j, :N + 1], levels[j, :N], events[j], corners[j])
+        if math.isfinite(flagged[j, 0, 0]):
+            graded = grade_towards(new, flagged[j], 0.25 * TURNING_MIN_STEP)
+            changed = changed or graded.size > new.size
+            new = graded
+        refined[k] = changed
+        grids.append(new)
+        offsets[k + 1] = offsets[k] + new.size
+    nodes = np.empty(offsets[-1])
+    for k in range(pairs.size):
+        nodes[offsets[k]:offsets[k + 1]] = grids[k]
+    return nodes, offsets, refined
+
+
+@dataclass(frozen=True)
+class _PassOutputs:
+    """One size class's pairs solved (``_run_level`` with ``paired``): rows 2j hold G, rows
+    2j + 1 hold B(G) of the class's point j; ``stiff`` only for the march, ``stages`` and
+    ``weights`` only for the periodic method."""
+
+    rows: np.ndarray
+    steps: np.ndarray
+    int_u: np.ndarray
+    int_pi: np.ndarray
+    u0: np.ndarray
+    status: np.ndarray
+    iterations: np.ndarray
+    step_u: np.ndarray
+    step_pi: np.ndarray
+    step_m: np.ndarray
+    nodes: np.ndarray
+    stiff: np.ndarray | None
+    stages: np.ndarray | None
+    weights: np.ndarray | None
+
+    @property
+    def ok(self):
+        """Both solves of each pair converged."""
+        return (self.status[0::2] == CONVERGED) & (self.status[1::2] == CONVERGED)
+
+    def fine_series(self, j):
+        """(u at B(G)'s nodes, those nodes without tau = 1) of pair j."""
+        N = self.steps[2 * j + 1]
+        return self.nodes[2 * j + 1, :N].copy(), self.rows[2 * j + 1, :N].copy()
+
+
+@dataclass(frozen=True)
+class _Verdict:
+    """What the checks of a pass decided for each pair of a size class: its estimate, whether
+    it is accepted, the bisection levels of G's steps, the events found on B(G) (NaN padded),
+    the turning points to grade toward (``_turning``; NaN where none), and for the march the
+    chattering steps that must be split (``forced``) and whether the pair may be accepted."""
+
+    estimate: np.ndarray
+    accepted: np.ndarray
+    levels: np.ndarray
+    events: np.ndarray
+    flagged: np.ndarray
+    forced: np.ndarray
+
+
+class _Refinement:
+    """The per-point state of ``solve_periodic`` over its refinement passes.
+
+    Every pass solves, for each active point, its grid G and the bisection B(G); a point
+    leaves when a pair is accepted, or when its next grid would exceed the budget or not
+    change.  ``grids[i]`` is point i's next G; ``previous[i]`` (B(G), its nodes' u, its
+    stages) of its last converged fine solve starts the next coarse solve (periodic method).
+    """
+
+    def __init__(self, kinematics, physics, method, rtol, return_series, max_steps):
+        n = len(kinematics)
+        self.kinematics, self.physics, self.method, self.rtol = kinematics, physics, method, rtol
+        self.spec = _SPECS[method]
+        self.max_steps = max_steps
+        self.code, self.params = kinematics.kernel_encoding()
+        self.vscale = kinematic_speed(kinematics)
+        self.u_floor = U_FLOOR_FRACTION * self.vscale
+        self.int_u = np.full(n, np.nan)
+        self.int_pi = np.full(n, np.nan)
+        self.status = np.full(n, TOLERANCE_NOT_REACHED, dtype=np.int8)
+        self.last_status = np.full(n, CONVERGED, dtype=np.int8)  # of the last grid's solves
+        self.estimate = np.full(n, np.inf)
+        self.iterations = np.zeros(n, dtype=np.int64)
+        self.n_tau = np.zeros(n, dtype=np.int64)
+        self.chatter_passes = np.zeros(n, dtype=np.int64)
+        self.series = [None] * n if return_series else None
+        self.still = self.vscale <= 0
+        self.status[self.still] = NO_MOTION
+        self.int_u[self.still] = 0.0
+        self.int_pi[self.still] = 0.0
+        self.estimate[self.still] = 0.0
+        self.active = np.flatnonzero(~self.still)
+        self.u0 = np.zeros(n)  # the march starts from rest
+        if method == "periodic" and self.active.size:
+            self.u0[self.active] = fast_limit_velocity(kinematics.take(self.active),
+                                                       physics.take(self.active))
+        self.grids = list(period_grid(kinematics, self.spec.first_steps))
+        self.corners = kinematics.corners()
+        self.previous = [None] * n
+
+    def refine(self, bucket, level):
+        """One pass over the points ``bucket``: solve, check, advance.  Returns the points
+        that go on to the next pass."""
+        out = self._solve(bucket)
+        self._record(bucket, out)
+        verdict = self._assess(bucket, out, level)
+        return self._advance(bucket, out, verdict)
+
+    def _solve(self, bucket):
+        rows, steps = _pair_rows(*_pad([self.grids[i] for i in bucket]))
+        results = _run_level(self.method, self.code, self.params, rows, steps, self.physics,
+                             self.u0, self.vscale, self.rtol, np.repeat(bucket, 2), paired=True,
+                             previous=_pad_previous([self.previous[i] for i in bucket]))
+        return _PassOutputs(rows, steps, *results)
+
+    def _record(self, bucket, out):
+        """The fine solutions' integrals (NaN where a pair failed), u(0) and counts."""
+        C, F = slice(0, None, 2), slice(1, None, 2)
+        ok = out.ok
+        self.iterations[bucket] += out.iterations[C] + out.iterations[F]
+        self.last_status[bucket] = np.where(out.status[F] != CONVERGED, out.status[F],
+                                            out.status[C])
+        fine_ok = out.status[F] == CONVERGED
+        self.u0[bucket[fine_ok]] = out.u0[F][fine_ok]
+        self.int_u[bucket] = np.where(ok, out.int_u[F], np.nan)
+        self.int_pi[bucket] = np.where(ok, out.int_pi[F], np.nan)
+        self.n_tau[bucket] = out.steps[F]
+
+    def _assess(self, bucket, out, level):
+        """Richardson's estimate and marking (``_assess_pairs``), then the turning-point
+        check (periodic) and the event check, each of which can withdraw an acceptance."""
+        m = bucket.size
+        rtol, physics = self.rtol, self.physics
+        may_accept = np.full(m, level >= 1)  # a single coarse grid can miss a short stop
+        forced = np.zeros((m, out.rows.shape[1] - 1), dtype=bool)
+        if out.stiff is not None:
+            self._mark_chatter(bucket, out, may_accept, forced)
+        assess_args = (out.rows, out.steps, out.int_u, out.int_pi, out.status, out.step_u,
+                       out.step_pi, out.step_m, out.nodes)
+        estimate, accepted, levels = _assess_pairs(
+            *assess_args, self.u_floor[bucket], rtol, self.spec.order, may_accept, forced)
+        flagged = np.full((m, MAX_FLAGGED, 3), np.nan)
+        if out.weights is not None:  # the check at turning points of phi (``_turning``)
+            richardson = estimate
+            estimate, withdrawn, flagged = _check_turning_points(
+                self.code, self.params, bucket, out.rows, out.steps, out.int_u, out.nodes,
+                out.stages, out.weights, physics, self.u_floor, rtol, estimate, accepted)
+            accepted[withdrawn] = False
+            # withdrawn pairs are graded toward their turning points; Richardson's marking
+            # (Doerfler's, its estimate being below rtol) only where that estimate is large
+            marked = withdrawn[richardson[withdrawn] > 0.5 * rtol]
+            if marked.size:
+                pair_rows = np.stack([2 * marked, 2 * marked + 1], axis=1).ravel()
+                levels[marked] = _assess_pairs(
+                    *(a[pair_rows] for a in assess_args), self.u_floor[bucket[marked]], rtol,
+                    self.spec.order, np.zeros(marked.size, dtype=bool), forced[marked])[2]
+        F = slice(1, None, 2)
+        events = event_times(self.code, self.params[bucket], out.rows[F], out.steps[F],
+                             out.nodes[F], physics.inertia_factor[bucket], physics.mu_n[bucket],
+                             physics.mu_s[bucket], physics.p[bucket], physics.delta_tau[bucket])
+        # events off the nodes of an accepted pair: their error is added, and where that
+        # withdraws the pair its steps holding them are bisected (and they become nodes)
+        estimate, withdrawn, event_steps = _check_events(
+            self.code, self.params, bucket, out.rows, out.steps, out.int_u, out.nodes, events,
+            physics, self.u_floor, rtol, estimate, accepted,
+            out.stages if self.method == "periodic" else None, out.weights)
+        accepted[withdrawn] = False
+        for j in withdrawn:
+            held = event_steps[j][event_steps[j] >= 0] // 2  # B(G)'s step -> G's
+            levels[j, held] = np.maximum(levels[j, held], 1)
+        ok = out.ok
+        self.estimate[bucket[ok]] = estimate[ok]
+        return _Verdict(estimate, accepted, levels, events, flagged, forced)
+
+    def _mark_chatter(self, bucket, out, may_accept, forced):
+        """The march: steps too long for stiff friction must be split (``_chatter``)."""
+        ok = out.ok
+        for j, i in enumerate(bucket):
+            if not ok[j]:
+                continue
+            unresolved = _chatter(out.stiff[2 * j], out.stiff[2 * j + 1], out.nodes[2 * j],
+                                  np.diff(out.rows[2 * j, :out.steps[2 * j] + 1]),
+                                  CHATTER_SHARE * self.rtol
+                                  * max(abs(out.int_u[2 * j + 1]), self.u_floor[i]))
+            if unresolved is not None:
+                self.last_status[i] = UNSTABLE
+                forced[j, :unresolved.size] = unresolved
+                may_accept[j] = False
+
+    def _hopeless_chatter(self, i, coarse, unresolved):
+        """The march chattered again: give up (UNSTABLE) after MAX_CHATTER_PASSES, or when
+        resolving the friction's time scale would need HOPELESS times the step budget."""
+        self.chatter_passes[i] += 1
+        return self.chatter_passes[i] > MAX_CHATTER_PASSES or _steps_to_resolve(
+            self.kinematics, self.physics, i, coarse[:-1][unresolved],
+            np.diff(coarse)[unresolved]) > HOPELESS * self.max_steps
+
+    def _advance(self, bucket, out, verdict):
+        """Accept, give up on, or re-grid every point of the pass; returns those re-gridded."""
+        ok = out.ok
+        accepted = verdict.accepted
+        self.status[bucket[accepted]] = CONVERGED
+        go_on = ~accepted
+        if out.stiff is not None:
+            for j in np.flatnonzero(go_on & ok & verdict.forced.any(axis=1)):
+                N = out.steps[2 * j]
+                if self._hopeless_chatter(bucket[j], out.rows[2 * j, :N + 1],
+                                          verdict.forced[j, :N]):
+                    go_on[j] = False
+        pairs = np.flatnonzero(go_on)
+        nodes, offsets, refined = _next_grids(out.rows, out.steps, verdict.levels,
+                                              verdict.events, self.corners[bucket],
+                                              verdict.flagged, pairs)
+        sizes = np.diff(offsets)
+        # out of budget, or nothing left to refine: TOLERANCE_NOT_REACHED or the kernel's reason
+        stop = (sizes - 1 > self.max_steps) | ~refined
+        if self.series is not None:
+            for j in np.flatnonzero(accepted | ok & np.isin(np.arange(bucket.size), pairs[stop])):
+                self.series[bucket[j]] = out.fine_series(j)
+        for k in np.flatnonzero(~stop):
+            j = pairs[k]
+            i = bucket[j]
+            self.grids[i] = nodes[offsets[k]:offsets[k + 1]]
+            if self.method == "periodic" and out.status[2 * j + 1] == CONVERGED:
+                N = out.steps[2 * j]
+                # views into this pass's arrays: ``_pad_previous`` copies them
+                self.previous[i] = (out.rows[2 * j + 1, :2 * N + 1], out.nodes[2 * j + 1, :2 * N],
+                                    out.stages[2 * j + 1, :4 * N])
+        return bucket[pairs[~stop]]
+
+    def result(self, seconds):
+        status, int_u, int_pi = self.status, self.int_u, self.int_pi
+        failed = status != CONVERGED
+        # report the kernel's own reason where the last grid failed outright
+        kernel_failed = failed & (self.last_status != CONVERGED) & (status != NO_MOTION)
+        status[kernel_failed] = self.last_status[kernel_failed]
+        keep_nan = failed & (status != NO_MOTION)
+        int_u[keep_nan] = np.nan
+        int_pi[keep_nan] = np.nan
+        out = _outputs(int_u, int_pi, self.physics)
+        for key in ("efficiency", "scaled_efficiency", "relative_efficiency"):
+            out[key][self.still] = np.nan
+        u_arr = tau_arr = None
+        if self.series is not None:
+            empty = (np.array([]), np.array([]))
+            u_arr = [(s or empty)[0] for s in self.series]
+            tau_arr = [(s or empty)[1] for s in self.series]
+            if len({len(s) for s in u_arr}) == 1:
+                u_arr, tau_arr = np.array(u_arr), np.array(tau_arr)
+        return SolveResult(
+            **out, status=status, converged=status == CONVERGED, error_estimate=self.estimate,
+            iterations=self.iterations, n_tau=self.n_tau, u=u_arr, tau=tau_arr,
+            seconds=seconds, method=self.method)
