@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._force import force_and_slope
-from ._kinematics import angle_and_rate, period_grid
+from ._kinematics import angle_and_rate, evaluate_grid, period_grid
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 GL4_NODES = 0.5 * (_GL_X + 1.0)
@@ -129,8 +129,9 @@ def kinematic_speed(kinematics, n_samples=512):
     """
     grid = period_grid(kinematics, n_samples)
     code, params = kinematics.kernel_encoding()
-    mid = 0.5 * (grid[:, 1:] + grid[:, :-1])
-    from ._kinematics import evaluate_grid
-    phi_left, _ = evaluate_grid(code, params, grid[:, :-1].copy(), mid.copy())
-    phi_right, _ = evaluate_grid(code, params, grid[:, 1:].copy(), mid.copy())
-    return 0.25 * np.abs(phi_right - phi_left).sum(axis=1)
+    # phi is continuous: one value per node (the side of a corner only matters for dphi/dtau)
+    side = np.empty_like(grid)
+    side[:, :-1] = 0.5 * (grid[:, 1:] + grid[:, :-1])
+    side[:, -1] = side[:, -2]
+    phi, _ = evaluate_grid(code, params, grid, side)
+    return 0.25 * np.abs(np.diff(phi, axis=1)).sum(axis=1)
