@@ -43,17 +43,21 @@ def _hard_inputs(rng, n):
 
 @pytest.mark.parametrize("p", [0.0, 0.5, 1.0, 1.5])
 @pytest.mark.parametrize("delta_tau", [1e-2, 1e-5, 1e-9])
-def test_force_partials_values_match_closed_forms(p, delta_tau):
-    # F, dF/du and Pi: the graded Gauss-Legendre rule against the closed forms of _force
+def test_force_partials_match_the_graded_quadrature(p, delta_tau):
+    # every entry of force_partials (closed-form link moments, as force_and_slope's) against
+    # force_partials_quadrature (graded Gauss-Legendre over the link, no closed forms)
     rng = np.random.default_rng(int(10 * p) + int(-math.log10(delta_tau)))
     for u, phi, omega in _hard_inputs(rng, 60):
         P = force_partials(u, phi, omega, MU_N, MU_S, p, delta_tau)
+        Q = force_partials_quadrature(u, phi, omega, MU_N, MU_S, p, delta_tau)
         F, dF = solver.force_and_slope(u, phi, omega, MU_N, MU_S, p, delta_tau)
-        Pi = solver.power_density(u, phi, omega, MU_N, MU_S, p, delta_tau)
         force_scale = MU_N * abs(math.sin(phi)) + MU_S * abs(math.cos(phi))
+        assert abs(P[0] - Q[0]) <= 1e-11 * (abs(Q[0]) + force_scale), (u, phi, omega)
+        assert abs(P[1] - Q[1]) <= 1e-10 * abs(Q[1]) + 1e-12 * force_scale, (u, phi, omega)
+        assert abs(P[5] - Q[5]) <= 1e-11 * abs(Q[5]) + 1e-300, (u, phi, omega)
+        # and force_partials is the force kernel's F and dF/du
         assert abs(P[0] - F) <= 1e-12 * (abs(F) + force_scale), (u, phi, omega)
         assert abs(P[1] - dF) <= 1e-11 * abs(dF) + 1e-13 * force_scale, (u, phi, omega)
-        assert abs(P[5] - Pi) <= 1e-12 * abs(Pi) + 1e-300, (u, phi, omega)
 
 
 def _richardson(fun, x, k, step):
@@ -362,18 +366,36 @@ def test_speed_at_power_gradient_matches_central_differences(case, p):
 
 
 def test_speed_at_power_gradient_is_tangent_to_the_constraint():
-    # moving theta by v and T by dT = -(P_theta . v) / P_T keeps P to first order and changes U
-    # by g . v: the implicit-function formula against the unconstrained adjoint gradients
+    """Moving theta by eps v and T by eps dT, dT = -(P_theta . v) / P_T, keeps P to first order
+    (its change shrinks like eps^2, measured by re-solving) and changes U at the rate g . v
+    (g the constrained gradient, against a central difference along that path)."""
     kinematics, physics = _clapping(), solver.Physics.from_scaled(2.0 ** 3, 1.0, p=0.5)
     grid = FixedGrid.uniform(kinematics, 64)
     res = speed_at_power(kinematics, physics, grid, objective_gradient(kinematics, physics, grid).P)
     at = res.at
-    n = len(res.names)
+    _, x = family_parameters(kinematics)
     rng = np.random.default_rng(2)
-    v = rng.normal(size=n)
-    dT = -(at.grad_P[:n] @ v) / at.grad_P[n]
-    np.testing.assert_allclose(at.grad_P[:n] @ v + at.grad_P[n] * dT, 0.0, atol=1e-12 * abs(at.P))
-    np.testing.assert_allclose(res.gradient @ v, at.grad_U[:n] @ v + at.grad_U[n] * dT, rtol=1e-12)
+    v = rng.normal(size=x.size) * np.maximum(np.abs(x), 0.1)
+    v /= np.linalg.norm(v)
+    T = float(physics.period[0])
+    dT = -(at.grad_P[:x.size] @ v) / at.grad_P[x.size]
+
+    def solve(eps):
+        _, U, P, _, status, _ = discrete_objective(
+            with_family_parameters(kinematics, x + eps * v), with_period(physics, T + eps * dT),
+            grid, u0=at.u0)
+        assert status == 0
+        return U, P
+
+    U0, P0 = solve(0.0)
+    eps = 1e-3
+    drift = [abs(solve(e)[1] - P0) / P0 for e in (eps, eps / 2)]
+    free_drift = abs(discrete_objective(with_family_parameters(kinematics, x + eps * v), physics,
+                                        grid, u0=at.u0)[2] - P0) / P0
+    assert drift[0] < 1e-2 * free_drift, (drift, free_drift)  # the first-order change is gone
+    assert 3.0 < drift[0] / drift[1] < 5.0, drift  # what is left is second order
+    slope = _extrapolated_slope(lambda e: solve(e)[0], 1e-4)
+    assert abs(res.gradient @ v - slope) <= 1e-6 * abs(slope), (res.gradient @ v, slope)
 
 
 def test_speed_at_power_rejects_bad_target():
