@@ -320,14 +320,17 @@ def test_registry_tolerances_are_honest(method):
 # ---------------------------------------------------------------------------
 
 
-def test_march_is_honest_on_burst_and_coast_at_high_anisotropy():
+def test_march_reports_unstable_on_burst_and_coast_at_high_anisotropy():
+    """The explicit march cannot resolve this point's sticking within its budget: it must say
+    so (UNSTABLE, NaN outputs), not return a number with a small estimate (before the chatter
+    check it returned status 0 with an estimate far below its true error).  A march that
+    learns to converge here must then be checked against a reference."""
+    from solver._status import UNSTABLE
     kin = solver.PowerLaw(1.2, 0.35, 0.8, 10.0, False, 3.0, True)
     phys = solver.Physics.from_scaled(64.0, 2.0, p=0.0, delta=1e-5)
-    ref = solver.solve_periodic(kin, phys, method="periodic", rtol=1e-9)
     r = solver.solve_periodic(kin, phys, method="march", rtol=1e-4)
-    V = solver.kinematic_speed(kin)
-    error = max(*solver_norm_errors(r.U, r.P, ref.U, ref.P, phys.period, V))[0]
-    assert r.status[0] != 0 or error <= 10 * 1e-4, f"status 0, estimate {r.error_estimate[0]:.2g}, true {error:.2g}"
+    assert r.status[0] == UNSTABLE, solver.STATUS_REASONS[int(r.status[0])]
+    assert np.isnan(r.U[0]) and np.isnan(r.P[0]) and not r.converged[0]
 
 
 # Short scaled periods next to turning points of phi (found in session 4 by a sweep of
