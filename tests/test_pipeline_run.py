@@ -81,11 +81,22 @@ def test_series_stored_at_the_requested_points_only(reference):
     assert ds["series_u"].dims == ("series_point", "series_tau") and ds["series_u"].shape == (2, 64)
     np.testing.assert_allclose(ds["series_tau"].values, np.arange(64) / 64)
     assert (ds["series_status"].values == 0).all()
-    # The mean of u over a period is T U: the grid's scaled speed times the scaled period (mu_n mu_s = 1).
+    import solver
+    tau = np.arange(64) / 64
     for k, (i, j, a, b) in enumerate([(1, 1, 0, 3), (0, 0, 3, 0)]):
         assert ds["series_A0"].values[k] == ds["A0"].values[a]
+        # The mean of u over a period is T U: the grid's scaled speed times the scaled period
+        # (mu_n mu_s = 1).
         speed = ds["scaled_speed"].values[i, j, a, b] * ds["scaled_period"].values[j]
         np.testing.assert_allclose(ds["series_u"].values[k].mean(), speed, rtol=2e-2, atol=1e-4)
+        # sample by sample: the solver's own u(tau) at that point, periodic-interpolated at k/64
+        A0, ratio = ds["A0"].values[a], ds["A1_ratio"].values[b]
+        physics = solver.Physics.from_scaled(ds["anisotropy_ratio"].values[i],
+                                             ds["scaled_period"].values[j], p=0.0, delta=1e-5)
+        res = solver.solve_periodic(solver.Harmonic(A0, ratio * A0), physics, rtol=1e-3,
+                                    return_series=True)
+        expected = np.interp(tau, res.tau[0], res.u[0], period=1.0)
+        np.testing.assert_allclose(ds["series_u"].values[k], expected, rtol=1e-12, atol=0)
 
 
 def test_reductions_equal_brute_force_numpy(reference):
