@@ -288,29 +288,63 @@ def test_tiny_study_report_has_its_sections(tiny, tmp_path):
 # ---------------------------------------------------------------------------
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("method", ["periodic", "march"])
-def test_registry_tolerances_are_honest(method):
-    """Every agreement case, rtol 1e-3, 1e-5, 1e-7, against periodic at 1e-10 cross-checked
-    by a uniform 2^17-step grid: >= 99 % within rtol, all within 10 rtol (stiff march cases
-    may fail, but not converge to a wrong answer)."""
-    ratios = []
+#: (case, rtol) where the march gives up (UNSTABLE: sticking it cannot resolve within its step
+#: budget) on a case not marked stiff (measured: harmonic_low_ratio from rtol 1e-7 on)
+MARCH_GIVES_UP = {("harmonic_low_ratio", 1e-7)}
+#: (case, rtol) whose reference neither the march at 1e-8 (TOLERANCE_NOT_REACHED) nor the
+#: uniform 2^17-step grid (1.3e-8 off) confirms to 0.1 rtol
+UNCONFIRMED = {("harmonic_isotropic", 1e-7)}
+REGISTRY_RTOLS = (1e-3, 1e-5, 1e-7)
+
+
+@pytest.fixture(scope="module")
+def registry_references():
+    """Per agreement case: the periodic reference at rtol 1e-10 and its disagreement with an
+    independent check, the explicit march at rtol 1e-8 (or, where the march fails, a uniform
+    2^17-step periodic grid, which does not use the error control under test)."""
+    refs = {}
     for case in AGREEMENT_CASES:
         ref = solver.solve_periodic(case.kinematics, case.physics, rtol=1e-10)
-        iu, ip, st = solver.solve_fixed_grid(case.kinematics, case.physics, 2 ** 17)
+        assert ref.converged[0], case.name
         T, p = case.physics.period, case.physics.p
         V = solver.kinematic_speed(case.kinematics)
-        check = max(*solver_norm_errors(iu / T, ip * T ** -(p + 1), ref.U, ref.P, T, V))
-        for rtol in (1e-3, 1e-5, 1e-7):
+        march = solver.solve_periodic(case.kinematics, case.physics, method="march", rtol=1e-8)
+        if march.converged[0]:
+            U, P = march.U, march.P
+        else:
+            iu, ip, _ = solver.solve_fixed_grid(case.kinematics, case.physics, 2 ** 17)
+            U, P = iu / T, ip * T ** -(p + 1)
+        refs[case.name] = (ref, max(*solver_norm_errors(U, P, ref.U, ref.P, T, V))[0])
+    return refs
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["periodic", "march"])
+def test_registry_tolerances_are_honest(method, registry_references):
+    """Every agreement case at rtol 1e-3, 1e-5, 1e-7 against its confirmed reference: >= 99 %
+    within rtol, all within 10 rtol.  The march may give up (UNSTABLE, NaN) only on stiff cases
+    and the listed ones, and never converges to a wrong answer; a reference that is not
+    confirmed must be listed."""
+    from solver._status import UNSTABLE
+    ratios, unconfirmed = [], set()
+    for case in AGREEMENT_CASES:
+        ref, check = registry_references[case.name]
+        T, V = case.physics.period, solver.kinematic_speed(case.kinematics)
+        for rtol in REGISTRY_RTOLS:
             if not check <= 0.1 * rtol:
+                unconfirmed.add((case.name, rtol))
                 continue
             r = solver.solve_periodic(case.kinematics, case.physics, method=method, rtol=rtol)
             if r.status[0] != 0:
-                assert case.stiff or method == "march", f"{case.name} {method} {rtol}: status {r.status[0]}"
+                gives_up = method == "march" and r.status[0] == UNSTABLE and (
+                    case.stiff or (case.name, rtol) in MARCH_GIVES_UP)
+                assert gives_up and np.isnan(r.U[0]), (case.name, method, rtol, r.status[0])
                 continue
-            ratios.append((max(*solver_norm_errors(r.U, r.P, ref.U, ref.P, T, V))[0] / rtol, case.name, rtol))
+            ratios.append((max(*solver_norm_errors(r.U, r.P, ref.U, ref.P, T, V))[0] / rtol,
+                           case.name, rtol))
+    assert unconfirmed == UNCONFIRMED
     ratios = sorted(ratios, reverse=True)
-    assert len(ratios) >= 20
+    assert len(ratios) >= 35
     assert sum(x <= 1 for x, *_ in ratios) >= 0.99 * len(ratios), ratios[:5]
     assert ratios[0][0] <= 10, ratios[:5]
 
