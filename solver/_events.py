@@ -282,7 +282,7 @@ def split_step_error(code, params, t0, event, t1, u_n, U1, U2, weight_next, kapp
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n, mu_s, p,
-                      dtau, scale_u, min_gap, stages, weights, atol):
+                      dtau, scale_u, min_gap, stages, weights, atol, split_steps):
     """The error of events that are not nodes of the solved grid, which Richardson is blind to.
 
     At a stop in a step (u decelerates to rest, then sticks), the Radau stage at a third of
@@ -300,11 +300,11 @@ def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n
     crosses zero the kink crosses the link's end and u'' jumps (by J2); with the event at
     d < h/3 past the node both stages lie beyond it and the step loses J2 d^2 / 2 whatever
     h is (measured by a helper: three harmonic points at anisotropy 57-202 and scaled period
-    0.2-0.45, 1.2-3.7 rtol off with estimates of 0.45-0.64).  So with ``stages`` and
-    ``weights`` of the Radau solution (rows, as ``_periodic.solve_pairs`` returns them; an
-    empty ``weights`` for the march, whose steps these are not) each event's term is the
-    larger of J d^2 / 2 and |``split_step_error``| (split steps to stage tolerance ``atol``
-    times scale_u).
+    0.2-0.45, 1.2-3.7 rtol off with estimates of 0.45-0.64).  So with ``split_steps`` (the
+    Radau solution's ``stages`` and node ``weights`` given as rows, as
+    ``_periodic.solve_pairs`` returns them) each event's term is the larger of J d^2 / 2 and
+    |``split_step_error``| (split steps to stage tolerance ``atol`` times scale_u).  The
+    march's steps are not Radau steps: it passes ``split_steps`` False (and empty arrays).
     """
     n = grids.shape[0]
     estimate = np.zeros(n)
@@ -332,7 +332,7 @@ def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n
             F0 = force_and_slope(u_nodes[i, k], phi0, om0, mu_n[i], mu_s[i], p[i], dtau[i])[0]
             F1 = force_and_slope(u1, phi1, om1, mu_n[i], mu_s[i], p[i], dtau[i])[0]
             term = 0.5 * kappa[i] * abs(F1 - F0) * d * d
-            if weights.shape[0] == n:
+            if split_steps:
                 split = split_step_error(
                     code, params[i], t0, e, t1, u_nodes[i, k], stages[i, 2 * k],
                     stages[i, 2 * k + 1], weights[i, k + 1] if k + 1 < N else weights[i, 0],

@@ -420,15 +420,16 @@ def _check_events(code, params, bucket, padded, steps, int_u, nodes, events, phy
     F = slice(1, None, 2)
     points = params[bucket]
     scale_u = np.maximum(np.abs(int_u[F]), u_floor[bucket])
-    if stages is None:
-        stages, weights = np.zeros((0, 0)), np.zeros((0, 0))
-    else:
+    split_steps = stages is not None
+    if split_steps:
         stages, weights = stages[F], weights[F]
+    else:
+        stages, weights = np.zeros((0, 0)), np.zeros((0, 0))
     extra, event_steps = unresolved_events(
         code, points, padded[F], np.where(accepted, steps[F], 0), nodes[F], events,
         physics.inertia_factor[bucket], physics.mu_n[bucket], physics.mu_s[bucket],
         physics.p[bucket], physics.delta_tau[bucket], scale_u, EVENT_GAP, stages, weights,
-        SPLIT_STEP_TOLERANCE * rtol)
+        SPLIT_STEP_TOLERANCE * rtol, split_steps)
     estimate = np.where(accepted, estimate + extra, estimate)
     withdrawn = np.flatnonzero(accepted & (estimate > rtol))
     return estimate, withdrawn, event_steps

@@ -142,7 +142,7 @@ def test_unresolved_events_weigh_the_jump_of_u_prime_by_the_squared_distance():
     estimate, steps = unresolved_events(
         code, params, grid, np.array([8, 0]), u, events, np.full(2, kappa), np.full(2, mu_n),
         np.full(2, mu_s), np.zeros(2), np.full(2, dtau), np.full(2, 0.5), 1e-9,
-        np.zeros((0, 0)), np.zeros((0, 0)), 1e-12)
+        np.zeros((0, 0)), np.zeros((0, 0)), 1e-12, False)
     phi0, phi1 = kin.angle(np.array([0.25, 0.375]))[0]
     om = -2 * np.pi * 0.4 * np.sin(2 * np.pi * np.array([0.25, 0.375]))
     F0 = force_and_slope(u[0, 2], phi0, om[0], mu_n, mu_s, p, dtau)[0]
