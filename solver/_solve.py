@@ -59,7 +59,7 @@ from . import _march, _periodic
 from ._events import event_times, place_events, unresolved_events
 from ._kinematics import period_grid
 from ._limits import fast_limit_velocity, kinematic_speed
-from ._status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
+from ._status import CONVERGED, NO_MOTION, OUT_OF_RANGE, TOLERANCE_NOT_REACHED, UNSTABLE
 from ._turning import MAX_FLAGGED, grade_towards, turning_point_estimates
 
 METHODS = ("periodic", "march")
@@ -148,22 +148,37 @@ class SolveResult:
 
 
 def _outputs(int_u, int_pi, physics):
+    """Every output from the period integrals int u and int Pi.  The efficiency and the scaled
+    outputs are formed without U and P, whose powers of T can leave the floating-point range
+    (p = 1.99, sqrt(mu_n mu_s) = 1e-2: T = 1e200) when theirs do not: T cancels in lambda, and
+    scaled_speed = int u / Ts, scaled_power = kappa int Pi / Ts^3 (kappa = T^(2-p), Ts the
+    scaled period, from logarithms)."""
     T, p = physics.period, physics.p
-    U = int_u / T
-    P = int_pi * T ** -(p + 1.0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        efficiency = np.sign(U) * np.abs(U) ** (p + 1.0) / P
     geo = physics.mu_n * physics.mu_s
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
+        U = int_u / T
+        P = int_pi * T ** -(p + 1.0)
+        efficiency = np.sign(int_u) * np.abs(int_u) ** (p + 1.0) / int_pi
+        log_scaled_period = np.log(geo) / (4.0 - 2.0 * p) + np.log(T)
+        scaled_speed = int_u * np.exp(-log_scaled_period)
+        scaled_power = int_pi * np.exp((2.0 - p) * np.log(T) - 3.0 * log_scaled_period)
     lam_ub = 1.0 / np.minimum(physics.mu_n, physics.mu_s)
     return dict(
         U=U, P=P, efficiency=efficiency,
-        scaled_speed=geo ** (1.0 / (2.0 * p - 4.0)) * U,
-        scaled_power=geo ** (3.0 / (2.0 * p - 4.0)) * P,
+        scaled_speed=scaled_speed,
+        scaled_power=scaled_power,
         scaled_efficiency=np.sqrt(geo) * efficiency,
         efficiency_upper_bound=lam_ub,
         relative_efficiency=efficiency / lam_ub,
         mean_u=int_u,
     )
+
+
+def _representable(out, int_u):
+    """Points whose U and P are finite floats: P > 0 did not underflow or overflow, nor U
+    (to 0 from a nonzero int u)."""
+    U, P = out["U"], out["P"]
+    return np.isfinite(U) & np.isfinite(P) & (P > 0) & ((U != 0) | (int_u == 0))
 
 
 @njit(cache=True)
@@ -828,6 +843,13 @@ class _Refinement:
         int_u[keep_nan] = np.nan
         int_pi[keep_nan] = np.nan
         out = _outputs(int_u, int_pi, self.physics)
+        # never a silent 0 or inf: a converged point whose U or P a float cannot hold fails
+        beyond = (status == CONVERGED) & ~_representable(out, int_u)
+        if beyond.any():
+            status[beyond] = OUT_OF_RANGE
+            for key in out:
+                if key != "efficiency_upper_bound":  # (a property of mu alone, as for any failure)
+                    out[key] = np.where(beyond, np.nan, out[key])
         for key in ("efficiency", "scaled_efficiency", "relative_efficiency"):
             out[key][self.still] = np.nan
         u_arr = tau_arr = None

@@ -8,6 +8,7 @@ UNSTABLE = 4
 STEP_BUDGET_EXCEEDED = 5
 TOLERANCE_NOT_REACHED = 6
 NO_MOTION = 7
+OUT_OF_RANGE = 8
 
 STATUS_REASONS = {
     CONVERGED: "converged: error estimate below rtol",
@@ -18,4 +19,7 @@ STATUS_REASONS = {
     STEP_BUDGET_EXCEEDED: "step budget exhausted before the march became periodic",
     TOLERANCE_NOT_REACHED: "finest grid reached before the error estimate fell below rtol",
     NO_MOTION: "phi is constant: the body does not move and the efficiency is undefined",
+    OUT_OF_RANGE: "converged, but U or P is outside the floating-point range (extreme period or "
+                  "friction scale): rescale (the scaled outputs depend only on mu_n/mu_s, the "
+                  "scaled period, p and delta T)",
 }

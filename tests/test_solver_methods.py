@@ -448,3 +448,26 @@ def test_periodicity_tolerance_leaves_no_offset_in_int_u(rtol):
     loose, _, status_loose = solve_fixed_grid(kin, phys, 4096, rtol=rtol)
     assert status[0] == 0 and status_loose[0] == 0
     assert abs(loose[0] - tight[0]) <= 0.05 * rtol * 1e-3 * V
+
+
+def test_outputs_beyond_the_float_range_fail_loudly():
+    """p = 1.99 and sqrt(mu_n mu_s) = 1e-2 put T at 1e200 (the scaling exponent is 1/(2-p) =
+    100): P = T^-(p+1) int Pi underflows to 0 (1e2: overflows), which must not come back as a
+    converged 0 or inf.  A large but representable scale keeps every scaled output."""
+    from solver._status import OUT_OF_RANGE
+    kin = solver.Harmonic(1.2, 0.3)
+    unit = solver.solve_periodic(kin, solver.Physics.from_scaled(0.1, 1.0, p=1.99, delta=0.0),
+                                 rtol=1e-6)
+    assert unit.converged[0]
+    for scale in (1e-2, 1e2):
+        r = solver.solve_periodic(kin, solver.Physics.from_scaled(0.1, 1.0, p=1.99, delta=0.0,
+                                                                  friction_scale=scale), rtol=1e-6)
+        assert r.status[0] == OUT_OF_RANGE and not r.converged[0]
+        for key in ("U", "P", "efficiency", "scaled_speed", "scaled_power", "scaled_efficiency",
+                    "relative_efficiency"):
+            assert np.isnan(getattr(r, key)[0]), key
+    wide = solver.solve_periodic(kin, solver.Physics.from_scaled(0.1, 1.0, p=1.99, delta=0.0,
+                                                                 friction_scale=0.5), rtol=1e-6)
+    assert wide.converged[0]
+    for key in ("scaled_speed", "scaled_power", "scaled_efficiency", "relative_efficiency"):
+        np.testing.assert_allclose(getattr(wide, key), getattr(unit, key), rtol=1e-9, err_msg=key)
