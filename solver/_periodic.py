@@ -73,6 +73,13 @@ def one_minus_monodromy(log_m, sign_m):
 
 
 @njit(cache=True)
+def stage_tolerance(rtol, vscale):
+    """The stage Newton's absolute tolerance in u: max(1e-5 rtol, 1e-14) V, V the speed scale.
+    Every converged step carries a residual up to this size."""
+    return max(1e-5 * rtol, 1e-14) * vscale
+
+
+@njit(cache=True)
 def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu_s, p, dtau,
                atol):
     """Solve one Radau IIA step from u_n, starting at the guess (U1, U2); sin_i, cos_i are
@@ -218,7 +225,7 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     sens = np.empty(2 * N)
     m_minus_1 = np.empty(N)
     u_start = np.empty(N)
-    atol_stage = max(1e-5 * rtol, 1e-14) * vscale
+    atol_stage = stage_tolerance(rtol, vscale)
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
     status = NOT_PERIODIC
     stage_its = 0

@@ -417,7 +417,7 @@ def _check_turning_points(code, params, active, padded, steps, int_u, nodes, sta
         code, params[points], padded[rows], steps[rows], nodes[rows], stages[rows],
         weights[rows], physics.inertia_factor[points], physics.mu_n[points],
         physics.mu_s[points], physics.p[points], physics.delta_tau[points], scale_u,
-        float(rtol), TURNING_MIN_STEP)
+        u_floor[points] / U_FLOOR_FRACTION, float(rtol), TURNING_MIN_STEP)
     estimate = estimate.copy()
     estimate[check] += extra
     withdrawn = check[estimate[check] > rtol]

@@ -57,7 +57,7 @@ from numba import njit, prange
 from ._events import illinois_update
 from ._force import force_and_slope
 from ._kinematics import FOURIER, angle_and_rate
-from ._periodic import collocation_value
+from ._periodic import collocation_value, stage_tolerance
 
 _x4, _w4 = np.polynomial.legendre.leggauss(4)
 GL4_NODES = 0.5 * (_x4 + 1.0)
@@ -262,12 +262,13 @@ def _add_turning_point(code, params, grid, n, u_nodes, stages, dtau, tz, out, co
 
 @njit(cache=True)
 def _point_check(code, params, grid, N, u_nodes, stages, weights, kappa, mu_n, mu_s, p, dtau,
-                 scale_u, rtol, min_step, flagged):
+                 scale_u, vscale, rtol, min_step, flagged):
     """Returns (estimate, number of flagged steps); flagged rows (tz, target step, reach)."""
     zeros = np.empty((MAX_TURNING_POINTS, 2))
     n_zeros = _turning_points(code, params, grid, N, u_nodes, stages, dtau, zeros)
     if n_zeros == 0:
         return 0.0, 0
+    floor = stage_tolerance(rtol, vscale)
     shares = np.empty(N)
     nearest = np.empty(N, dtype=np.int64)
     distances = np.empty(N)
@@ -296,6 +297,11 @@ def _point_check(code, params, grid, N, u_nodes, stages, weights, kappa, mu_n, m
                                 stages[2 * n + 1], zeros[best, 0] + shift, zeros[best, 1],
                                 kappa, mu_n, mu_s, p, dtau)
         lam = weights[n + 1] if n + 1 < N else weights[0]
+        if abs(defect) <= floor:
+            # the stage Newton's own residual, which every step carries: not a quadrature
+            # error, and where lambda is astronomic (a corner turning point at rest, lambda
+            # 9e18, D 1e-14) the linearised weight would make it one of 1e8 rtol
+            defect = 0.0
         share = abs(defect * lam) / scale_u
         if not math.isfinite(share):
             share = math.inf
@@ -325,12 +331,14 @@ def _point_check(code, params, grid, N, u_nodes, stages, weights, kappa, mu_n, m
 
 @njit(cache=True, parallel=True)
 def turning_point_estimates(code, params, grids, n_steps, u_nodes, stages, weights, kappa, mu_n,
-                            mu_s, p, dtau, scale_u, rtol, min_step):
+                            mu_s, p, dtau, scale_u, vscale, rtol, min_step):
     """The check of the module docstring for every row of a solved batch.
 
     grids (n, m), row i valid for n_steps[i] steps; u_nodes (n, >= N), stages (n, >= 2N) and
     weights (n, >= N) of the converged solutions; kappa = T^(2-p), mu_n, mu_s, p, dtau,
-    scale_u (the norm of int u) : (n,); min_step: the smallest target step.
+    scale_u (the norm of int u), vscale (the speed scale V; defects within the stage
+    tolerance ``_periodic.stage_tolerance`` are not counted) : (n,); min_step: the smallest
+    target step.
     Returns (estimate (n,), flagged (n, MAX_FLAGGED, 3): rows (tz, target step, reach), NaN
     padded): estimate is sum |D_n lambda_{n+1}| / scale_u.
     """
@@ -340,7 +348,8 @@ def turning_point_estimates(code, params, grids, n_steps, u_nodes, stages, weigh
     for i in prange(n):
         estimate[i], _ = _point_check(code, params[i], grids[i], n_steps[i], u_nodes[i],
                                       stages[i], weights[i], kappa[i], mu_n[i], mu_s[i], p[i],
-                                      dtau[i], scale_u[i], rtol, min_step, flagged[i])
+                                      dtau[i], scale_u[i], vscale[i], rtol, min_step,
+                                      flagged[i])
     return estimate, flagged
 
 

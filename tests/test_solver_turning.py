@@ -179,7 +179,7 @@ def test_turning_point_estimate_sees_the_trap_and_not_a_resolved_solution():
         scale = max(abs(int_u), 1e-3 * V)
         estimate, flagged = turning_point_estimates(
             code, params, grid[None], np.array([N]), nodes[None], stages[None], weights[None],
-            *(np.array([x]) for x in physics), np.array([scale]), 1e-4, 1e-7)
+            *(np.array([x]) for x in physics), np.array([scale]), np.array([V]), 1e-4, 1e-7)
         estimates.append((abs(int_u - ref.mean_u[0]) / scale, estimate[0],
                           np.isfinite(flagged[0, :, 0]).sum()))
     (trapped_error, trapped_estimate, trapped_flags), (error, estimate, flags) = estimates
@@ -228,3 +228,24 @@ def test_rate_slope_bound_bounds_the_rate_of_omega():
     pl = solver.PowerLaw(1.2, 0.35, 0.8, 1.5, False, 3.0, True)
     code, params = pl.kernel_encoding()
     assert rate_slope_bound(code, params[0]) == np.inf  # omega' unbounded at the corner
+
+
+def test_stage_residual_is_not_counted_as_a_defect():
+    """A corner of phi with exponent 20 on both sides is a turning point where the body rests
+    (u_n 1e-56); the steps leaving it have node weights lambda ~ 9e18 (the linearised
+    sensitivity explodes where the anisotropic law amplifies), and a defect of 1e-14, the stage
+    Newton's own residual, gave an estimate of 7e8: refinement stopped after 2,156 steps with
+    TOLERANCE_NOT_REACHED at rtol 1e-5 (found by a stress sweep).  Defects within the stage
+    tolerance are not counted; the point then converges, honestly."""
+    kin = solver.PowerLaw([2.1930766425058286], [0.3106065040016449], [0.7189580800698627],
+                          [20.0], [True], [20.0], [False])
+    phys = solver.Physics.from_scaled(73.23732052227966, 0.035042416335456184, p=0.0,
+                                      delta=1e-10)
+    ref = solver.solve_periodic(kin, phys, rtol=1e-8)
+    assert ref.converged[0]
+    scale = max(abs(ref.mean_u[0]), 1e-3 * solver.kinematic_speed(kin)[0])
+    for rtol in (1e-5, 1e-6):
+        res = solver.solve_periodic(kin, phys, rtol=rtol)
+        assert res.converged[0], solver.STATUS_REASONS[int(res.status[0])]
+        error = max(abs(res.mean_u[0] - ref.mean_u[0]) / scale, abs(res.P[0] - ref.P[0]) / ref.P[0])
+        assert error <= rtol and error <= res.error_estimate[0], (rtol, error, res.error_estimate[0])
