@@ -29,16 +29,18 @@ weight where that is larger (it also sees a corner of u'), is added to E as well
 
 Cost (``python -m solver.bench``, 2000 harmonic points at rtol 1e-4, 2 cores):
 about 2,400 step-sweeps per point (Radau steps times shooting sweeps, summed over
-the ~3 grid pairs; 10 % of them since the turning-point check, which also costs
-~4 % of the time itself), ~0.37 us each on one core (the stage iterations carry Pi, so a
-converged sweep needs no power pass: that pass had been a quarter of the evaluations), and
-~37 % of the wall time outside the sweeps (event search ~6 %, the turning-point check ~6 %,
-the rest Python: grids, padding; profile of a 1.35 s solve).  B(G) is solved after G on
-the same thread, from G's u(0) and collocation polynomials (``_periodic.solve_pairs``), and
-the pairs alternate across threads so numba's static split stays balanced.  A pass
-batches its points by size class of their grids (``_size_classes``): one batch padded every
-row to the longest grid (at rtol 1e-7, 31 M steps to 139 M cells), which had cost ~40 % of
-the wall time.
+the ~3 grid pairs; 10 % of them since the turning-point check), ~0.37 us each on one core
+(the stage iterations carry Pi, so a converged sweep needs no power pass: that pass had been
+a quarter of the evaluations).  On one thread (profile of a 2.5 s solve) the sweeps are
+76 % of the time, the turning-point check 8 %, the event search 7 %, the first guesses of
+u(0) and V 4 %, the next grids 2 %, and Python ~3 %: a pass builds its pairs and next
+grids in one numba call per size class (``_pair_rows``, ``_next_grids``; the Python loop over
+points they replaced made solves 1.09-1.15x slower, interleaved A/B).  Two threads run it 1.73x faster than one.  B(G)
+is solved after G on the same thread, from G's u(0) and collocation polynomials
+(``_periodic.solve_pairs``), and the pairs alternate across threads so numba's static split
+stays balanced.  A pass batches its points by size class of their grids (``_size_classes``):
+one batch padded every row to the longest grid (at rtol 1e-7, 31 M steps to 139 M cells),
+which had cost ~40 % of the wall time.
 
 Error norm.  For P (always > 0) the error is relative.  U can vanish (for
 example at isotropic friction and p = 1), so its error is measured relative
