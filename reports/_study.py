@@ -26,7 +26,9 @@ __all__ = ["is_study", "study_section", "honesty_records", "honesty_summary", "f
 #: this share of rtol; other solves are counted apart ("reference unverified"), not judged.
 REFERENCE_SHARE = 0.1
 _COLORS = {"periodic": "#1f77b4", "march": "#d62728", "baseline": "#2ca02c"}
-_STATUS_COLORS = ["#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#d62728", "#e377c2", "#bcbd22", "#7f7f7f"]
+#: one colour per solver status code 0 .. 8 (``solver.STATUS_REASONS``)
+_STATUS_COLORS = ["#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#d62728", "#e377c2", "#bcbd22", "#7f7f7f",
+                  "#17becf"]
 
 
 def _esc(x) -> str:

@@ -457,3 +457,9 @@ def test_periodic_is_honest_on_a_sweep_of_short_scaled_periods():
         assert r.converged.all()
         ratio = np.maximum(*solver_norm_errors(r.U, r.P, ref.U, ref.P, phys.period, V)) / rtol
         assert np.mean(ratio <= 1) >= 0.95 and ratio.max() <= 10, (rtol, np.sort(ratio)[-5:])
+
+
+def test_status_map_has_a_colour_for_every_status_code():
+    from reports._study import _STATUS_COLORS
+    assert len(_STATUS_COLORS) == max(solver.STATUS_REASONS) + 1
+    assert sorted(solver.STATUS_REASONS) == list(range(len(_STATUS_COLORS)))
