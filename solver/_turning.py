@@ -32,7 +32,10 @@ so it resolves the window the step does not (to ~1e-6 of T^(2-p) mu h at a simpl
 kinks of F inside a panel limit it to ~1e-3 of D_n at a triple zero).  Weighted by the node
 weight lambda_{n+1} (``_periodic.node_weights``, the sensitivity of int u to a jump of u
 there) |D_n lambda_{n+1}| is the step's error in int u, linearised (a dual-weighted
-residual).  The march passes pseudo-stages on which u_h is its linear interpolant
+residual).  A defect within the stage Newton's tolerance (``_periodic.stage_tolerance``)
+is that Newton's residual, which every step carries, and is not counted: at a corner turning
+point where the body rests, lambda reached 9e18 and made a 1e-14 residual 7e8 rtol.  The
+march passes pseudo-stages on which u_h is its linear interpolant
 (``_march._check_inputs``); D_n is then the defect of that interpolant, which also holds
 Heun's ordinary local error (counted by Richardson too: twice, conservatively).  Measured on
 a clapping Fourier point whose march was 16 rtol off at rtol 1e-7 with nothing flagged: the
