@@ -240,8 +240,6 @@ def force_partials_into(u, S, C, phi, omega, mu_n, mu_s, p, delta_tau, out):
         out[8] = quadrature[8]
 
 
-
-
 @njit(cache=True)
 def force_partials_quadrature(u, phi, omega, mu_n, mu_s, p, delta_tau):
     """F, Pi and their partial derivatives in u, phi, omega and delta_tau, by quadrature.

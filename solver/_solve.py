@@ -256,6 +256,7 @@ def bisect(grid, levels):
     return out
 
 
+@njit(cache=True)
 def bisect_all(grid):
     """Nodes of ``grid`` with every step split once."""
     out = np.empty(2 * grid.size - 1)
@@ -580,11 +581,8 @@ def _pair_rows(coarse, steps):
     pair_steps = np.empty(2 * m, dtype=np.int64)
     for j in range(m):
         N = steps[j]
-        for k in range(N + 1):
-            rows[2 * j, k] = coarse[j, k]
-            rows[2 * j + 1, 2 * k] = coarse[j, k]
-        for k in range(N):
-            rows[2 * j + 1, 2 * k + 1] = 0.5 * (coarse[j, k] + coarse[j, k + 1])
+        rows[2 * j, :N + 1] = coarse[j, :N + 1]
+        rows[2 * j + 1, :2 * N + 1] = bisect_all(coarse[j, :N + 1])
         pair_steps[2 * j] = N
         pair_steps[2 * j + 1] = 2 * N
     return rows, pair_steps
