@@ -178,6 +178,27 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
 
 
 @njit(cache=True)
+def _radau_step_retrying(u_n, U1, U2, predicted, h, sin1, cos1, om1, sin2, cos2, om2, kappa,
+                         mu_n, mu_s, p, dtau, atol):
+    """``radau_step`` from the start (U1, U2); where its Newton fails, again from u_n if the
+    start was ``predicted`` (a tangent prediction or a guess can miss the basin), then from rest
+    (a step into a stop can defeat both: a burst-and-coast power law at its corner took 60
+    iterations from each, from rest 6).  Returns as ``radau_step``, iterations summed."""
+    out = radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu_s, p,
+                     dtau, atol)
+    its = out[5]
+    if not out[10] and predicted:
+        out = radau_step(u_n, u_n, u_n, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu_s,
+                         p, dtau, atol)
+        its += out[5]
+    if not out[10] and u_n != 0.0:
+        out = radau_step(u_n, 0.0, 0.0, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu_s,
+                         p, dtau, atol)
+        its += out[5]
+    return out[:5] + (its,) + out[6:]
+
+
+@njit(cache=True)
 def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
                  u_out, step_u, step_pi, step_m, stages_out=None, stage_guess=None,
                  kinematics_out=None, weights_out=None):
@@ -261,23 +282,11 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
                 U1 = stages[2 * n] + sens[2 * n] * du
                 U2 = stages[2 * n + 1] + sens[2 * n + 1] * du
             u_start[n] = u
-            U1, U2, s1, s2, mm1, its, P1, P2, Pu1, Pu2, ok = radau_step(
-                u, U1, U2, hs[n], sins[2 * n], coss[2 * n], oms[2 * n], sins[2 * n + 1],
-                coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau, atol_stage)
+            U1, U2, s1, s2, mm1, its, P1, P2, Pu1, Pu2, ok = _radau_step_retrying(
+                u, U1, U2, not first or guessed or n > 0, hs[n], sins[2 * n], coss[2 * n],
+                oms[2 * n], sins[2 * n + 1], coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s,
+                p, dtau, atol_stage)
             stage_its += its
-            if not ok and (not first or guessed or n > 0):
-                # the tangent prediction (or the guess) can miss the basin: retry cold
-                U1, U2, s1, s2, mm1, its, P1, P2, Pu1, Pu2, ok = radau_step(
-                    u, u, u, hs[n], sins[2 * n], coss[2 * n], oms[2 * n], sins[2 * n + 1],
-                    coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau, atol_stage)
-                stage_its += its
-            if not ok and u != 0.0:
-                # a step into a stop can defeat both (measured: a burst-and-coast power law at
-                # its corner, 60 iterations from each; from rest, 6): retry from rest
-                U1, U2, s1, s2, mm1, its, P1, P2, Pu1, Pu2, ok = radau_step(
-                    u, 0.0, 0.0, hs[n], sins[2 * n], coss[2 * n], oms[2 * n], sins[2 * n + 1],
-                    coss[2 * n + 1], oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau, atol_stage)
-                stage_its += its
             if not ok:
                 status = STAGE_SOLVE_FAILED if math.isfinite(U2) else NON_FINITE
                 return math.nan, math.nan, u0, status, it_out, stage_its
