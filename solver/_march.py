@@ -59,15 +59,16 @@ def step_jumps(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
 
 @njit(cache=True)
 def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
-                 max_steps, u_out, step_u, step_pi, step_m, step_stiff, stages, weights):
+                 max_steps, u_out, step_u, step_pi, step_m, step_stiff, stages, weights,
+                 step_weights):
     """March on the first N steps of ``grid``; per-step integrals into ``step_u``, ``step_pi``.
 
     ``step_stiff[n]`` flags the steps of the last period that chatter through a
-    sticking phase (consecutive ``step_jumps``).  ``stages`` (>= 2N) and ``weights`` (>= N)
-    receive what the turning-point check (``_turning``) needs: pseudo-stages
-    (u_n + (u_{n+1} - u_n) / 3, u_{n+1}), on which the check's quadratic through
-    theta = 0, 1/3, 1 is the linear interpolant of the march, and the node weights of
-    ``_periodic.node_weights`` for the trapezoidal integral of u.
+    sticking phase (consecutive ``step_jumps``).  ``stages`` (>= 2N), ``weights`` and
+    ``step_weights`` (>= N) receive what the turning-point and event checks need:
+    pseudo-stages (u_n + (u_{n+1} - u_n) / 3, u_{n+1}), on which the check's quadratic
+    through theta = 0, 1/3, 1 is the linear interpolant of the march, and the node and step
+    weights of ``_periodic.node_weights`` for the trapezoidal integral of u.
     Returns (int_u, int_Pi, u0, status, periods).
     """
     phis = np.empty(2 * N)
@@ -146,20 +147,22 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
         nxt = step_stiff[n + 1] if n + 1 < N else first
         step_stiff[n] = cur and (prev or nxt)
         prev = cur
-    _check_inputs(nodes, ms, hs, N, stages, weights)
+    _check_inputs(nodes, ms, hs, N, stages, weights, step_weights)
     return int_u, int_pi, nodes[0], CONVERGED, period
 
 
 @njit(cache=True)
-def _check_inputs(nodes, ms, hs, N, stages, weights):
-    """Pseudo-stages and node weights of a marched period (see ``_march_point``): the
-    trapezoidal integral h_n (u_n + u_{n+1}) / 2 has d/du_n = h_n (1 + m_n) / 2."""
+def _check_inputs(nodes, ms, hs, N, stages, weights, step_weights):
+    """Pseudo-stages, node weights and step weights of a marched period (see
+    ``_march_point``): the trapezoidal integral h_n (u_n + u_{n+1}) / 2 has
+    d/du_n = h_n (1 + m_n) / 2."""
     log_m = 0.0
     sign_m = 1.0
     for n in range(N):
         stages[2 * n] = nodes[n] + (nodes[n + 1] - nodes[n]) / 3.0
         stages[2 * n + 1] = nodes[n + 1]
         weights[n] = 0.5 * hs[n] * (1.0 + ms[n])
+        step_weights[n] = weights[n]
         log_m, sign_m = monodromy_factor(log_m, sign_m, ms[n] - 1.0)
     node_weights(weights[:N], ms[:N], one_minus_monodromy(log_m, sign_m))
 
@@ -174,10 +177,11 @@ def march_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u_ini
     stiff = np.zeros((n, m - 1), dtype=np.bool_)
     stages = np.full((n, 2 * (m - 1)), np.nan)
     weights = np.full((n, m - 1), np.nan)
+    step_weights = np.full((n, m - 1), np.nan)
     for i in prange(n):
         int_u[i], int_pi[i], u0_out[i], status[i], periods[i] = _march_point(
             code, params[i], grids[i], n_steps[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
             u_init[i], vscale[i], rtol, max_steps, nodes[i], step_u[i], step_pi[i], step_m[i],
-            stiff[i], stages[i], weights[i])
+            stiff[i], stages[i], weights[i], step_weights[i])
     return (int_u, int_pi, u0_out, status, periods, step_u, step_pi, step_m, nodes, stiff,
-            stages, weights)
+            stages, weights, step_weights)

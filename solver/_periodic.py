@@ -201,7 +201,7 @@ def _radau_step_retrying(u_n, U1, U2, predicted, h, sin1, cos1, om1, sin2, cos2,
 @njit(cache=True)
 def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
                  u_out, step_u, step_pi, step_m, stages_out=None, stage_guess=None,
-                 kinematics_out=None, weights_out=None):
+                 kinematics_out=None, weights_out=None, step_weights_out=None):
     """Periodic solution for one parameter point on the first N steps of ``grid``.
 
     Writes u at the nodes into ``u_out``, the per-step integrals of u and Pi into
@@ -214,7 +214,8 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     and dphi/dtau at the stage times, and with 4 rows also sin phi and cos phi there (for
     the adjoint, ``_gradient``).  ``vscale`` <= 0: the speed scale is computed here,
     (1/4) int |dphi/dtau| by the Radau rule.  ``weights_out`` (>= N,),
-    optional: receives the node weights of ``node_weights``.
+    optional: receives the node weights of ``node_weights``, and ``step_weights_out`` (>= N,),
+    optional, the step weights q_n they are formed from.
     Returns (int_u, int_Pi, u0, status, shooting_iterations, stage_iterations).
     """
     phis = np.empty(2 * N)
@@ -356,6 +357,8 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     if weights_out is not None:
         for n in range(N):  # d(step integral of u)/du_n, with dU_i/du_n from the last sweep
             weights_out[n] = hs[n] * (0.75 * sens[2 * n] + 0.25 * sens[2 * n + 1])
+        if step_weights_out is not None:
+            step_weights_out[:N] = weights_out[:N]
         node_weights(weights_out[:N], step_m, one_minus_M)
     return int_u, int_pi, u0, CONVERGED, it_out, stage_its
 
@@ -455,6 +458,7 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
         batch_outputs(n, m)
     stages = np.empty((n, 2 * (m - 1)))
     weights = np.full((n, m - 1), np.nan)
+    step_weights = np.full((n, m - 1), np.nan)
     for j in prange(n // 2):
         c = 2 * j
         f = c + 1
@@ -479,5 +483,6 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
         int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = _solve_point(
             code, params[f], grids[f], n_steps[f], kappa[f], mu_n[f], mu_s[f], p[f],
             dtau[f], start, vscale[f], rtol, nodes[f], step_u[f], step_pi[f], step_m[f],
-            stages[f], guess_f, None, weights[f])
-    return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes, stages, weights
+            stages[f], guess_f, None, weights[f], step_weights[f])
+    return (int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes, stages, weights,
+            step_weights)

@@ -401,8 +401,8 @@ def _assess_pairs(grids, n_steps, int_u, int_pi, status, step_u, step_pi, step_m
     return estimate, accepted, levels
 
 
-def _check_turning_points(code, params, active, padded, steps, int_u, nodes, stages, weights,
-                          physics, u_floor, rtol, estimate, accepted):
+def _check_turning_points(code, params, active, padded, steps, int_u, nodes, stages, step_m,
+                          step_weights, physics, u_floor, rtol, estimate, accepted):
     """``_turning``'s check of the bisected solutions of the pairs Richardson accepts: adds
     its estimate and withdraws the acceptance where the sum exceeds rtol.
 
@@ -418,7 +418,7 @@ def _check_turning_points(code, params, active, padded, steps, int_u, nodes, sta
     scale_u = np.maximum(np.abs(int_u[rows]), u_floor[points])
     extra, flagged[check] = turning_point_estimates(
         code, params[points], padded[rows], steps[rows], nodes[rows], stages[rows],
-        weights[rows], physics.inertia_factor[points], physics.mu_n[points],
+        step_m[rows], step_weights[rows], physics.inertia_factor[points], physics.mu_n[points],
         physics.mu_s[points], physics.p[points], physics.delta_tau[points], scale_u,
         u_floor[points] / U_FLOOR_FRACTION, float(rtol), TURNING_MIN_STEP)
     estimate = estimate.copy()
@@ -479,13 +479,14 @@ def _run_level(method, code, params, grids, n_steps, physics, u0, vscale, rtol, 
     """Solve the points ``index`` on padded ``grids``.
 
     Returns (int_u, int_pi, u0, status, iterations, step_u, step_pi, step_m, u_nodes,
-    step_stiff, stages, weights); step_stiff (march only, else None) flags the steps that do not
-    resolve the friction's time scale (chatter, ``_march.step_jumps``).  ``paired``: rows
-    2j + 1 bisect rows 2j (``_periodic.solve_pairs`` then starts each from its partner, and
-    pair j's coarse grid from ``previous``, the padded (grids, steps, nodes, stages) of an
-    earlier solution); stages: the stages of every row (the march's pseudo-stages,
-    ``_march._check_inputs``), weights: the node weights (``_periodic.node_weights``) of the
-    bisected rows (the march: of every row), for the turning-point check.
+    step_stiff, stages, weights, step_weights); step_stiff (march only, else None) flags the
+    steps that do not resolve the friction's time scale (chatter, ``_march.step_jumps``).
+    ``paired``: rows 2j + 1 bisect rows 2j (``_periodic.solve_pairs`` then starts each from
+    its partner, and pair j's coarse grid from ``previous``, the padded (grids, steps, nodes,
+    stages) of an earlier solution); stages: the stages of every row (the march's
+    pseudo-stages, ``_march._check_inputs``), weights and step_weights: the node weights and
+    the step weights they are formed from (``_periodic.node_weights``) of the bisected rows
+    (the march: of every row), for the event and turning-point checks.
     """
     args = (code, params[index], grids, n_steps, physics.inertia_factor[index],
             physics.mu_n[index], physics.mu_s[index], physics.p[index],
@@ -494,7 +495,7 @@ def _run_level(method, code, params, grids, n_steps, physics, u0, vscale, rtol, 
         out = _periodic.solve_pairs(*args, *previous)
         return out[:9] + (None,) + out[9:]
     if method == "periodic":
-        return _periodic.solve_points(*args) + (None, None, None)
+        return _periodic.solve_points(*args) + (None, None, None, None)
     return _march.march_points(*args, MARCH_MAX_STEPS)
 
 
@@ -619,8 +620,8 @@ def _next_grids(rows, steps, levels, events, corners, flagged, pairs):
 @dataclass(frozen=True)
 class _PassOutputs:
     """One size class's pairs solved (``_run_level`` with ``paired``): rows 2j hold G, rows
-    2j + 1 hold B(G) of the class's point j; ``stiff`` only for the march, ``stages`` and
-    ``weights`` only for the periodic method."""
+    2j + 1 hold B(G) of the class's point j; ``stiff`` only for the march; ``stages``,
+    ``weights`` and ``step_weights`` (``_run_level``) are the march's pseudo-ones there."""
 
     rows: np.ndarray
     steps: np.ndarray
@@ -636,6 +637,7 @@ class _PassOutputs:
     stiff: np.ndarray | None
     stages: np.ndarray | None
     weights: np.ndarray | None
+    step_weights: np.ndarray | None
 
     @property
     def ok(self):
@@ -749,7 +751,8 @@ class _Refinement:
             richardson = estimate
             estimate, withdrawn, flagged = _check_turning_points(
                 self.code, self.params, bucket, out.rows, out.steps, out.int_u, out.nodes,
-                out.stages, out.weights, physics, self.u_floor, rtol, estimate, accepted)
+                out.stages, out.step_m, out.step_weights, physics, self.u_floor, rtol, estimate,
+                accepted)
             accepted[withdrawn] = False
             # withdrawn pairs are graded toward their turning points; Richardson's marking
             # (Doerfler's, its estimate being below rtol) only where that estimate is large
