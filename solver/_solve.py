@@ -75,6 +75,14 @@ EVENT_GAP = 4 * MIN_STEP
 #: ~|u| / |phi''| wide, can be far below MIN_STEP (4e-9 measured at scaled period 2^-4.5)
 #: and only its own geometric grading, a few nodes per halving, needs to resolve it
 TURNING_MIN_STEP = 2.0 ** -36
+#: the smallest step next to a corner of phi (the power law's tau = 0 and tau0), where
+#: omega ~ z^(gamma - 1) and a step's error falls only like h^gamma for exponents gamma near
+#: 1: with those steps held at MIN_STEP, 9 of 300 long-period power-law points (scaled
+#: period 4 .. 128, exponents ~1.1) failed at rtol 1e-6 and 25 at 1e-8 with 220,000+ steps,
+#: their estimates stuck at the error made in the corner steps (2.8e-6 at every rtol)
+CORNER_MIN_STEP = 2.0 ** -40
+#: ... and within this distance of it (the singular omega needs a graded mesh around it)
+CORNER_REACH = 2.0 ** -10
 #: the march gives up on chatter when resolving it would need this many times its budget
 HOPELESS = 8
 #: ... or when it still chatters after this many passes that refined the chattering steps
@@ -331,34 +339,52 @@ def _pair_estimate(coarse_u, fine_u, coarse_pi, fine_pi, n_coarse, scale_u, scal
     return sum_u / scale_u, sum_p / scale_p, change_u, change_p
 
 
+@njit(cache=True)
+def step_floors(grid, N, corners):
+    """The smallest step each of the N steps of ``grid`` may be split into: CORNER_MIN_STEP
+    for the steps within CORNER_REACH of a corner of phi (``corners``, in [0, 1); a corner
+    at 0 is also one at 1), MIN_STEP for the others."""
+    floors = np.full(N, MIN_STEP)
+    for c in corners:
+        for n in range(N):
+            # distance from the step [grid[n], grid[n + 1]] to c, or to c + 1
+            d = min(max(c - grid[n + 1], grid[n] - c, 0.0),
+                    max(c + 1.0 - grid[n + 1], grid[n] - c - 1.0, 0.0))
+            if d <= CORNER_REACH:
+                floors[n] = CORNER_MIN_STEP
+    return floors
+
+
 @njit(cache=True, error_model="numpy")
 def _marked_levels(grid, change_u, change_p, u_coarse, u_fine, step_m, scale_u, scale_p, rtol,
-                   order):
+                   order, floors):
     """Bisection levels of the coarse steps from the local indicators (``refinement_levels``)
     of u (``local_indicators``, relative to scale_u), or, with ``scale_p`` > 0, the larger of
     those and each step's change of int Pi relative to scale_p.  The caller passes scale_p
     only when P alone is over the tolerance: P's changes include errors carried from
     upstream (marking by them everywhere adds ~30 % of steps without gaining accuracy), but
     where U vanishes u's indicators are rounding noise (a p = 1 isotropic Fourier point kept
-    one step holding 5e-7 of P's change while 19,541 others were split).  Steps at MIN_STEP
-    cannot be split, so marking is among the others."""
+    one step holding 5e-7 of P's change while 19,541 others were split).  Steps at their
+    floor (``step_floors``) cannot be split, so marking is among the others."""
     n_coarse = change_u.size
     h = grid[1:n_coarse + 1] - grid[:n_coarse]
     indicators = local_indicators(u_coarse[:n_coarse], u_fine[:2 * n_coarse:2],
                                   step_m[:n_coarse], change_u, h)
     for n in range(n_coarse):
         by_power = abs(change_p[n]) / scale_p if scale_p > 0.0 else 0.0
-        indicators[n] = max(indicators[n] / scale_u, by_power) if h[n] >= 2 * MIN_STEP else 0.0
+        indicators[n] = max(indicators[n] / scale_u, by_power) if h[n] >= 2 * floors[n] else 0.0
     return refinement_levels(indicators, h, rtol, order)
 
 
 @njit(cache=True)
 def _next_grid(grid, levels, events, corners):
-    """``grid`` bisected by ``levels`` (never below MIN_STEP: tiny steps at events are fine,
-    bisecting them is not), with nodes on ``events`` (``place_events``)."""
+    """``grid`` bisected by ``levels`` (never below the steps' floors, ``step_floors``: tiny
+    steps at events are fine, bisecting them is not), with nodes on ``events``
+    (``place_events``)."""
     clipped = np.empty(levels.size, dtype=np.int64)
+    floors = step_floors(grid, levels.size, corners)
     for n in range(levels.size):
-        ratio = (grid[n + 1] - grid[n]) / MIN_STEP
+        ratio = (grid[n + 1] - grid[n]) / floors[n]
         room = int(math.floor(math.log2(ratio))) if ratio >= 1.0 else 0
         clipped[n] = max(0, min(levels[n], room))
     return place_events(bisect(grid, clipped), events, corners, EVENT_GAP), clipped.any()
@@ -366,13 +392,14 @@ def _next_grid(grid, levels, events, corners):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def _assess_pairs(grids, n_steps, int_u, int_pi, status, step_u, step_pi, step_m, nodes,
-                  u_floor, rtol, order, may_accept, forced):
+                  u_floor, rtol, order, may_accept, forced, corners):
     """Every pair of a ``solve_pairs`` batch (rows 2j: grid G, 2j + 1: B(G)) at once.
 
     Returns (estimate, accepted, levels): the estimate of the module docstring (inf where
     either solve failed), whether it is accepted (``may_accept[j]`` and estimate <= rtol),
     and otherwise the bisection levels of G's steps (``_marked_levels``; steps ``forced``
     get MAX_BISECTIONS; a failed pair is bisected everywhere once), shape (m, width - 1).
+    ``corners`` (m, k): the corners of phi of pair j's point (``step_floors``).
     """
     m = n_steps.size // 2
     estimate = np.full(m, np.inf)
@@ -395,7 +422,7 @@ def _assess_pairs(grids, n_steps, int_u, int_pi, status, step_u, step_pi, step_m
             continue
         hot = _marked_levels(grids[c, :N + 1], change_u, change_p, nodes[c], nodes[f], step_m[c],
                              scale_u, scale_p if estimate_u <= rtol < estimate_p else 0.0, rtol,
-                             order)
+                             order, step_floors(grids[c], N, corners[j]))
         for n in range(N):
             levels[j, n] = MAX_BISECTIONS if forced[j, n] else hot[n]
     return estimate, accepted, levels
@@ -745,7 +772,8 @@ class _Refinement:
         assess_args = (out.rows, out.steps, out.int_u, out.int_pi, out.status, out.step_u,
                        out.step_pi, out.step_m, out.nodes)
         estimate, accepted, levels = _assess_pairs(
-            *assess_args, self.u_floor[bucket], rtol, self.spec.order, may_accept, forced)
+            *assess_args, self.u_floor[bucket], rtol, self.spec.order, may_accept, forced,
+            self.corners[bucket])
         flagged = np.full((m, MAX_FLAGGED, 3), np.nan)
         if out.weights is not None:  # the check at turning points of phi (``_turning``)
             richardson = estimate
@@ -761,7 +789,8 @@ class _Refinement:
                 pair_rows = np.stack([2 * marked, 2 * marked + 1], axis=1).ravel()
                 levels[marked] = _assess_pairs(
                     *(a[pair_rows] for a in assess_args), self.u_floor[bucket[marked]], rtol,
-                    self.spec.order, np.zeros(marked.size, dtype=bool), forced[marked])[2]
+                    self.spec.order, np.zeros(marked.size, dtype=bool), forced[marked],
+                    self.corners[bucket[marked]])[2]
         F = slice(1, None, 2)
         events = event_times(self.code, self.params[bucket], out.rows[F], out.steps[F],
                              out.nodes[F], physics.inertia_factor[bucket], physics.mu_n[bucket],

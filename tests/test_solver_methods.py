@@ -471,3 +471,48 @@ def test_outputs_beyond_the_float_range_fail_loudly():
     assert wide.converged[0]
     for key in ("scaled_speed", "scaled_power", "scaled_efficiency", "relative_efficiency"):
         np.testing.assert_allclose(getattr(wide, key), getattr(unit, key), rtol=1e-9, err_msg=key)
+
+
+def test_step_floors_reach_around_the_corners():
+    """CORNER_MIN_STEP on every step within CORNER_REACH of a corner (tau = 0 also at 1),
+    MIN_STEP elsewhere: against the distances computed directly."""
+    from solver._solve import CORNER_MIN_STEP, CORNER_REACH, MIN_STEP, step_floors
+
+    rng = np.random.default_rng(3)
+    corner = 0.4
+    grid = np.unique(np.r_[0.0, rng.uniform(0, 1, 3000), corner, corner + 0.3 * CORNER_REACH,
+                           1.0 - 2.0 * CORNER_REACH, 1.0])
+    N = grid.size - 1
+    floors = step_floors(grid, N, np.array([0.0, corner]))
+    lo, hi = grid[:-1], grid[1:]
+    distance = np.minimum.reduce([np.maximum.reduce([c - hi, lo - c, np.zeros(N)])
+                                  for c in (0.0, corner, 1.0)])
+    near = distance <= CORNER_REACH
+    assert near.sum() >= 6 and (~near).sum() > 2900
+    np.testing.assert_array_equal(floors, np.where(near, CORNER_MIN_STEP, MIN_STEP))
+    assert np.all(step_floors(grid, N, np.zeros(0)) == MIN_STEP)  # smooth families
+
+
+def test_long_period_power_law_with_singular_corners_converges():
+    """Scaled period 67.8, closing and opening exponents 1.05 and 1.10 (omega ~ z^0.05 and
+    z^0.1 at the corners):
+    with the steps next to the corners held at MIN_STEP (2^-26) the estimate stayed at
+    2.8e-6 from 11,000 to 219,000 steps and the solve failed at rtol 1e-6 (9 of 300 such
+    points at 1e-6, 25 at 1e-8).  The corner steps may now be split to CORNER_MIN_STEP.
+    The answer is checked against the scipy LSODA march (``solver.bench.baseline_point``,
+    tol 1e-10), an independent method, which resolves U here to ~1e-7 in the solver's
+    norm."""
+    from solver import bench
+
+    kin = solver.PowerLaw(1.0597919352438694, 0.49812427732542985, 0.3186763827140434,
+                          1.0534083570390707, True, 1.104202936986926, False)
+    phys = solver.Physics.from_scaled(13.46751615309997, 67.84639435833623, p=0.0, delta=1e-8)
+    res = solver.solve_periodic(kin, phys, rtol=1e-6)
+    assert res.converged[0], solver.STATUS_REASONS[int(res.status[0])]
+    assert res.n_tau[0] < 50_000
+    vscale = solver.kinematic_speed(kin)[0]
+    U, P, _, _ = bench.baseline_point(bench.family_angle(kin), phys.mu_n[0], phys.mu_s[0], 0.0,
+                                      phys.period[0], phys.delta_tau[0], vscale, 1e-10, 60.0)
+    scale_u = max(abs(U), 1e-3 * vscale / phys.period[0])
+    assert abs(res.U[0] - U) <= 2e-6 * scale_u, (res.U[0], U)
+    assert abs(res.P[0] - P) <= 2e-6 * P
