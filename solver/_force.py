@@ -238,7 +238,10 @@ def link_moments(a, b, e2, p):
     h = 0.25 * abs(b)
     mid = a + 0.25 * b
     gap = max(abs(mid) - h, 0.0)
-    if gap * gap + e2 >= (SWITCH_RATIO * h) ** 2:
+    # written as "not <" so that a NaN stage iterate takes the quadrature (NaN moments, which
+    # the stage Newton reports) rather than the closed forms' 1 / b: with b = 0 that raised
+    # ZeroDivisionError out of the compiled solver (delta 1e-10, power-law corners)
+    if not (gap * gap + e2 < (SWITCH_RATIO * h) ** 2):
         return _moments_quadrature(a, b, e2, p)
     if p == 0.0:
         return _moments_closed_coulomb(a, b, e2)

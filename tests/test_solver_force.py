@@ -5,6 +5,7 @@ import mpmath as mp
 import numpy as np
 import pytest
 
+import solver
 from solver import force_and_slope, power_density
 
 
@@ -158,3 +159,29 @@ def test_link_moments_in_the_closed_form_regime(p):
         ref, size = _moment_reference(a, b, e2, p)
         got = np.array(link_moments(a, b, e2, p))
         assert np.all(np.abs(got - ref) <= 1e-13 * size), (a, b, e2, got, ref)
+
+
+def test_link_moments_of_a_nan_iterate_at_zero_rate_are_nan_not_an_exception():
+    """omega = 0 (b = 0) with a NaN stage iterate (a diverged Newton step, delta 1e-10 at
+    power-law corners) took the closed forms and their 1 / b, which raised
+    ZeroDivisionError out of the compiled solver; it must give NaN for the Newton to report."""
+    from solver._force import link_moments
+
+    for p in (0.0, 0.5):
+        moments = link_moments(math.nan, 0.0, 1e-20, p)
+        assert all(math.isnan(m) for m in moments), moments
+
+
+def test_power_law_corners_at_tiny_delta_solve_without_an_exception():
+    """One of three points of a stress sweep (mu_n/mu_s 2^-12 .. 2^12, delta 1e-10) on which
+    solve_periodic raised ZeroDivisionError (``link_moments``); now it converges, honestly."""
+    kin = solver.PowerLaw(0.511646074393324, 0.43780610553700355, 0.05016145039000145,
+                          1.1104818468195743, True, 11.514216747091353, False)
+    phys = solver.Physics(0.29019658422967287, 6.195989242315322, 0.16139472824945048, 0.0,
+                          1e-10)
+    ref = solver.solve_periodic(kin, phys, rtol=1e-7)
+    res = solver.solve_periodic(kin, phys, rtol=1e-3)
+    assert ref.converged[0] and res.converged[0]
+    scale = max(abs(ref.mean_u[0]), 1e-3 * solver.kinematic_speed(kin)[0])
+    assert abs(res.mean_u[0] - ref.mean_u[0]) / scale <= 1e-3
+    assert abs(res.P[0] - ref.P[0]) <= 1e-3 * ref.P[0]
