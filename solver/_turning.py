@@ -41,8 +41,9 @@ refined: lambda 7e35, D_n 4e-29).  (Until session 9 defects below the stage tole
 dropped instead; with that tolerance at 1e-5 rtol V and weights of ~800 at short periods,
 it dropped trapped steps' defects of 3e-9 worth 2.6 rtol.)  The node weights are those of
 the resolved problem (``_resolved_weights``).  The march passes pseudo-stages on which u_h
-is its linear interpolant (``_march._check_inputs``); D_n is then the defect of that interpolant, which also holds
-Heun's ordinary local error (counted by Richardson too: twice, conservatively).  Measured on
+is its linear interpolant (``_march._check_inputs``); D_n is then the defect of that
+interpolant, which also holds Heun's ordinary local error (counted by Richardson too:
+twice, conservatively).  Measured on
 a clapping Fourier point whose march was 16 rtol off at rtol 1e-7 with nothing flagged: the
 check estimated 1.5-3x its true errors.
 
