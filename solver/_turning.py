@@ -43,9 +43,8 @@ it dropped trapped steps' defects of 3e-9 worth 2.6 rtol.)  The node weights are
 the resolved problem (``_resolved_weights``).  The march passes pseudo-stages on which u_h
 is its linear interpolant (``_march._check_inputs``); D_n is then the defect of that
 interpolant, which also holds Heun's ordinary local error (counted by Richardson too:
-twice, conservatively).  Measured on
-a clapping Fourier point whose march was 16 rtol off at rtol 1e-7 with nothing flagged: the
-check estimated 1.5-3x its true errors.
+twice, conservatively).  Measured on a clapping Fourier point whose march was 16 rtol off
+at rtol 1e-7 with nothing flagged: the check estimated 1.5-3x its true errors.
 
 The sum of |D_n lambda_{n+1}|, relative to the norm of U (``_solve``), is added to the error
 estimate; the steps holding the most of it (each above FLAG_SHARE rtol, and the largest
