@@ -305,9 +305,10 @@ def _resolved_weights(step_weights, step_m, N, steps, log_factors, count):
     The discrete factor of a step that samples F inside a turning-point window holds the
     discretisation's error: a stage on tau_z with the body at rest sees the full stiffness
     T^(2-p) mu / delta_tau there and damps a perturbation (m = 0.32 on the point of
-    ``DISHONEST_CORNERS``) that the resolved window passes almost unchanged (0.9996), so the
-    discrete 1 - M (0.68) hid the solution's weak hold on its mean (1 - M = 0.0017) and
-    lambda, 1.5 instead of 587, hid a 40 rtol error as 0.14 rtol."""
+    ``tests/test_study.py::test_trapped_turning_point_at_short_period_is_seen``) that the
+    resolved window passes almost unchanged (0.9996), so the discrete 1 - M (0.68) hid the
+    solution's weak hold on its mean (1 - M = 0.0017) and lambda, 1.5 instead of 587, hid a
+    40 rtol error as 0.14 rtol."""
     m_minus_1 = np.empty(N)
     for n in range(N):
         m_minus_1[n] = step_m[n] - 1.0
