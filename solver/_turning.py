@@ -81,6 +81,7 @@ FLAG_SHARE = 0.1
 FLAG_REST = 0.25
 #: a defect within this many times its own rounding error (``step_defect``) is noise
 ROUNDING_FACTOR = 1e3
+_EPS = float(np.finfo(np.float64).eps)
 #: at most this many flagged steps per point are returned
 MAX_FLAGGED = 32
 #: omega is sampled at this many equal sub-steps of each step (two zeros in one step)
@@ -184,7 +185,7 @@ def step_defect(code, params, t0, t1, u_n, U1, U2, tz, window, kappa, mu_n, mu_s
         F2 = force_and_slope(U2, phi2, om2, mu_n, mu_s, p, dtau)[0]
         change = kappa * h * (0.75 * F1 + 0.25 * F2)
         magnitude = kappa * h * (0.75 * abs(F1) + 0.25 * abs(F2))
-    rounding = 2.2e-16 * (magnitude + kappa * size)
+    rounding = _EPS * (magnitude + kappa * size)
     return change - kappa * force, kappa * slope, panels, rounding
 
 
