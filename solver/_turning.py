@@ -388,7 +388,10 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
     count = 0
     for r in order:
         share = shares[r]
-        if not (rest > FLAG_REST * rtol or share > FLAG_SHARE * rtol) or count >= flagged.shape[0]:
+        # (share 0: what rest holds is the rounding of its sum, 1e14 of an estimate of 1e30;
+        # its step target divided by zero)
+        if (not (rest > FLAG_REST * rtol or share > FLAG_SHARE * rtol) or share == 0.0
+                or count >= flagged.shape[0]):
             break
         rest -= share
         h = grid[checked[r] + 1] - grid[checked[r]]
