@@ -429,10 +429,12 @@ def _assess_pairs(grids, n_steps, int_u, int_pi, status, step_u, step_pi, step_m
 
 
 def _check_turning_points(code, params, active, padded, steps, int_u, nodes, stages, step_m,
-                          step_weights, physics, u_floor, rtol, estimate, accepted, collocated):
+                          step_weights, physics, u_floor, rtol, estimate, accepted, collocated,
+                          corners):
     """``_turning``'s check of the bisected solutions of the pairs Richardson accepts: adds
     its estimate and withdraws the acceptance where the sum exceeds rtol.  ``collocated``:
-    the stages are Radau stages (the periodic method), not the march's pseudo-stages.
+    the stages are Radau stages (the periodic method), not the march's pseudo-stages;
+    ``corners`` (pairs, k): the corners of phi of each pair's point (their layers are checked).
 
     Returns (estimate, withdrawn, flagged): the pairs whose acceptance it withdraws, and
     flagged (pairs, MAX_FLAGGED, 3), the nodes to grade toward each turning point
@@ -448,7 +450,7 @@ def _check_turning_points(code, params, active, padded, steps, int_u, nodes, sta
         code, params[points], padded[rows], steps[rows], nodes[rows], stages[rows],
         step_m[rows], step_weights[rows], physics.inertia_factor[points], physics.mu_n[points],
         physics.mu_s[points], physics.p[points], physics.delta_tau[points], scale_u,
-        float(rtol), TURNING_MIN_STEP, collocated)
+        float(rtol), TURNING_MIN_STEP, collocated, corners[check])
     estimate = estimate.copy()
     estimate[check] += extra
     withdrawn = check[estimate[check] > rtol]
@@ -781,7 +783,7 @@ class _Refinement:
             estimate, withdrawn, flagged = _check_turning_points(
                 self.code, self.params, bucket, out.rows, out.steps, out.int_u, out.nodes,
                 out.stages, out.step_m, out.step_weights, physics, self.u_floor, rtol, estimate,
-                accepted, self.method == "periodic")
+                accepted, self.method == "periodic", self.corners[bucket])
             accepted[withdrawn] = False
             # withdrawn pairs are graded toward their turning points; Richardson's marking
             # (Doerfler's, its estimate being below rtol) only where that estimate is large

@@ -198,7 +198,8 @@ def test_turning_point_estimate_sees_the_trap_and_not_a_resolved_solution():
         scale = max(abs(int_u), 1e-3 * V)
         estimate, flagged = turning_point_estimates(
             code, params, grid[None], np.array([N]), nodes[None], stages[None], step_m[None],
-            q[None], *(np.array([x]) for x in physics), np.array([scale]), 1e-4, 1e-7, True)
+            q[None], *(np.array([x]) for x in physics), np.array([scale]), 1e-4, 1e-7, True,
+            kin.corners())
         estimates.append((abs(int_u - ref.mean_u[0]) / scale, estimate[0],
                           np.isfinite(flagged[0, :, 0]).sum()))
     (trapped_error, trapped_estimate, trapped_flags), (error, estimate, flags) = estimates
@@ -289,3 +290,54 @@ def test_flagging_with_a_rounding_residue_raises_no_exception():
         assert relative_u_error(res.U, ref.U, phys.period, solver.kinematic_speed(kin))[0] <= 1e-3
     else:
         assert res.status[0] != 0 and np.isnan(res.U[0])
+
+
+def test_corner_layer_error_against_an_independent_integration():
+    """The step after tau0 of a long-period power law (scaled period 113, 512 steps, rate
+    times h ~ 760): its error in int u from ``corner_layer_error`` (graded Radau sub-steps)
+    against scipy's Radau at rtol 1e-12 from the same u_n, with the same node weight.  The
+    error is ~13 rtol at rtol 1e-3 of the norm of int u: the layer the step misses."""
+    from scipy.integrate import solve_ivp
+    from solver._turning import _layer_rate, corner_layer_error
+    kin = solver.PowerLaw([0.5729944571272555], [0.009698383749602814], [0.4888715012712118],
+                          [5.0], [False], [14.468630943676835], [False])
+    phys = solver.Physics.from_scaled(0.16643930643694074, 112.84102281785694, p=0.0,
+                                      delta=4.39375774699564e-10)
+    code, params = kin.kernel_encoding()
+    params = params[0]
+    kappa, mu_n, mu_s, p, dtau = (float(x[0]) for x in (
+        phys.inertia_factor, phys.mu_n, phys.mu_s, phys.p, phys.delta_tau))
+    physics = (kappa, mu_n, mu_s, p, dtau)
+    V = solver.kinematic_speed(kin)[0]
+    grid = period_grid(kin, 512)[0]
+    N = grid.size - 1
+    nodes, step_u, step_pi, step_m, weights, q = (np.empty(N) for _ in range(6))
+    stages = np.empty(2 * N)
+    status = _solve_point(code, params, grid, N, *physics, 0.0, V, 1e-10, nodes, step_u,
+                          step_pi, step_m, stages, None, None, weights, q)[3]
+    assert status == 0
+    n = int(np.flatnonzero(np.abs(grid - kin.duty_cycle[0]) < 1e-14)[0])
+    t0, t1 = grid[n], grid[n + 1]
+    side = 0.5 * (t0 + t1)
+    U1, U2 = stages[2 * n], stages[2 * n + 1]
+    rate = _layer_rate(code, params, t0, t1, nodes[n], U1, U2, *physics)
+    assert rate * (t1 - t0) > 100
+    estimate = corner_layer_error(code, params, t0, t1, nodes[n], U1, U2, 1.0 / rate,
+                                  weights[n + 1], *physics, 1e-16)
+
+    def rhs(t, y):
+        phi, om = angle_and_rate(code, params, t, side)
+        return [kappa * force_and_slope(y[0], phi, om, mu_n, mu_s, p, dtau)[0], y[0]]
+
+    def jac(t, y):
+        phi, om = angle_and_rate(code, params, t, side)
+        return [[kappa * force_and_slope(y[0], phi, om, mu_n, mu_s, p, dtau)[1], 0.0],
+                [1.0, 0.0]]
+
+    ref = solve_ivp(rhs, (t0, t1), [nodes[n], 0.0], method="Radau", jac=jac, rtol=1e-12,
+                    atol=[1e-14, 1e-18], first_step=1e-9)
+    assert ref.success
+    true = ref.y[1, -1] - (t1 - t0) * (0.75 * U1 + 0.25 * U2) + weights[n + 1] * (
+        ref.y[0, -1] - U2)
+    assert abs(true) > 5e-3 * (1e-3 * V)  # (5 rtol at rtol 1e-3 of the floor 1e-3 V)
+    assert abs(estimate - true) <= 0.02 * abs(true), (estimate, true)
