@@ -322,8 +322,8 @@ def test_corner_layer_error_against_an_independent_integration():
     U1, U2 = stages[2 * n], stages[2 * n + 1]
     rate = _layer_rate(code, params, t0, t1, nodes[n], U1, U2, *physics)
     assert rate * (t1 - t0) > 100
-    estimate = corner_layer_error(code, params, t0, t1, nodes[n], U1, U2, 1.0 / rate,
-                                  weights[n + 1], *physics, 1e-16)
+    estimate, end = corner_layer_error(code, params, t0, t1, nodes[n], U1, U2, 1.0 / rate,
+                                       weights[n + 1], *physics, 1e-16)
 
     def rhs(t, y):
         phi, om = angle_and_rate(code, params, t, side)
@@ -341,3 +341,4 @@ def test_corner_layer_error_against_an_independent_integration():
         ref.y[0, -1] - U2)
     assert abs(true) > 5e-3 * (1e-3 * V)  # (5 rtol at rtol 1e-3 of the floor 1e-3 V)
     assert abs(estimate - true) <= 0.02 * abs(true), (estimate, true)
+    assert abs(end - ref.y[0, -1]) <= 1e-6 * abs(ref.y[0, -1])
