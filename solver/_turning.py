@@ -112,6 +112,10 @@ LAYER_STIFFNESS = 4.0
 #: whose error is below LAYER_NEGLIGIBLE rtol (the layer is over) ...
 LAYER_STEPS = 8
 LAYER_SEARCH = 64
+#: ... and starting within this distance of the corner (a layer's longest measured reach,
+#: a slide to a stop after tau = 0, was 4.4e-4; past it a stiff step's stage on the corner
+#: at tau = 1, 0.9 later, was taken for one and its defect left unchecked)
+LAYER_REACH = 2.0 ** -10
 LAYER_NEGLIGIBLE = 1e-3
 #: ... the first sub-step is this fraction of the layer's width ...
 LAYER_FIRST_FRACTION = 0.125
@@ -410,9 +414,9 @@ def corner_layer_error(code, params, t0, t1, u_start, U1, U2, width, weight_next
 def _corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n, mu_s, p, dtau,
                    steps, widths, first):
     """The steps after each corner of phi that may hold its layer: among the first
-    LAYER_SEARCH steps, the first LAYER_STEPS whose fastest relaxation rate times h exceeds
-    LAYER_STIFFNESS (a layer shorter than the step; the shorter steps before them resolve
-    theirs).  Writes them into ``steps`` with their layer widths (1 / rate), in order,
+    LAYER_SEARCH steps that start within LAYER_REACH of it, the first LAYER_STEPS whose
+    fastest relaxation rate times h exceeds LAYER_STIFFNESS (a layer shorter than the step;
+    the shorter steps before them resolve theirs).  Writes them into ``steps`` with their layer widths (1 / rate), in order,
     and marks a corner's first one in ``first``; returns their number."""
     count = 0
     for c in corners:
@@ -421,6 +425,8 @@ def _corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n,
             continue
         found = 0
         for n in range(n0, min(n0 + LAYER_SEARCH, N)):
+            if grid[n] - c > LAYER_REACH:
+                break  # (a stiff step far after the corner is no layer's: a stop, say)
             rate = _layer_rate(code, params, grid[n], grid[n + 1], u_nodes[n], stages[2 * n],
                                stages[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
             if rate * (grid[n + 1] - grid[n]) > LAYER_STIFFNESS:
