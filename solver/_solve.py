@@ -437,8 +437,8 @@ def _check_turning_points(code, params, active, padded, steps, int_u, nodes, sta
     ``corners`` (pairs, k): the corners of phi of each pair's point (their layers are checked).
 
     Returns (estimate, withdrawn, flagged): the pairs whose acceptance it withdraws, and
-    flagged (pairs, MAX_FLAGGED, 3), the nodes to grade toward each turning point
-    (``grade_towards``), NaN where none."""
+    flagged (pairs, MAX_FLAGGED, 3), the nodes to grade toward each turning point, or forward
+    into a corner's layer (``grade_towards``), NaN where none."""
     flagged = np.full((active.size, MAX_FLAGGED, 3), np.nan)
     check = np.flatnonzero(accepted)
     if check.size == 0:

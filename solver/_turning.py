@@ -58,16 +58,17 @@ both miss it alike.  Measured: ``tests/test_study.py``'s power_law_period_113 (s
 113), rtol 1e-3, 12.7 rtol off with an estimate of 0.5, the layer (width ~1e-5) inside a
 step of 1e-3 whose own integral of u held the whole error; the turning-point check did not
 see it, as omega changes sign at a node there, not inside a step.  So the first LAYER_STEPS
-steps after each corner whose fastest rate times h exceeds LAYER_STIFFNESS (tiny steps
-before them resolve their part) are solved again on sub-steps growing geometrically from
-the layer's width (``corner_layer_error``); the change of the step's integral of u plus
-lambda_{n+1} times the change of its end value is its error, added like D_n lambda_{n+1}
-(and in place of it, which the stiff step's damping makes 300x too large there), and a
-flagged layer step grades nodes from its start down to the width.  Consecutive layer steps
-are re-solved as one stretch, each from where the re-solve of the one before ended, and only
-the last end is weighted by lambda: a jump of u into a stuck region is not linear (on
-power_law_ratio_4096 a stage on a spurious stuck root ended a step 1.8 short, lambda after it
-was 3e-9, and the stop it moved cost 48 rtol).  On 2 x 300 long-period power-law points
+steps within LAYER_REACH after each corner (and before the next) whose fastest rate times h
+exceeds LAYER_STIFFNESS (tiny steps before them resolve their part) are solved again on
+sub-steps growing geometrically from the layer's width (``corner_layer_error``); the change
+of the step's integral of u plus lambda_{n+1} times the change of its end value is its
+error, added like D_n lambda_{n+1} (and in place of it, which the stiff step's damping makes
+300x too large there).  Consecutive layer steps are re-solved as one stretch, each from
+where the re-solve of the one before ended, and only the last end is weighted by lambda: a
+jump of u into a stuck region is not linear (on power_law_ratio_4096 a stage on a spurious
+stuck root ended a step 1.8 short, lambda after it was 3e-9, and the stop it moved cost
+48 rtol).  A flagged layer step grades nodes forward from the start of its stretch down to
+the width of the stretch's first step.  On 2 x 300 long-period power-law points
 (scaled period 4 .. 256, delta 1e-10 .. 1e-5) the worst error went from 17 / 36 rtol to
 0.55 / 0.96 at rtol 1e-3, 45 / 0.53 to 0.39 / 0.37 at 1e-4 and 0.51 / 3.5 to 0.51 / 0.39
 at 1e-5, n_tau within 1 %.
@@ -104,23 +105,25 @@ FLAG_REST = 0.25
 #: a defect within this many times its own rounding error (``step_defect``) is noise
 ROUNDING_FACTOR = 1e3
 _EPS = float(np.finfo(np.float64).eps)
-#: a step that starts at a corner of phi (the power law's tau = 0 and tau0) is solved again on
-#: graded sub-steps (``corner_layer_error``) when its fastest relaxation rate times h exceeds
-#: this: a layer shorter than the step, which the step and its bisection both miss
+#: a step after a corner of phi (the power law's tau = 0 and tau0) is solved again on graded
+#: sub-steps (``corner_layer_error``) when its fastest relaxation rate times h exceeds this:
+#: a layer shorter than the step, which the step and its bisection both miss ...
 LAYER_STIFFNESS = 4.0
-#: ... the first LAYER_STEPS such steps among the LAYER_SEARCH after the corner, until one
-#: whose error is below LAYER_NEGLIGIBLE rtol (the layer is over) ...
+#: ... the first LAYER_STEPS such steps among the LAYER_SEARCH after the corner (and before
+#: the next one) ...
 LAYER_STEPS = 8
 LAYER_SEARCH = 64
-#: ... and starting within this distance of the corner (a layer's longest measured reach,
+#: ... that start within this distance of the corner (a layer's longest measured reach,
 #: a slide to a stop after tau = 0, was 4.4e-4; past it a stiff step's stage on the corner
-#: at tau = 1, 0.9 later, was taken for one and its defect left unchecked)
+#: at tau = 1, 0.9 later, was taken for one and its defect left unchecked) ...
 LAYER_REACH = 2.0 ** -10
-LAYER_NEGLIGIBLE = 1e-3
 #: ... the first sub-step is this fraction of the layer's width ...
 LAYER_FIRST_FRACTION = 0.125
-#: ... and the sub-steps' stage tolerance this times rtol times the norm of int u
+#: ... and the sub-steps' stage tolerance this times rtol times the norm of int u, at least
+#: LAYER_ROUNDING times the rounding of u (|u| reached 250 times that norm at rtol 1e-3:
+#: below its rounding, a sub-step's Newton failed and the estimate became inf)
 LAYER_TOLERANCE = 1e-9
+LAYER_ROUNDING = 16.0
 #: at most this many flagged steps per point are returned
 MAX_FLAGGED = 32
 #: omega is sampled at this many equal sub-steps of each step (two zeros in one step)
@@ -399,7 +402,7 @@ def corner_layer_error(code, params, t0, t1, u_start, U1, U2, width, weight_next
     d = first
     while a < t1:
         b = a + d
-        if b + d > t1:  # the last sub-step takes the rest (between d and 2 d)
+        if b + d > t1:  # the last sub-step takes the rest (at most 2 d)
             b = t1
         q, u, ok = _radau_from(u, a, b, code, params, kappa, mu_n, mu_s, p, dtau, atol)
         if not ok:
@@ -416,15 +419,21 @@ def _corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n,
     """The steps after each corner of phi that may hold its layer: among the first
     LAYER_SEARCH steps that start within LAYER_REACH of it, the first LAYER_STEPS whose
     fastest relaxation rate times h exceeds LAYER_STIFFNESS (a layer shorter than the step;
-    the shorter steps before them resolve theirs).  Writes them into ``steps`` with their layer widths (1 / rate), in order,
-    and marks a corner's first one in ``first``; returns their number."""
+    the shorter steps before them resolve theirs), and not beyond the next corner.  Writes
+    them into ``steps`` with their layer widths (1 / rate), in order, and marks each corner's
+    first one in ``first``; returns their number."""
     count = 0
     for c in corners:
         n0 = np.searchsorted(grid[:N + 1], c)
-        if n0 >= N or abs(grid[n0] - c) > 1e-12 or (count > 0 and n0 <= steps[count - 1]):
+        if n0 >= N or abs(grid[n0] - c) > 1e-12:
             continue
+        end = min(n0 + LAYER_SEARCH, N)
+        for c2 in corners:  # (the next corner's layer is its own)
+            n2 = np.searchsorted(grid[:N + 1], c2)
+            if n0 < n2 < end:
+                end = n2
         found = 0
-        for n in range(n0, min(n0 + LAYER_SEARCH, N)):
+        for n in range(n0, end):
             if grid[n] - c > LAYER_REACH:
                 break  # (a stiff step far after the corner is no layer's: a stop, say)
             rate = _layer_rate(code, params, grid[n], grid[n + 1], u_nodes[n], stages[2 * n],
@@ -483,7 +492,7 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
             if d < distance:
                 distance, best, shift = d, cand, offset
         if distance > h or n in layer_steps[:n_layers]:
-            continue  # (a layer step: its own check below also holds what D_n measures)
+            continue  # (a layer step, re-solved below: that holds what D_n measures)
         defect, log_factor, _, rounding = step_defect(
             code, params, t0, t1, u_nodes[n], stages[2 * n], stages[2 * n + 1],
             zeros[best, 0] + shift, zeros[best, 1], kappa, mu_n, mu_s, p, dtau, collocated)
@@ -505,7 +514,7 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
     shares = np.empty(rows)
     estimate = 0.0
     start = 0.0
-    done = True
+    width = 0.0
     carried = math.nan
     for r in range(rows):
         if r < n_checked:
@@ -515,34 +524,42 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
         else:
             j = r - n_checked
             n = layer_steps[j]
-            if first[j]:
+            if first[j] or layer_steps[j - 1] != n - 1:  # a stretch starts
                 start = grid[n]
-                done = False
+                width = widths[j]
             # consecutive layer steps are re-solved as one stretch: the error at a step's end
             # is carried by the re-solve, not weighted by lambda_{n+1}, which is linear (a
             # stage stuck on a spurious root, 1.8 short, had lambda 3e-9 after it, and the
-            # triangle of u it lost was 49 rtol on power_law_ratio_4096)
+            # triangle of u it lost was 48 rtol on power_law_ratio_4096)
             chained = not first[j] and layer_steps[j - 1] == n - 1 and math.isfinite(carried)
             goes_on = j + 1 < n_layers and not first[j + 1] and layer_steps[j + 1] == n + 1
-            share = 0.0
-            if chained or not done:  # (done: the layer ended in a step before)
-                error, carried = corner_layer_error(
-                    code, params, grid[n], grid[n + 1], carried if chained else u_nodes[n],
-                    stages[2 * n], stages[2 * n + 1], widths[j],
-                    0.0 if goes_on else (weights[n + 1] if n + 1 < N else weights[0]),
-                    kappa, mu_n, mu_s, p, dtau, LAYER_TOLERANCE * rtol * scale_u)
-                share = abs(error) / scale_u
-                done = not goes_on and share <= LAYER_NEGLIGIBLE * rtol
-            else:
-                carried = math.nan
+            magnitude = max(abs(u_nodes[n]), abs(stages[2 * n]), abs(stages[2 * n + 1]))
+            error, carried = corner_layer_error(
+                code, params, grid[n], grid[n + 1], carried if chained else u_nodes[n],
+                stages[2 * n], stages[2 * n + 1], widths[j],
+                0.0 if goes_on else (weights[n + 1] if n + 1 < N else weights[0]),
+                kappa, mu_n, mu_s, p, dtau,
+                max(LAYER_TOLERANCE * rtol * scale_u, LAYER_ROUNDING * _EPS * magnitude))
+            share = abs(error) / scale_u
+            # graded one-sided from the stretch's start down to its first step's width (a
+            # later step's, in a stuck region, is the regularisation's, 100x finer)
             row_tz[r] = start
-            row_h[r] = -max(widths[j], min_step)  # (< 0: a layer row, its target step)
+            row_h[r] = -max(width, min_step)  # (< 0: a layer row, its target step)
             row_reach[r] = grid[n + 1] - start
         if not math.isfinite(share):
             share = math.inf
         shares[r] = share
         estimate += share
-    # flag the largest until the rest holds at most FLAG_REST rtol, and any above FLAG_SHARE
+    return estimate, flag_rows(shares, estimate, row_tz, row_h, row_reach, rtol, min_step,
+                               flagged)
+
+
+@njit(cache=True)
+def flag_rows(shares, estimate, row_tz, row_h, row_reach, rtol, min_step, flagged):
+    """Flag the rows holding the largest ``shares`` (of the sum ``estimate``) until the rest
+    holds at most FLAG_REST rtol, and any above FLAG_SHARE rtol, into ``flagged`` as
+    (tz, target step, reach) for ``grade_towards``; returns their number.  ``row_h`` is
+    the checked step's length, or minus the target step of a layer row."""
     order = np.argsort(-shares)
     rest = estimate
     count = 0
@@ -555,13 +572,13 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
             break
         rest -= share
         flagged[count, 0] = row_tz[r]
-        if row_h[r] < 0.0:  # a layer: grade down to its width
-            flagged[count, 1] = -row_h[r]
+        if row_h[r] < 0.0:  # a layer: grade forward from its start down to its width
+            flagged[count, 1] = row_h[r]
         else:  # in the trapped regime D_n ~ h: shrink the step in proportion
             flagged[count, 1] = max(row_h[r] * min(0.5, FLAG_SHARE * rtol / share), min_step)
         flagged[count, 2] = row_reach[r]
         count += 1
-    return estimate, count
+    return count
 
 
 @njit(cache=True, parallel=True)
@@ -594,18 +611,22 @@ def turning_point_estimates(code, params, grids, n_steps, u_nodes, stages, step_
 @njit(cache=True)
 def grade_towards(grid, flagged, min_gap):
     """``grid`` with nodes at tz and tz +- target 2^k (k = 0, 1, ... while within reach of tz)
-    for every flagged row (tz, target, reach); a node within ``min_gap`` of another (of the
-    grid, or added before it) is not added, so targets should exceed ``min_gap``."""
+    for every flagged row (tz, target, reach); a negative target grades forward only, at
+    tz + |target| 2^k (a layer after a corner).  A node within ``min_gap`` of another (of
+    the grid, or added before it) is not added, so |targets| should exceed ``min_gap``."""
     extra = []
     for r in range(flagged.shape[0]):
         tz, target, reach = flagged[r, 0], flagged[r, 1], flagged[r, 2]
         if not math.isfinite(tz):
             continue
         extra.append(tz)
-        d = target
+        d = abs(target)
         while d < reach:
-            for t in (tz - d, tz + d):
-                extra.append(t - math.floor(t))  # the period wraps
+            if target > 0.0:
+                back = tz - d
+                extra.append(back - math.floor(back))  # the period wraps
+            ahead = tz + d
+            extra.append(ahead - math.floor(ahead))
             d *= 2.0
     if len(extra) == 0:
         return grid

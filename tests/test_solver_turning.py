@@ -271,32 +271,64 @@ def test_stage_residual_is_not_counted_as_a_defect():
         assert error <= rtol and error <= res.error_estimate[0], (rtol, error, res.error_estimate[0])
 
 
-def test_flagging_with_a_rounding_residue_raises_no_exception():
-    """A long-period power law with anisotropy 229 and delta 2e-9 (a 300-point sweep of
-    scaled periods 4 .. 256): at rtol 1e-3 the check's estimate reached 1e30, and after the
-    steps holding it were flagged the rounding of that sum was left over the flagging
-    threshold with only steps of share 0, whose target step divided by zero
-    (ZeroDivisionError out of the compiled check).  Whatever the solve returns now is
-    honest: within rtol, or NaN with a failure status."""
-    from solver.bench import relative_u_error
-    kin = solver.PowerLaw([1.4182145079170343], [0.7839910605584534], [0.406487022998004],
-                          [1.0563407336237485], [True], [3.562368125537508], [True])
-    phys = solver.Physics.from_scaled(229.28499630060264, 19.16152971270941, p=0.0,
-                                      delta=2.0522903858592786e-09)
-    ref = solver.solve_periodic(kin, phys, rtol=1e-6)
-    assert ref.converged[0]
-    res = solver.solve_periodic(kin, phys, rtol=1e-3)
-    if res.converged[0]:
-        assert relative_u_error(res.U, ref.U, phys.period, solver.kinematic_speed(kin))[0] <= 1e-3
-    else:
-        assert res.status[0] != 0 and np.isnan(res.U[0])
+def test_flagging_stops_at_a_share_of_zero():
+    """Shares 1e30, 1e14, 0: after the first two are flagged, the rounding of their sum
+    (1.4e14 of it) is still over FLAG_REST rtol, and the step target of the share-0 row was
+    divided by zero: ZeroDivisionError out of the compiled check (a long-period power law at
+    anisotropy 229, delta 2e-9, rtol 1e-3, whose check estimated 1e30)."""
+    from solver._turning import flag_rows
+    shares = np.array([1e30, 1e14, 0.0])
+    estimate = float(shares[0] + shares[1] + shares[2])
+    rtol = 1e-3
+    assert estimate - shares[0] - shares[1] > 0.25 * rtol  # the residue the test is about
+    flagged = np.full((4, 3), np.nan)
+    count = flag_rows(shares, estimate, np.array([0.1, 0.2, 0.3]), np.array([1e-3, 1e-3, 1e-3]),
+                      np.array([2e-3, 2e-3, 2e-3]), rtol, 2.0 ** -36, flagged)
+    assert count == 2
+    assert np.all(np.isfinite(flagged[:2])) and np.all(flagged[:2, 1] > 0)
+
+
+def test_layer_rows_grade_forward_only():
+    """A negative target (a layer row) grades from tz forward only; a positive one on both
+    sides, wrapping at the period's ends."""
+    grid = np.linspace(0.0, 1.0, 9)
+    forward = grade_towards(grid, np.array([[0.25, -1e-3, 0.1]]), 1e-12)
+    both = grade_towards(grid, np.array([[0.25, 1e-3, 0.1]]), 1e-12)
+    added_forward = np.setdiff1d(forward, grid)
+    added_both = np.setdiff1d(both, grid)
+    assert added_forward.size >= 6 and np.all(added_forward > 0.25)
+    assert np.any(added_both < 0.25) and np.any(added_both > 0.25)
+    np.testing.assert_allclose(np.sort(added_forward - 0.25), 1e-3 * 2.0 ** np.arange(
+        added_forward.size))
+
+
+def test_each_corner_keeps_its_own_layer_steps():
+    """Two corners 2^-12 apart (duty cycle 2^-12), every step stiff (u = 0, T^(2-p) 1e12,
+    delta_tau 1e-12): the steps after tau = 0 stop at tau0, which starts its own list.
+    (Searched 64 steps on, tau = 0 took tau0's steps as its own, so a flagged tau0 layer was
+    graded toward tau = 0, or not re-solved at all.)"""
+    from solver._turning import LAYER_STEPS, _corner_layers
+    kin = solver.PowerLaw([1.0], [0.5], [2.0 ** -12], [2.0], [False], [2.0], [False])
+    tau0 = kin.duty_cycle[0]
+    grid = np.concatenate([np.linspace(0.0, tau0, 3), tau0 + 2.0 ** -13 * np.arange(1, 40),
+                           [0.5, 1.0]])
+    N = grid.size - 1
+    code, params = kin.kernel_encoding()
+    steps = np.empty(2 * LAYER_STEPS, dtype=np.int64)
+    widths = np.empty(2 * LAYER_STEPS)
+    first = np.empty(2 * LAYER_STEPS, dtype=np.bool_)
+    count = _corner_layers(code, params[0], grid, N, np.zeros(N), np.zeros(2 * N),
+                           kin.corners()[0], 1e12, 1.0, 1.0, 0.0, 1e-12, steps, widths, first)
+    assert list(steps[:count]) == [0, 1] + list(range(2, 2 + LAYER_STEPS))
+    assert list(first[:count]) == [True, False, True] + [False] * (LAYER_STEPS - 1)
 
 
 def test_corner_layer_error_against_an_independent_integration():
     """The step after tau0 of a long-period power law (scaled period 113, 512 steps, rate
     times h ~ 760): its error in int u from ``corner_layer_error`` (graded Radau sub-steps)
     against scipy's Radau at rtol 1e-12 from the same u_n, with the same node weight.  The
-    error is ~13 rtol at rtol 1e-3 of the norm of int u: the layer the step misses."""
+    error is ~13 rtol at rtol 1e-3 of the norm of int u (its floor 1e-3 V here): the layer
+    the step misses."""
     from scipy.integrate import solve_ivp
     from solver._turning import _layer_rate, corner_layer_error
     kin = solver.PowerLaw([0.5729944571272555], [0.009698383749602814], [0.4888715012712118],
