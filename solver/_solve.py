@@ -68,6 +68,10 @@ METHODS = ("periodic", "march")
 U_FLOOR_FRACTION = 1e-3
 MARCH_MAX_STEPS = 2 ** 22  # steps per solve (periods x steps per period) before giving up
 MAX_BISECTIONS = 4  # per refinement pass and step
+#: a pair whose estimate (relative: 1e3 times the answer, or its floor 1e-3 V) exceeds this is
+#: bisected at most once where marked (at 1 it caught coarse grids of small-U points, whose
+#: error of 1.6 times the floor was genuine, and one then ran out of steps at rtol 1e-8)
+DISAGREEMENT = 1e3
 MIN_STEP = 2.0 ** -26
 #: an event this close to a node is taken to be on it (keeps steps above MIN_STEP)
 EVENT_GAP = 4 * MIN_STEP
@@ -423,8 +427,13 @@ def _assess_pairs(grids, n_steps, int_u, int_pi, status, step_u, step_pi, step_m
         hot = _marked_levels(grids[c, :N + 1], change_u, change_p, nodes[c], nodes[f], step_m[c],
                              scale_u, scale_p if estimate_u <= rtol < estimate_p else 0.0, rtol,
                              order, step_floors(grids[c], N, corners[j]))
+        # grids that disagree by more than the answer itself are no asymptotic pair (spurious
+        # discrete solutions at extreme corners: estimates of 1e68 .. 1e242): their indicators
+        # do not size steps, and splitting the marked ones 16-fold took a rtol-1e-3 point to
+        # 79,564 steps where rtol 1e-5 needed 1,000; they are bisected once
+        cap = 1 if not estimate[j] <= DISAGREEMENT else MAX_BISECTIONS
         for n in range(N):
-            levels[j, n] = MAX_BISECTIONS if forced[j, n] else hot[n]
+            levels[j, n] = MAX_BISECTIONS if forced[j, n] else min(hot[n], cap)
     return estimate, accepted, levels
 
 

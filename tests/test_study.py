@@ -513,3 +513,22 @@ def test_status_map_has_a_colour_for_every_status_code():
     from reports._study import _STATUS_COLORS
     assert len(_STATUS_COLORS) == max(solver.STATUS_REASONS) + 1
     assert sorted(solver.STATUS_REASONS) == list(range(len(_STATUS_COLORS)))
+
+
+def test_pairs_that_disagree_beyond_the_answer_are_bisected_once():
+    """mu_n/mu_s 0.0035, scaled period 0.156, exponents 12.4 and 10.3, delta 1e-10 (a
+    400-point stress sweep at mu_n/mu_s 2^-12 .. 2^12): at rtol 1e-3 coarse pairs with
+    spurious discrete solutions disagreed by 1e68 .. 1e242 times the answer, their steps were
+    split 16-fold where marked, and the solve took 79,564 steps where rtol 1e-5 took ~1,000.
+    Such pairs are now bisected once (13,284 steps measured), and the answer is honest."""
+    kin = solver.PowerLaw([1.7101549133764915], [0.9994489879778728], [0.6784272143095593],
+                          [12.403227782423754], [False], [10.296832823298375], [False])
+    phys = solver.Physics.from_scaled(0.0035091081423200957, 0.15592301247464194, p=0.0,
+                                      delta=1e-10)
+    ref = solver.solve_periodic(kin, phys, rtol=1e-6)
+    res = solver.solve_periodic(kin, phys, rtol=1e-3)
+    assert ref.converged[0] and res.converged[0]
+    assert res.n_tau[0] < 40_000, res.n_tau[0]
+    error = max(*solver_norm_errors(res.U, res.P, ref.U, ref.P, phys.period,
+                                    solver.kinematic_speed(kin)))[0]
+    assert error <= 1e-3
