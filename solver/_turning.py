@@ -70,7 +70,7 @@ stuck root ended a step 1.8 short, lambda after it was 3e-9, and the stop it mov
 48 rtol).  A flagged layer step grades nodes forward from the start of its stretch down to
 the width of the stretch's first step.  On 2 x 300 long-period power-law points
 (scaled period 4 .. 256, delta 1e-10 .. 1e-5) the worst error went from 17 / 36 rtol to
-0.55 / 0.96 at rtol 1e-3, 45 / 0.53 to 0.39 / 0.37 at 1e-4 and 0.51 / 3.5 to 0.51 / 0.39
+0.55 / 0.96 at rtol 1e-3, 45 / 0.53 to 0.39 / 0.53 at 1e-4 and 0.51 / 3.5 to 0.51 / 0.55
 at 1e-5, n_tau within 1 %.
 
 The check covers U only.  P's error in the trapped solutions was small: the point above,
