@@ -474,12 +474,10 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
     row_reach = np.empty(N + n_layers)
     n_checked = 0
     k = 0
-    for n in range(N):
+    for n in range(N if n_zeros > 0 else 0):
         t0 = grid[n]
         t1 = grid[n + 1]
         h = t1 - t0
-        if n_zeros == 0:
-            break
         while k + 1 < n_zeros and zeros[k + 1, 0] <= t0:
             k += 1
         best = -1
@@ -510,46 +508,45 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
         n_checked += 1
     # the error of int u is sum D_n lambda_{n+1}, lambda the weights of the resolved problem
     weights = _resolved_weights(step_weights, step_m, N, checked, log_factors, n_checked)
-    rows = n_checked + n_layers
-    shares = np.empty(rows)
-    estimate = 0.0
+    shares = np.empty(n_checked + n_layers)
+    for r in range(n_checked):
+        n = checked[r]
+        lam = weights[n + 1] if n + 1 < N else weights[0]
+        shares[r] = abs(defects[r] * lam) / scale_u if defects[r] != 0.0 else 0.0
     start = 0.0
     width = 0.0
     carried = math.nan
-    for r in range(rows):
-        if r < n_checked:
-            n = checked[r]
-            lam = weights[n + 1] if n + 1 < N else weights[0]
-            share = abs(defects[r] * lam) / scale_u if defects[r] != 0.0 else 0.0
-        else:
-            j = r - n_checked
-            n = layer_steps[j]
-            if first[j] or layer_steps[j - 1] != n - 1:  # a stretch starts
-                start = grid[n]
-                width = widths[j]
-            # consecutive layer steps are re-solved as one stretch: the error at a step's end
-            # is carried by the re-solve, not weighted by lambda_{n+1}, which is linear (a
-            # stage stuck on a spurious root, 1.8 short, had lambda 3e-9 after it, and the
-            # triangle of u it lost was 48 rtol on power_law_ratio_4096)
-            chained = not first[j] and layer_steps[j - 1] == n - 1 and math.isfinite(carried)
-            goes_on = j + 1 < n_layers and not first[j + 1] and layer_steps[j + 1] == n + 1
-            magnitude = max(abs(u_nodes[n]), abs(stages[2 * n]), abs(stages[2 * n + 1]))
-            error, carried = corner_layer_error(
-                code, params, grid[n], grid[n + 1], carried if chained else u_nodes[n],
-                stages[2 * n], stages[2 * n + 1], widths[j],
-                0.0 if goes_on else (weights[n + 1] if n + 1 < N else weights[0]),
-                kappa, mu_n, mu_s, p, dtau,
-                max(LAYER_TOLERANCE * rtol * scale_u, LAYER_ROUNDING * _EPS * magnitude))
-            share = abs(error) / scale_u
-            # graded one-sided from the stretch's start down to its first step's width (a
-            # later step's, in a stuck region, is the regularisation's, 100x finer)
-            row_tz[r] = start
-            row_h[r] = -max(width, min_step)  # (< 0: a layer row, its target step)
-            row_reach[r] = grid[n + 1] - start
-        if not math.isfinite(share):
-            share = math.inf
-        shares[r] = share
-        estimate += share
+    for j in range(n_layers):
+        r = n_checked + j
+        n = layer_steps[j]
+        # consecutive layer steps are re-solved as one stretch: the error at a step's end is
+        # carried by the re-solve, not weighted by lambda_{n+1}, which is linear (a stage
+        # stuck on a spurious root, 1.8 short, had lambda 3e-9 after it, and the triangle of
+        # u it lost was 48 rtol on power_law_ratio_4096)
+        follows = not first[j] and layer_steps[j - 1] == n - 1
+        if not follows:  # a stretch starts
+            start = grid[n]
+            width = widths[j]
+        chained = follows and math.isfinite(carried)
+        goes_on = j + 1 < n_layers and not first[j + 1] and layer_steps[j + 1] == n + 1
+        magnitude = max(abs(u_nodes[n]), abs(stages[2 * n]), abs(stages[2 * n + 1]))
+        error, carried = corner_layer_error(
+            code, params, grid[n], grid[n + 1], carried if chained else u_nodes[n],
+            stages[2 * n], stages[2 * n + 1], widths[j],
+            0.0 if goes_on else (weights[n + 1] if n + 1 < N else weights[0]),
+            kappa, mu_n, mu_s, p, dtau,
+            max(LAYER_TOLERANCE * rtol * scale_u, LAYER_ROUNDING * _EPS * magnitude))
+        shares[r] = abs(error) / scale_u
+        # graded one-sided from the stretch's start down to its first step's width (a later
+        # step's, in a stuck region, is the regularisation's, 100x finer)
+        row_tz[r] = start
+        row_h[r] = -max(width, min_step)  # (< 0: a layer row, its target step)
+        row_reach[r] = grid[n + 1] - start
+    estimate = 0.0
+    for r in range(shares.size):
+        if not math.isfinite(shares[r]):
+            shares[r] = math.inf
+        estimate += shares[r]
     return estimate, flag_rows(shares, estimate, row_tz, row_h, row_reach, rtol, min_step,
                                flagged)
 
