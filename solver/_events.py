@@ -25,6 +25,11 @@ STOP_PROBE, where its extrapolation crosses zero), and located in the step as th
 along the extrapolation of u from the step's left end (``_locate``); on the next grid
 they are nodes (a nearby node is moved onto the event, or one is inserted), so each
 refinement pass moves them to the newer solution's events.
+
+Where the nodes put a stop steps before the extrapolation does, a stage stuck on a spurious
+root of the step equations stopped u early (h T^(2-p) mu > |u_n|, mu up to mu_n when the
+body sticks); the event goes where the extrapolation stops, and the error of the steps
+between is measured by solving them again in short steps (``misplaced_stop_error``).
 """
 from __future__ import annotations
 
@@ -44,6 +49,12 @@ STOP_PROBE = 10.0
 #: at most this many events per period are placed (beyond it the rest are not; a Fourier
 #: motion of Kmax = 10 has at most ~4 Kmax zeros of each of the four functions)
 MAX_EVENTS = 256
+#: how far past a step where g changes sign at the nodes ``_locate`` follows the extrapolation
+#: of u to its zero, in lengths of that step (a spurious stop came 2.3 steps early at
+#: mu_n/mu_s = 3,020)
+STOP_REACH = 4.0
+#: ``stop_crossing_step`` looks this many steps back for the crossing
+STOP_LOOKBACK = 64
 
 
 @njit(cache=True, error_model="numpy")
@@ -100,11 +111,38 @@ def _locate(code, params, grid, N, u_nodes, n, k, g0, g1, physics):
     phi, om = angle_and_rate(code, params, t1, mid)
     f0 = g0
     f1 = _event_function(k, u0 + x * (slope + curve * x), phi, om)
+    a, b, fa, fb = t0, t1, f0, f1
     if not (f0 * f1 < 0.0 and math.isfinite(f1)):
         if g0 * g1 > 0.0:  # a probe (``_point_events``): no root along the extrapolation
             return math.nan
-        return t0 + (t1 - t0) * g0 / (g0 - g1)
-    a, b, fa, fb = t0, t1, f0, f1
+        # the nodes change sign but the extrapolation does not: where it crosses in one of
+        # the next STOP_REACH steps (phi smooth), the node after the crossing sits on a
+        # spurious root of the stage equations (a stop forced early by h T^(2-p) mu > |u_n|,
+        # ``misplaced_stop_error``), not on the solution
+        if k < 2 or not math.isfinite(f1):
+            return t0 + (t1 - t0) * g0 / (g0 - g1)
+        j = n + 1
+        reach = t1 + STOP_REACH * (t1 - t0)
+        while j < N and grid[j] < reach:
+            ta, tb = grid[j], grid[j + 1]
+            _, om_left = angle_and_rate(code, params, ta, 0.5 * (grid[j - 1] + ta))
+            phi, om = angle_and_rate(code, params, ta, 0.5 * (ta + tb))
+            if abs(om_left - om) > 1e-12 * (1.0 + abs(om)):
+                break  # a corner of phi: the extrapolation does not reach past it
+            phi, om = angle_and_rate(code, params, tb, 0.5 * (ta + tb))
+            x = tb - t0
+            fb = _event_function(k, u0 + x * (slope + curve * x), phi, om)
+            if not math.isfinite(fb):
+                break
+            if f0 * fb < 0.0:
+                x = ta - t0
+                phi, om = angle_and_rate(code, params, ta, 0.5 * (ta + tb))
+                fa = _event_function(k, u0 + x * (slope + curve * x), phi, om)
+                a, b, mid = ta, tb, 0.5 * (ta + tb)
+                break
+            j += 1
+        if not f0 * fb < 0.0:
+            return t0 + (t1 - t0) * g0 / (g0 - g1)
     side = 0
     c = a
     for _ in range(100):
@@ -280,6 +318,77 @@ def split_step_error(code, params, t0, event, t1, u_n, U1, U2, weight_next, kapp
     return qa + qb - (t1 - t0) * (0.75 * U1 + 0.25 * U2) + weight_next * (ub - U2)
 
 
+#: sub-steps per step in ``misplaced_stop_error``'s re-solve
+STOP_SUBSTEPS = 8
+
+
+@njit(cache=True, error_model="numpy")
+def _substeps_from(u_n, t0, t1, m, code, params, kappa, mu_n, mu_s, p, dtau, atol):
+    """m equal Radau steps over [t0, t1] from u_n: (their integral of u, end value, ok)."""
+    total = 0.0
+    u = u_n
+    for j in range(m):
+        q, u, ok = _radau_from(u, t0 + (t1 - t0) * j / m, t0 + (t1 - t0) * (j + 1) / m, code,
+                               params, kappa, mu_n, mu_s, p, dtau, atol)
+        if not ok:
+            return total, u, False
+        total += q
+    return total, u, True
+
+
+@njit(cache=True, error_model="numpy")
+def misplaced_stop_error(code, params, grid, first, event, last, u_first, stages, weight_next,
+                         kappa, mu_n, mu_s, p, dtau, atol):
+    """The error in int u of Radau steps first..last (from u_first; ``stages`` the solution's
+    row of stage values) when the nodes put a stop in step ``first`` but the solution's
+    extrapolation puts it at ``event`` in step ``last`` (``_locate``).
+
+    Step ``first`` then ended on a spurious root of its stage equations: with
+    h T^(2-p) mu > |u_n| (mu up to mu_n when the body sticks) a stage can stick while u
+    is still sliding, and the collocation polynomial overshoots through zero (measured: a
+    power-law point at mu_n/mu_s 3,020, scaled period 56, rtol 1e-3, stopped 1.8e-3 early,
+    from u = 1.2 where h T^(2-p) F was 0.38; the grid and its bisection both did, so
+    Richardson saw 0.39 rtol of an error of 1.7).  The steps are solved again from u_first
+    with STOP_SUBSTEPS steps per step up to the event and as many after it, too short to
+    reach a spurious root; the change of the integral plus ``weight_next`` (lambda after
+    step ``last``) times the change of the end value is returned (NaN on failure).
+    """
+    before = STOP_SUBSTEPS * (last - first + 1)
+    qa, ua, ok_a = _substeps_from(u_first, grid[first], event, before, code, params, kappa,
+                                  mu_n, mu_s, p, dtau, atol)
+    qb, ub, ok_b = _substeps_from(ua, event, grid[last + 1], STOP_SUBSTEPS, code, params,
+                                  kappa, mu_n, mu_s, p, dtau, atol)
+    if not (ok_a and ok_b):
+        return math.nan
+    discrete = 0.0
+    for n in range(first, last + 1):
+        discrete += (grid[n + 1] - grid[n]) * (0.75 * stages[2 * n] + 0.25 * stages[2 * n + 1])
+    return qa + qb - discrete + weight_next * (ub - stages[2 * last + 1])
+
+
+@njit(cache=True, error_model="numpy")
+def _g_at_node(code, params, grid, N, u_nodes, n, side):
+    phi, om = angle_and_rate(code, params, grid[n], side)
+    return (u_nodes[n] if n < N else u_nodes[0]) + 0.25 * om * math.sin(phi)
+
+
+@njit(cache=True, error_model="numpy")
+def stop_crossing_step(code, params, grid, N, u_nodes, k, event):
+    """The step c < k over which g = u + omega S / 4 changes sign while it does not over
+    steps c + 1..k, with ``event`` (in step k) within STOP_REACH of c's lengths past it: the
+    crossing whose event ``_locate`` followed the extrapolation to; -1 when there is none."""
+    g_right = _g_at_node(code, params, grid, N, u_nodes, k + 1, 0.5 * (grid[k] + grid[k + 1]))
+    for c in range(k - 1, max(k - 1 - STOP_LOOKBACK, -1), -1):
+        side = 0.5 * (grid[c + 1] + grid[c + 2])
+        g_after = _g_at_node(code, params, grid, N, u_nodes, c + 1, side)
+        if g_after * g_right <= 0.0:
+            return -1  # g changes sign after step c: the event is not that crossing's
+        g_before = _g_at_node(code, params, grid, N, u_nodes, c, 0.5 * (grid[c] + grid[c + 1]))
+        if g_before * g_after < 0.0:  # the first crossing back is the only candidate
+            return c if event <= grid[c + 1] + STOP_REACH * (grid[c + 1] - grid[c]) else -1
+    return -1
+
+
 @njit(cache=True, parallel=True, error_model="numpy")
 def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n, mu_s, p,
                       dtau, scale_u, min_gap, stages, weights, atol, split_steps):
@@ -305,6 +414,9 @@ def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n
     ``_periodic.solve_pairs`` returns them) each event's term is the larger of J d^2 / 2 and
     |``split_step_error``| (split steps to stage tolerance ``atol`` times scale_u).  The
     march's steps are not Radau steps: it passes ``split_steps`` False (and empty arrays).
+    With ``split_steps``, an event that ``_locate`` placed past the nodes' crossing
+    (``stop_crossing_step``) takes the larger of that and |``misplaced_stop_error``|, and
+    its step index is that of the crossing, the step that stopped early.
     """
     n = grids.shape[0]
     estimate = np.zeros(n)
@@ -333,11 +445,20 @@ def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n
             F1 = force_and_slope(u1, phi1, om1, mu_n[i], mu_s[i], p[i], dtau[i])[0]
             term = 0.5 * kappa[i] * abs(F1 - F0) * d * d
             if split_steps:
+                weight_next = weights[i, k + 1] if k + 1 < N else weights[i, 0]
                 split = split_step_error(
                     code, params[i], t0, e, t1, u_nodes[i, k], stages[i, 2 * k],
-                    stages[i, 2 * k + 1], weights[i, k + 1] if k + 1 < N else weights[i, 0],
+                    stages[i, 2 * k + 1], weight_next,
                     kappa[i], mu_n[i], mu_s[i], p[i], dtau[i], atol * scale_u[i])
                 term = max(term, abs(split)) if math.isfinite(split) else term
+                first = stop_crossing_step(code, params[i], grid, N, u_nodes[i], k, e)
+                if first >= 0:
+                    split = misplaced_stop_error(
+                        code, params[i], grid, first, e, k, u_nodes[i, first], stages[i],
+                        weight_next, kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
+                        atol * scale_u[i])
+                    term = max(term, abs(split)) if math.isfinite(split) else term
+                    k = first  # the step to split is the one that stopped early
             total += term
             steps[i, j] = k
         estimate[i] = total / scale_u[i]
