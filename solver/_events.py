@@ -49,12 +49,13 @@ STOP_PROBE = 10.0
 #: at most this many events per period are placed (beyond it the rest are not; a Fourier
 #: motion of Kmax = 10 has at most ~4 Kmax zeros of each of the four functions)
 MAX_EVENTS = 256
-#: how far past a step where g changes sign at the nodes ``_locate`` follows the extrapolation
-#: of u to its zero, in lengths of that step (a spurious stop came 2.3 steps early at
-#: mu_n/mu_s = 3,020)
+#: how far past a step whose nodes put a stop in it ``_follow`` follows u's extrapolation to
+#: its zero, in lengths of that step (a spurious stop came 2.3 steps early at mu_n/mu_s 3,020)
 STOP_REACH = 4.0
-#: ``stop_crossing_step`` looks this many steps back for the crossing
-STOP_LOOKBACK = 64
+#: ... and how far at least, in lengths of that step, the zero must lie past its end (closer
+#: is an ordinary crossing near the node, which the secant of the node values places better:
+#: 0.000-0.003 h off against 0.008-0.08 h, measured by a reviewer on six such events)
+FOLLOW_MARGIN = 0.5
 
 
 @njit(cache=True, error_model="numpy")
@@ -81,15 +82,61 @@ def _event_function(k, u, phi, omega):
 
 
 @njit(cache=True, error_model="numpy")
-def _locate(code, params, grid, N, u_nodes, n, k, g0, g1, physics):
-    """Root of event function k in step n.
+def _extrapolated(k, code, params, t, side, t0, u0, slope, curve):
+    """Event function k along u's extrapolation u0 + s x + c x^2 from t0 (x = t - t0)."""
+    phi, om = angle_and_rate(code, params, t, side)
+    x = t - t0
+    return _event_function(k, u0 + x * (slope + curve * x), phi, om)
+
+
+@njit(cache=True, error_model="numpy")
+def _follow(code, params, grid, N, u_nodes, n, k, g1, t0, u0, slope, curve, f1, corners):
+    """Where u's extrapolation from node n takes event function k (u-dependent, k >= 2)
+    through zero after step n, whose nodes already change its sign: the bracket (a, b, fa,
+    fb) in the step it reaches, or a = NaN where it does not count as a spurious stop.
+
+    A stop forced early by a stage stuck on a spurious root of the step equations
+    (h T^(2-p) mu > |u_n|, with mu up to mu_n when the body sticks) ends the step near
+    zero where the extrapolation is still far from it.  Followed only while the nodes keep
+    the sign they took after step n, up to a corner of phi, and over whole steps within
+    STOP_REACH lengths of step n (``_locate`` then keeps the zero only if it lies more than
+    FOLLOW_MARGIN of them past step n)."""
+    t1 = grid[n + 1]
+    h = t1 - t0
+    fa = f1
+    j = n + 1
+    while j < N and grid[j + 1] <= t1 + STOP_REACH * h:
+        ta, tb = grid[j], grid[j + 1]
+        for c in corners:
+            if ta == c:
+                return math.nan, math.nan, math.nan, math.nan
+        node = u_nodes[j + 1] if j + 1 < N else u_nodes[0]
+        phi, om = angle_and_rate(code, params, tb, 0.5 * (ta + tb))
+        if _event_function(k, node, phi, om) * g1 < 0.0:
+            break  # the nodes cross back: not one stop
+        fb = _extrapolated(k, code, params, tb, 0.5 * (ta + tb), t0, u0, slope, curve)
+        if not math.isfinite(fb):
+            break
+        if fa * fb < 0.0:
+            return ta, tb, fa, fb
+        fa = fb
+        j += 1
+    return math.nan, math.nan, math.nan, math.nan
+
+
+@njit(cache=True, error_model="numpy")
+def _locate(code, params, grid, N, u_nodes, n, k, g0, g1, physics, corners):
+    """Root of event function k whose node values g0, g1 bracket it in step n (or, for a
+    probe, g0 g1 > 0, that only may): (time, origin).
 
     Along the solution's extrapolation from the step's left end, u_n + s x + c x^2
     (x = tau - tau_n) with the one-sided slope s = T^(2-p) F(u_n, tau_n+) and c
     from u_{n-1} (dropped when phi has a corner at tau_n): the solution is smooth
     up to the event, not across it, so this is accurate to O(h^3) where the secant
     of the node values is not (at a stop, u has a corner exactly at the event).
-    Illinois regula falsi on it when it brackets a root, else the secant.
+    Illinois regula falsi on it when it brackets a root.  When it does not, but clearly
+    does in a later step (``_follow``: a stop forced early), the root is there and origin
+    is n; otherwise the secant of the node values (NaN for a probe), and origin -1.
     """
     kappa, mu_n, mu_s, p, dtau = physics[0], physics[1], physics[2], physics[3], physics[4]
     t0 = grid[n]
@@ -107,42 +154,21 @@ def _locate(code, params, grid, N, u_nodes, n, k, g0, g1, physics):
         curve = (u_nodes[m] - u0 - slope * x) / (x * x)
         if abs(curve) * (grid[n + 1] - t0) > abs(slope):
             curve = 0.0  # u has a corner at tau_n (an event of the last pass): linear only
-    x = t1 - t0
-    phi, om = angle_and_rate(code, params, t1, mid)
     f0 = g0
-    f1 = _event_function(k, u0 + x * (slope + curve * x), phi, om)
+    f1 = _extrapolated(k, code, params, t1, mid, t0, u0, slope, curve)
     a, b, fa, fb = t0, t1, f0, f1
+    origin = -1
     if not (f0 * f1 < 0.0 and math.isfinite(f1)):
         if g0 * g1 > 0.0:  # a probe (``_point_events``): no root along the extrapolation
-            return math.nan
-        # the nodes change sign but the extrapolation does not: where it crosses in one of
-        # the next STOP_REACH steps (phi smooth), the node after the crossing sits on a
-        # spurious root of the stage equations (a stop forced early by h T^(2-p) mu > |u_n|,
-        # ``misplaced_stop_error``), not on the solution
-        if k < 2 or not math.isfinite(f1):
-            return t0 + (t1 - t0) * g0 / (g0 - g1)
-        j = n + 1
-        reach = t1 + STOP_REACH * (t1 - t0)
-        while j < N and grid[j] < reach:
-            ta, tb = grid[j], grid[j + 1]
-            _, om_left = angle_and_rate(code, params, ta, 0.5 * (grid[j - 1] + ta))
-            phi, om = angle_and_rate(code, params, ta, 0.5 * (ta + tb))
-            if abs(om_left - om) > 1e-12 * (1.0 + abs(om)):
-                break  # a corner of phi: the extrapolation does not reach past it
-            phi, om = angle_and_rate(code, params, tb, 0.5 * (ta + tb))
-            x = tb - t0
-            fb = _event_function(k, u0 + x * (slope + curve * x), phi, om)
-            if not math.isfinite(fb):
-                break
-            if f0 * fb < 0.0:
-                x = ta - t0
-                phi, om = angle_and_rate(code, params, ta, 0.5 * (ta + tb))
-                fa = _event_function(k, u0 + x * (slope + curve * x), phi, om)
-                a, b, mid = ta, tb, 0.5 * (ta + tb)
-                break
-            j += 1
-        if not f0 * fb < 0.0:
-            return t0 + (t1 - t0) * g0 / (g0 - g1)
+            return math.nan, -1
+        a = math.nan
+        if k >= 2 and math.isfinite(f1):
+            a, b, fa, fb = _follow(code, params, grid, N, u_nodes, n, k, g1, t0, u0, slope,
+                                   curve, f1, corners)
+        if not math.isfinite(a):
+            return t0 + (t1 - t0) * g0 / (g0 - g1), -1
+        mid = 0.5 * (a + b)
+        origin = n
     side = 0
     c = a
     for _ in range(100):
@@ -151,13 +177,13 @@ def _locate(code, params, grid, N, u_nodes, n, k, g0, g1, physics):
         c = (a * fb - b * fa) / (fb - fa)
         if b - a <= 1e-15 * max(1.0, abs(c)):
             break
-        phi, om = angle_and_rate(code, params, c, mid)
-        x = c - t0
-        fc = _event_function(k, u0 + x * (slope + curve * x), phi, om)
+        fc = _extrapolated(k, code, params, c, mid, t0, u0, slope, curve)
         if fc == 0.0:
             break
         a, b, fa, fb, side = illinois_update(a, b, fa, fb, c, fc, side)
-    return c
+    if origin >= 0 and not c > t1 + FOLLOW_MARGIN * (t1 - t0):
+        return t0 + (t1 - t0) * g0 / (g0 - g1), -1  # an ordinary crossing near the node
+    return c, origin
 
 
 @njit(cache=True)
@@ -177,8 +203,10 @@ def illinois_update(a, b, fa, fb, c, fc, last):
 
 
 @njit(cache=True, error_model="numpy")
-def _point_events(code, params, grid, N, u_nodes, physics, out):
-    """Event times in (grid[0], grid[N]) for u at the nodes ``u_nodes`` (u_N = u_0)."""
+def _point_events(code, params, grid, N, u_nodes, physics, corners, out, origins):
+    """Event times in (grid[0], grid[N]) for u at the nodes ``u_nodes`` (u_N = u_0) into
+    ``out``, and in ``origins`` the step whose nodes' crossing ``_locate`` followed to each
+    (-1 where it did not); returns their count."""
     count = 0
     prev = np.empty(4)
     cur = np.empty(4)
@@ -192,17 +220,16 @@ def _point_events(code, params, grid, N, u_nodes, physics, out):
         u1 = u_nodes[n + 1] if n + 1 < N else u_nodes[0]
         _event_functions(u1, phi, om, cur)
         for k in range(4):
-            if prev[k] * cur[k] < 0.0 and count < out.size:
-                out[count] = _locate(code, params, grid, N, u_nodes, n, k, prev[k], cur[k],
-                                     physics)
-                count += 1
-            elif (k == 2 and prev[k] * cur[k] > 0.0 and abs(cur[k]) < STOP_PROBE * physics[4]
-                    and count < out.size):
-                # g ends the step stuck in the friction's band without changing sign: a stop
-                # there is an event where g's extrapolation from the left node crosses zero
-                t = _locate(code, params, grid, N, u_nodes, n, k, prev[k], cur[k], physics)
-                if math.isfinite(t):
+            crossing = prev[k] * cur[k] < 0.0
+            # g ending the step stuck in the friction's band without changing sign: a stop
+            # there is an event where g's extrapolation from the left node crosses zero
+            probe = k == 2 and prev[k] * cur[k] > 0.0 and abs(cur[k]) < STOP_PROBE * physics[4]
+            if (crossing or probe) and count < out.size:
+                t, origin = _locate(code, params, grid, N, u_nodes, n, k, prev[k], cur[k],
+                                    physics, corners)
+                if math.isfinite(t) or crossing:
                     out[count] = t
+                    origins[count] = origin
                     count += 1
         if n + 1 < N and code == FOURIER:  # no corners: the next step sees the same values
             prev[:] = cur
@@ -213,19 +240,22 @@ def _point_events(code, params, grid, N, u_nodes, physics, out):
 
 
 @njit(cache=True, parallel=True)
-def event_times(code, params, grids, n_steps, u_nodes, kappa, mu_n, mu_s, p, dtau):
-    """Events of every point; row i of the result holds its times, NaN-padded.
+def event_times(code, params, grids, n_steps, u_nodes, kappa, mu_n, mu_s, p, dtau, corners):
+    """Events of every point: (times, origins), row i NaN- (-1-) padded.
 
     grids : (n, m) nodes, row i valid for n_steps[i] steps; u_nodes : (n, >= max n_steps);
-    kappa = T^(2-p), mu_n, mu_s, p, dtau : (n,).
-    Returns ndarray, shape (n, MAX_EVENTS).
+    kappa = T^(2-p), mu_n, mu_s, p, dtau : (n,); corners : (n, k) corners of phi.
+    Returns times, shape (n, MAX_EVENTS), and origins (int64, same shape): for an event
+    that ``_locate`` followed past the step where the nodes cross, that step, else -1.
     """
     n = grids.shape[0]
     out = np.full((n, MAX_EVENTS), np.nan)
+    origins = np.full((n, MAX_EVENTS), -1, dtype=np.int64)
     for i in prange(n):
         physics = np.array([kappa[i], mu_n[i], mu_s[i], p[i], dtau[i]])
-        _point_events(code, params[i], grids[i], n_steps[i], u_nodes[i], physics, out[i])
-    return out
+        _point_events(code, params[i], grids[i], n_steps[i], u_nodes[i], physics, corners[i],
+                      out[i], origins[i])
+    return out, origins
 
 
 @njit(cache=True)
@@ -318,21 +348,36 @@ def split_step_error(code, params, t0, event, t1, u_n, U1, U2, weight_next, kapp
     return qa + qb - (t1 - t0) * (0.75 * U1 + 0.25 * U2) + weight_next * (ub - U2)
 
 
-#: sub-steps per step in ``misplaced_stop_error``'s re-solve
+#: sub-steps per step (on each side of the event in its step) in ``misplaced_stop_error``
 STOP_SUBSTEPS = 8
+#: times a sub-step whose stage Newton fails is halved before the re-solve gives up
+SUBSTEP_HALVINGS = 6
 
 
 @njit(cache=True, error_model="numpy")
 def _substeps_from(u_n, t0, t1, m, code, params, kappa, mu_n, mu_s, p, dtau, atol):
-    """m equal Radau steps over [t0, t1] from u_n: (their integral of u, end value, ok)."""
+    """m equal Radau steps over [t0, t1] from u_n, a step whose stage Newton fails halved
+    (up to SUBSTEP_HALVINGS times): (their integral of u, end value, ok)."""
     total = 0.0
     u = u_n
     for j in range(m):
-        q, u, ok = _radau_from(u, t0 + (t1 - t0) * j / m, t0 + (t1 - t0) * (j + 1) / m, code,
-                               params, kappa, mu_n, mu_s, p, dtau, atol)
-        if not ok:
-            return total, u, False
-        total += q
+        a = t0 + (t1 - t0) * j / m
+        end = t0 + (t1 - t0) * (j + 1) / m
+        depth = 0
+        while a < end:
+            b = a + (end - a) / (1 << depth) if depth > 0 else end
+            if not a < b < end:
+                b = end  # (a rounding residue of the step)
+            q, u_b, ok = _radau_from(u, a, b, code, params, kappa, mu_n, mu_s, p, dtau, atol)
+            if not ok:
+                if depth == SUBSTEP_HALVINGS:
+                    return total, u, False
+                depth += 1  # (a cold stage Newton can fail on a step holding the stop)
+                continue
+            total += q
+            u = u_b
+            a = b
+            depth = max(depth - 1, 0)
     return total, u, True
 
 
@@ -341,57 +386,40 @@ def misplaced_stop_error(code, params, grid, first, event, last, u_first, stages
                          kappa, mu_n, mu_s, p, dtau, atol):
     """The error in int u of Radau steps first..last (from u_first; ``stages`` the solution's
     row of stage values) when the nodes put a stop in step ``first`` but the solution's
-    extrapolation puts it at ``event`` in step ``last`` (``_locate``).
+    extrapolation puts it at ``event`` in step ``last`` (``_locate`` followed it there).
 
     Step ``first`` then ended on a spurious root of its stage equations: with
     h T^(2-p) mu > |u_n| (mu up to mu_n when the body sticks) a stage can stick while u
     is still sliding, and the collocation polynomial overshoots through zero (measured: a
     power-law point at mu_n/mu_s 3,020, scaled period 56, rtol 1e-3, stopped 1.8e-3 early,
     from u = 1.2 where h T^(2-p) F was 0.38; the grid and its bisection both did, so
-    Richardson saw 0.39 rtol of an error of 1.7).  The steps are solved again from u_first
-    with STOP_SUBSTEPS steps per step up to the event and as many after it, too short to
-    reach a spurious root; the change of the integral plus ``weight_next`` (lambda after
+    Richardson saw 0.39 rtol of an error of 1.7).  The steps are solved again from u_first,
+    each in STOP_SUBSTEPS equal sub-steps, step ``last`` split at the event first, too short
+    to reach a spurious root; the change of the integral plus ``weight_next`` (lambda after
     step ``last``) times the change of the end value is returned (NaN on failure).
     """
-    before = STOP_SUBSTEPS * (last - first + 1)
-    qa, ua, ok_a = _substeps_from(u_first, grid[first], event, before, code, params, kappa,
-                                  mu_n, mu_s, p, dtau, atol)
-    qb, ub, ok_b = _substeps_from(ua, event, grid[last + 1], STOP_SUBSTEPS, code, params,
-                                  kappa, mu_n, mu_s, p, dtau, atol)
-    if not (ok_a and ok_b):
-        return math.nan
+    u = u_first
+    total = 0.0
     discrete = 0.0
     for n in range(first, last + 1):
         discrete += (grid[n + 1] - grid[n]) * (0.75 * stages[2 * n] + 0.25 * stages[2 * n + 1])
-    return qa + qb - discrete + weight_next * (ub - stages[2 * last + 1])
-
-
-@njit(cache=True, error_model="numpy")
-def _g_at_node(code, params, grid, N, u_nodes, n, side):
-    phi, om = angle_and_rate(code, params, grid[n], side)
-    return (u_nodes[n] if n < N else u_nodes[0]) + 0.25 * om * math.sin(phi)
-
-
-@njit(cache=True, error_model="numpy")
-def stop_crossing_step(code, params, grid, N, u_nodes, k, event):
-    """The step c < k over which g = u + omega S / 4 changes sign while it does not over
-    steps c + 1..k, with ``event`` (in step k) within STOP_REACH of c's lengths past it: the
-    crossing whose event ``_locate`` followed the extrapolation to; -1 when there is none."""
-    g_right = _g_at_node(code, params, grid, N, u_nodes, k + 1, 0.5 * (grid[k] + grid[k + 1]))
-    for c in range(k - 1, max(k - 1 - STOP_LOOKBACK, -1), -1):
-        side = 0.5 * (grid[c + 1] + grid[c + 2])
-        g_after = _g_at_node(code, params, grid, N, u_nodes, c + 1, side)
-        if g_after * g_right <= 0.0:
-            return -1  # g changes sign after step c: the event is not that crossing's
-        g_before = _g_at_node(code, params, grid, N, u_nodes, c, 0.5 * (grid[c] + grid[c + 1]))
-        if g_before * g_after < 0.0:  # the first crossing back is the only candidate
-            return c if event <= grid[c + 1] + STOP_REACH * (grid[c + 1] - grid[c]) else -1
-    return -1
+        split = n == last and grid[n] < event < grid[n + 1]
+        start = grid[n]
+        for end in ((event, grid[n + 1]) if split else (grid[n + 1], grid[n + 1])):
+            if end <= start:
+                continue
+            q, u, ok = _substeps_from(u, start, end, STOP_SUBSTEPS, code, params, kappa, mu_n,
+                                      mu_s, p, dtau, atol)
+            if not ok:
+                return math.nan
+            total += q
+            start = end
+    return total - discrete + weight_next * (u - stages[2 * last + 1])
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n, mu_s, p,
-                      dtau, scale_u, min_gap, stages, weights, atol, split_steps):
+def unresolved_events(code, params, grids, n_steps, u_nodes, events, origins, kappa, mu_n, mu_s,
+                      p, dtau, scale_u, min_gap, stages, weights, atol, split_steps):
     """The error of events that are not nodes of the solved grid, which Richardson is blind to.
 
     At a stop in a step (u decelerates to rest, then sticks), the Radau stage at a third of
@@ -414,9 +442,10 @@ def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n
     ``_periodic.solve_pairs`` returns them) each event's term is the larger of J d^2 / 2 and
     |``split_step_error``| (split steps to stage tolerance ``atol`` times scale_u).  The
     march's steps are not Radau steps: it passes ``split_steps`` False (and empty arrays).
-    With ``split_steps``, an event that ``_locate`` placed past the nodes' crossing
-    (``stop_crossing_step``) takes the larger of that and |``misplaced_stop_error``|, and
-    its step index is that of the crossing, the step that stopped early.
+    With ``split_steps``, an event that ``_locate`` followed past the step where the nodes
+    cross (``origins``, rows of ``event_times``'s second output; -1 elsewhere) takes the
+    larger of that and |``misplaced_stop_error``| (once per such step: where omega = 0 two
+    event functions cross together), and its step index is that step, which stopped early.
     """
     n = grids.shape[0]
     estimate = np.zeros(n)
@@ -427,6 +456,7 @@ def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n
             continue
         grid = grids[i]
         total = 0.0
+        counted = -1  # the last step whose early stop was counted
         for j in range(events.shape[1]):
             e = events[i, j]
             if not (grid[0] < e < grid[N]):
@@ -434,6 +464,18 @@ def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n
             k = np.searchsorted(grid[:N + 1], e) - 1
             t0 = grid[k]
             t1 = grid[k + 1]
+            weight_next = weights[i, k + 1] if split_steps and k + 1 < N else (
+                weights[i, 0] if split_steps else 0.0)
+            first = origins[i, j]
+            if split_steps and first >= 0 and first != counted:
+                # a stop forced early in step first (on a node of this grid or not)
+                counted = first
+                early = misplaced_stop_error(
+                    code, params[i], grid, first, e, k, u_nodes[i, first], stages[i],
+                    weight_next, kappa[i], mu_n[i], mu_s[i], p[i], dtau[i], atol * scale_u[i])
+                if math.isfinite(early):
+                    total += abs(early)
+                    steps[i, j] = first  # the step to split is the one that stopped early
             d = min(e - t0, t1 - e)
             if d <= min_gap:
                 continue
@@ -445,21 +487,13 @@ def unresolved_events(code, params, grids, n_steps, u_nodes, events, kappa, mu_n
             F1 = force_and_slope(u1, phi1, om1, mu_n[i], mu_s[i], p[i], dtau[i])[0]
             term = 0.5 * kappa[i] * abs(F1 - F0) * d * d
             if split_steps:
-                weight_next = weights[i, k + 1] if k + 1 < N else weights[i, 0]
                 split = split_step_error(
                     code, params[i], t0, e, t1, u_nodes[i, k], stages[i, 2 * k],
                     stages[i, 2 * k + 1], weight_next,
                     kappa[i], mu_n[i], mu_s[i], p[i], dtau[i], atol * scale_u[i])
                 term = max(term, abs(split)) if math.isfinite(split) else term
-                first = stop_crossing_step(code, params[i], grid, N, u_nodes[i], k, e)
-                if first >= 0:
-                    split = misplaced_stop_error(
-                        code, params[i], grid, first, e, k, u_nodes[i, first], stages[i],
-                        weight_next, kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
-                        atol * scale_u[i])
-                    term = max(term, abs(split)) if math.isfinite(split) else term
-                    k = first  # the step to split is the one that stopped early
             total += term
-            steps[i, j] = k
+            if steps[i, j] < 0:
+                steps[i, j] = k
         estimate[i] = total / scale_u[i]
     return estimate, steps

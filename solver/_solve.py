@@ -466,8 +466,8 @@ def _check_turning_points(code, params, active, padded, steps, int_u, nodes, sta
     return estimate, withdrawn, flagged
 
 
-def _check_events(code, params, bucket, padded, steps, int_u, nodes, events, physics, u_floor,
-                  rtol, estimate, accepted, stages=None, weights=None):
+def _check_events(code, params, bucket, padded, steps, int_u, nodes, events, origins, physics,
+                  u_floor, rtol, estimate, accepted, stages=None, weights=None):
     """``_events.unresolved_events`` for the bisected solutions of the accepted pairs (with
     the Radau ``stages`` and node ``weights``, its split-step term too): adds its estimate
     and withdraws the acceptance where the sum exceeds rtol.
@@ -483,7 +483,7 @@ def _check_events(code, params, bucket, padded, steps, int_u, nodes, events, phy
     else:
         stages, weights = np.zeros((0, 0)), np.zeros((0, 0))
     extra, event_steps = unresolved_events(
-        code, points, padded[F], np.where(accepted, steps[F], 0), nodes[F], events,
+        code, points, padded[F], np.where(accepted, steps[F], 0), nodes[F], events, origins,
         physics.inertia_factor[bucket], physics.mu_n[bucket], physics.mu_s[bucket],
         physics.p[bucket], physics.delta_tau[bucket], scale_u, EVENT_GAP, stages, weights,
         SPLIT_STEP_TOLERANCE * rtol, split_steps)
@@ -804,14 +804,15 @@ class _Refinement:
                     self.spec.order, np.zeros(marked.size, dtype=bool), forced[marked],
                     self.corners[bucket[marked]])[2]
         F = slice(1, None, 2)
-        events = event_times(self.code, self.params[bucket], out.rows[F], out.steps[F],
-                             out.nodes[F], physics.inertia_factor[bucket], physics.mu_n[bucket],
-                             physics.mu_s[bucket], physics.p[bucket], physics.delta_tau[bucket])
+        events, origins = event_times(
+            self.code, self.params[bucket], out.rows[F], out.steps[F], out.nodes[F],
+            physics.inertia_factor[bucket], physics.mu_n[bucket], physics.mu_s[bucket],
+            physics.p[bucket], physics.delta_tau[bucket], self.corners[bucket])
         # events off the nodes of an accepted pair: their error is added, and where that
         # withdraws the pair its steps holding them are bisected (and they become nodes)
         estimate, withdrawn, event_steps = _check_events(
             self.code, self.params, bucket, out.rows, out.steps, out.int_u, out.nodes, events,
-            physics, self.u_floor, rtol, estimate, accepted,
+            origins, physics, self.u_floor, rtol, estimate, accepted,
             out.stages if self.method == "periodic" else None, out.weights)
         accepted[withdrawn] = False
         for j in withdrawn:

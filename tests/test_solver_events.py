@@ -16,7 +16,7 @@ def test_kinematic_event_located_to_rounding():
     grid = np.linspace(0.0, 1.0, 41)[None, :]
     u = np.full((1, 40), 0.3)
     found = event_times(code, params, grid, np.array([40]), u, np.ones(1), np.ones(1),
-                        np.ones(1), np.zeros(1), np.full(1, 1e-5))[0]
+                        np.ones(1), np.zeros(1), np.full(1, 1e-5), kin.corners())[0][0]
     exact = np.arccos((np.pi / 2 - A0) / A1) / (2 * np.pi)
     assert np.nanmin(np.abs(found - exact)) < 1e-12
     assert np.nanmin(np.abs(found - (1 - exact))) < 1e-12
@@ -141,7 +141,8 @@ def test_unresolved_events_weigh_the_jump_of_u_prime_by_the_squared_distance():
     events[:, 1] = 0.5 + 1e-12  # on a node
     kappa, mu_n, mu_s, p, dtau = 2.0, 0.5, 1.0, 0.0, 1e-5
     estimate, steps = unresolved_events(
-        code, params, grid, np.array([8, 0]), u, events, np.full(2, kappa), np.full(2, mu_n),
+        code, params, grid, np.array([8, 0]), u, events, np.full((2, 4), -1),
+        np.full(2, kappa), np.full(2, mu_n),
         np.full(2, mu_s), np.zeros(2), np.full(2, dtau), np.full(2, 0.5), 1e-9,
         np.zeros((0, 0)), np.zeros((0, 0)), 1e-12, False)
     phi0, phi1 = kin.angle(np.array([0.25, 0.375]))[0]
@@ -197,19 +198,18 @@ SPURIOUS_STOP_CASE = (
 
 
 def test_misplaced_stop_error_against_an_independent_integration():
-    """On 256 uniform steps a stage sticks on a spurious root 3 steps before the stop: the
-    nodes cross zero in step 9, u's extrapolation in step 12, where ``_locate`` now puts the
-    event.  ``misplaced_stop_error`` (the steps re-solved in 8 sub-steps each) against
-    scipy's Radau at rtol 1e-12 from the same u, with the same node weight."""
+    """On 256 steps (uniform in each phase) a stage sticks on a spurious root 3 steps before
+    the stop: the nodes cross zero in step 9, u's extrapolation in step 12, where
+    ``_locate`` now puts the event.  ``misplaced_stop_error`` (the steps re-solved in 8
+    sub-steps each) against scipy's Radau at rtol 1e-12 from the same u, with the same node
+    weight."""
     from scipy.integrate import solve_ivp
-    from solver._events import MAX_EVENTS, _point_events, misplaced_stop_error, \
-        stop_crossing_step
+    from solver._events import misplaced_stop_error
     from solver._force import force_and_slope
     from solver._kinematics import angle_and_rate, period_grid
     from solver._periodic import _solve_point
     kin, phys = SPURIOUS_STOP_CASE
     code, params = kin.kernel_encoding()
-    params = params[0]
     physics = tuple(float(x[0]) for x in (
         phys.inertia_factor, phys.mu_n, phys.mu_s, phys.p, phys.delta_tau))
     kappa, mu_n, mu_s, p, dtau = physics
@@ -217,15 +217,21 @@ def test_misplaced_stop_error_against_an_independent_integration():
     N = grid.size - 1
     nodes, step_u, step_pi, step_m, weights, q = (np.empty(N) for _ in range(6))
     stages = np.empty(2 * N)
-    status = _solve_point(code, params, grid, N, *physics, 0.0, solver.kinematic_speed(kin)[0],
-                          1e-10, nodes, step_u, step_pi, step_m, stages, None, None, weights, q)[3]
+    status = _solve_point(code, params[0], grid, N, *physics, 0.0,
+                          solver.kinematic_speed(kin)[0], 1e-10, nodes, step_u, step_pi, step_m,
+                          stages, None, None, weights, q)[3]
     assert status == 0
-    events = np.full(MAX_EVENTS, np.nan)
-    count = _point_events(code, params, grid, N, nodes, np.array(physics), events)
-    stop = min(events[:count], key=lambda e: abs(e - 0.05625))  # the reference's stop
+    times, origins = (a[0] for a in event_times(
+        code, params, grid[None], np.array([N]), nodes[None], *(np.array([x]) for x in physics),
+        kin.corners()))
+    followed = np.flatnonzero(origins >= 0)
+    assert followed.size >= 1
+    stop = times[followed[0]]
+    first = origins[followed[0]]
     k = int(np.searchsorted(grid, stop)) - 1
-    first = stop_crossing_step(code, params, grid, N, nodes, k, stop)
-    assert abs(stop - 0.05625) < 1e-4 and 0 <= first < k
+    # the reference's stop is at 0.05625 (the secant of the nodes: 0.0438), a step is 4.6e-3
+    assert abs(stop - 0.05625) < 0.1 * (grid[k + 1] - grid[k]) and 0 <= first < k
+    params = params[0]
     estimate = misplaced_stop_error(code, params, grid, first, stop, k, nodes[first], stages,
                                     weights[k + 1], *physics, 1e-12)
 
