@@ -61,3 +61,28 @@ AGREEMENT_CASES = [
 
 def by_name(name):
     return next(c for c in AGREEMENT_CASES if c.name == name)
+
+
+def radau_reference(code, params, physics, t0, t1, u0, side=None):
+    """u' = T^(2-p) F(u, tau) from u(t0) = u0 over [t0, t1] by scipy's Radau at rtol 1e-12,
+    with the solver's own force kernel: (int_t0^t1 u dtau, u(t1)).  An independent check of
+    the solver's re-solved steps; ``side`` selects the side of a corner of phi (default:
+    the evaluation point itself).  physics = (T^(2-p), mu_n, mu_s, p, delta_tau)."""
+    from scipy.integrate import solve_ivp
+    from solver._force import force_and_slope
+    from solver._kinematics import angle_and_rate
+    kappa, mu_n, mu_s, p, dtau = physics
+
+    def rhs(t, y):
+        phi, om = angle_and_rate(code, params, t, t if side is None else side)
+        return [kappa * force_and_slope(y[0], phi, om, mu_n, mu_s, p, dtau)[0], y[0]]
+
+    def jac(t, y):
+        phi, om = angle_and_rate(code, params, t, t if side is None else side)
+        return [[kappa * force_and_slope(y[0], phi, om, mu_n, mu_s, p, dtau)[1], 0.0],
+                [1.0, 0.0]]
+
+    ref = solve_ivp(rhs, (t0, t1), [u0, 0.0], method="Radau", jac=jac, rtol=1e-12,
+                    atol=[1e-14, 1e-18], first_step=1e-9)
+    assert ref.success
+    return ref.y[1, -1], ref.y[0, -1]

@@ -203,16 +203,14 @@ def test_misplaced_stop_error_against_an_independent_integration():
     ``_locate`` now puts the event.  ``misplaced_stop_error`` (the steps re-solved in 8
     sub-steps each) against scipy's Radau at rtol 1e-12 from the same u, with the same node
     weight."""
-    from scipy.integrate import solve_ivp
+    from cases import radau_reference
     from solver._events import misplaced_stop_error
-    from solver._force import force_and_slope
-    from solver._kinematics import angle_and_rate, period_grid
+    from solver._kinematics import period_grid
     from solver._periodic import _solve_point
     kin, phys = SPURIOUS_STOP_CASE
     code, params = kin.kernel_encoding()
     physics = tuple(float(x[0]) for x in (
         phys.inertia_factor, phys.mu_n, phys.mu_s, phys.p, phys.delta_tau))
-    kappa, mu_n, mu_s, p, dtau = physics
     grid = period_grid(kin, 256)[0]
     N = grid.size - 1
     nodes, step_u, step_pi, step_m, weights, q = (np.empty(N) for _ in range(6))
@@ -235,22 +233,11 @@ def test_misplaced_stop_error_against_an_independent_integration():
     estimate = misplaced_stop_error(code, params, grid, first, stop, k, nodes[first], stages,
                                     weights[k + 1], *physics, 1e-12)
 
-    def rhs(t, y):
-        phi, om = angle_and_rate(code, params, t, t)
-        return [kappa * force_and_slope(y[0], phi, om, mu_n, mu_s, p, dtau)[0], y[0]]
-
-    def jac(t, y):
-        phi, om = angle_and_rate(code, params, t, t)
-        return [[kappa * force_and_slope(y[0], phi, om, mu_n, mu_s, p, dtau)[1], 0.0],
-                [1.0, 0.0]]
-
-    ref = solve_ivp(rhs, (grid[first], grid[k + 1]), [nodes[first], 0.0], method="Radau",
-                    jac=jac, rtol=1e-12, atol=[1e-14, 1e-18], first_step=1e-9)
-    assert ref.success
+    int_u, u_end = radau_reference(code, params, physics, grid[first], grid[k + 1], nodes[first])
     h = np.diff(grid[first:k + 2])
     discrete = np.sum(h * (0.75 * stages[2 * first:2 * k + 2:2]
                            + 0.25 * stages[2 * first + 1:2 * k + 2:2]))
-    exact = ref.y[1, -1] - discrete + weights[k + 1] * (ref.y[0, -1] - stages[2 * k + 1])
+    exact = int_u - discrete + weights[k + 1] * (u_end - stages[2 * k + 1])
     assert abs(exact) > 0.05  # a tenth of int u: the early stop is no small error
     assert abs(estimate - exact) <= 1e-2 * abs(exact), (estimate, exact)
 

@@ -329,7 +329,7 @@ def test_corner_layer_error_against_an_independent_integration():
     against scipy's Radau at rtol 1e-12 from the same u_n, with the same node weight.  The
     error is ~13 rtol at rtol 1e-3 of the norm of int u (its floor 1e-3 V here): the layer
     the step misses."""
-    from scipy.integrate import solve_ivp
+    from cases import radau_reference
     from solver._turning import _layer_rate, corner_layer_error
     kin = solver.PowerLaw([0.5729944571272555], [0.009698383749602814], [0.4888715012712118],
                           [5.0], [False], [14.468630943676835], [False])
@@ -337,9 +337,8 @@ def test_corner_layer_error_against_an_independent_integration():
                                       delta=4.39375774699564e-10)
     code, params = kin.kernel_encoding()
     params = params[0]
-    kappa, mu_n, mu_s, p, dtau = (float(x[0]) for x in (
+    physics = tuple(float(x[0]) for x in (
         phys.inertia_factor, phys.mu_n, phys.mu_s, phys.p, phys.delta_tau))
-    physics = (kappa, mu_n, mu_s, p, dtau)
     V = solver.kinematic_speed(kin)[0]
     grid = period_grid(kin, 512)[0]
     N = grid.size - 1
@@ -356,21 +355,8 @@ def test_corner_layer_error_against_an_independent_integration():
     assert rate * (t1 - t0) > 100
     estimate, end = corner_layer_error(code, params, t0, t1, nodes[n], U1, U2, 1.0 / rate,
                                        weights[n + 1], *physics, 1e-16)
-
-    def rhs(t, y):
-        phi, om = angle_and_rate(code, params, t, side)
-        return [kappa * force_and_slope(y[0], phi, om, mu_n, mu_s, p, dtau)[0], y[0]]
-
-    def jac(t, y):
-        phi, om = angle_and_rate(code, params, t, side)
-        return [[kappa * force_and_slope(y[0], phi, om, mu_n, mu_s, p, dtau)[1], 0.0],
-                [1.0, 0.0]]
-
-    ref = solve_ivp(rhs, (t0, t1), [nodes[n], 0.0], method="Radau", jac=jac, rtol=1e-12,
-                    atol=[1e-14, 1e-18], first_step=1e-9)
-    assert ref.success
-    true = ref.y[1, -1] - (t1 - t0) * (0.75 * U1 + 0.25 * U2) + weights[n + 1] * (
-        ref.y[0, -1] - U2)
+    int_u, u_end = radau_reference(code, params, physics, t0, t1, nodes[n], side)
+    true = int_u - (t1 - t0) * (0.75 * U1 + 0.25 * U2) + weights[n + 1] * (u_end - U2)
     assert abs(true) > 5e-3 * (1e-3 * V)  # (5 rtol at rtol 1e-3 of the floor 1e-3 V)
     assert abs(estimate - true) <= 0.02 * abs(true), (estimate, true)
-    assert abs(end - ref.y[0, -1]) <= 1e-6 * abs(ref.y[0, -1])
+    assert abs(end - u_end) <= 1e-6 * abs(u_end)
