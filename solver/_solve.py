@@ -473,7 +473,8 @@ def _check_events(code, params, bucket, padded, steps, int_u, nodes, events, ori
     and withdraws the acceptance where the sum exceeds rtol.
 
     Returns (estimate, withdrawn, event_steps): the pairs withdrawn, and for every pair the
-    bisected grid's steps holding the events counted (-1 elsewhere)."""
+    bisected grid's steps holding the events counted, or for a stop forced early the step
+    that stopped (``unresolved_events``; -1 elsewhere)."""
     F = slice(1, None, 2)
     points = params[bucket]
     scale_u = np.maximum(np.abs(int_u[F]), u_floor[bucket])

@@ -228,7 +228,7 @@ def test_misplaced_stop_error_against_an_independent_integration():
     first = origins[followed[0]]
     k = int(np.searchsorted(grid, stop)) - 1
     # the reference's stop is at 0.05625 (the secant of the nodes: 0.0438), a step is 4.6e-3
-    assert abs(stop - 0.05625) < 0.1 * (grid[k + 1] - grid[k]) and 0 <= first < k
+    assert abs(stop - 0.05625) < 0.25 * (grid[k + 1] - grid[k]) and 0 <= first < k
     params = params[0]
     estimate = misplaced_stop_error(code, params, grid, first, stop, k, nodes[first], stages,
                                     weights[k + 1], *physics, 1e-12)
@@ -242,12 +242,24 @@ def test_misplaced_stop_error_against_an_independent_integration():
     assert abs(estimate - exact) <= 1e-2 * abs(exact), (estimate, exact)
 
 
-def test_a_stop_forced_early_by_a_spurious_stage_root_is_counted():
+# a neighbour (found by a reviewer in 300 points around it): there the extrapolation's zero,
+# 2.97 steps past the crossing step, lay in a step ending 4.25 steps past it (the steps
+# after the crossing were 1.5x longer), and following only whole steps within 4 missed it:
+# 2.83 rtol off at rtol 1e-3 with an estimate of 0.44
+SPURIOUS_STOP_NEIGHBOUR = (
+    solver.PowerLaw([1.8730589450843962], [1.228801695952612], [0.23469493023743124],
+                    [7.122139834770227], [False], [3.0398580342139843], [True]),
+    solver.Physics.from_scaled(7971.722214334097, 55.08018350081435, p=0.0, delta=1e-5))
+
+
+@pytest.mark.parametrize("case", [SPURIOUS_STOP_CASE, SPURIOUS_STOP_NEIGHBOUR],
+                         ids=["ratio_3020", "ratio_7972"])
+def test_a_stop_forced_early_by_a_spurious_stage_root_is_counted(case):
     """A stage stuck on a spurious root stopped u 1.8e-3 before the stop, on the grid and on
     its bisection alike: rtol 1e-3 was accepted 1.74 rtol off with an estimate of 0.39 (found
     by a 400-point stress sweep).  The event is now placed where u's extrapolation stops,
     and the steps from the nodes' crossing to it are re-solved for the estimate."""
-    kin, phys = SPURIOUS_STOP_CASE
+    kin, phys = case
     ref = solver.solve_periodic(kin, phys, rtol=1e-8)
     res = solver.solve_periodic(kin, phys, rtol=1e-3)
     assert ref.status[0] == 0 and res.status[0] == 0
