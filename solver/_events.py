@@ -406,16 +406,16 @@ def misplaced_stop_error(code, params, grid, first, event, last, u_first, stages
     for n in range(first, last + 1):
         discrete += (grid[n + 1] - grid[n]) * (0.75 * stages[2 * n] + 0.25 * stages[2 * n + 1])
         split = n == last and grid[n] < event < grid[n + 1]
-        start = grid[n]
-        for end in ((event, grid[n + 1]) if split else (grid[n + 1], grid[n + 1])):
-            if end <= start:
-                continue
-            q, u, ok = _substeps_from(u, start, end, STOP_SUBSTEPS, code, params, kappa, mu_n,
-                                      mu_s, p, dtau, atol)
-            if not ok:
-                return math.nan
-            total += q
-            start = end
+        cut = event if split else grid[n + 1]
+        q, u, ok = _substeps_from(u, grid[n], cut, STOP_SUBSTEPS, code, params, kappa, mu_n,
+                                  mu_s, p, dtau, atol)
+        if ok and split:
+            q_rest, u, ok = _substeps_from(u, cut, grid[n + 1], STOP_SUBSTEPS, code, params,
+                                           kappa, mu_n, mu_s, p, dtau, atol)
+            q += q_rest
+        if not ok:
+            return math.nan
+        total += q
     return total - discrete + weight_next * (u - stages[2 * last + 1])
 
 
