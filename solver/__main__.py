@@ -11,6 +11,8 @@ import math
 import sys
 import time
 
+from . import _solve
+
 
 class _UsageError(Exception):
     pass
@@ -70,7 +72,7 @@ def build_parser():
     pt.add_argument("--mu-s", dest="mu_s", type=_finite("--mu-s"), required=True)
     pt.add_argument("--p", type=_finite("--p"), default=0.0)
     pt.add_argument("--delta", type=_finite("--delta"), default=1e-5)
-    pt.add_argument("--method", choices=["periodic", "march"], default="periodic")
+    pt.add_argument("--method", choices=list(_solve.METHODS), default="periodic")
     pt.add_argument("--rtol", type=_finite("--rtol"), default=1e-6)
     pt.add_argument("--series", action="store_true", help="include tau and u(tau)")
     return parser

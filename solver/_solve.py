@@ -57,14 +57,14 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numba import njit, prange
 
-from . import _march, _periodic
+from . import _march, _periodic, _radau5_solve
 from ._events import event_times, place_events, unresolved_events
 from ._kinematics import period_grid
 from ._limits import fast_limit_velocity, kinematic_speed
 from ._status import CONVERGED, NO_MOTION, OUT_OF_RANGE, TOLERANCE_NOT_REACHED, UNSTABLE
 from ._turning import MAX_FLAGGED, grade_towards, turning_point_estimates
 
-METHODS = ("periodic", "march")
+METHODS = ("periodic", "march", "radau5")
 U_FLOOR_FRACTION = 1e-3
 MARCH_MAX_STEPS = 2 ** 22  # steps per solve (periods x steps per period) before giving up
 MAX_BISECTIONS = 4  # per refinement pass and step
@@ -573,9 +573,11 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         phi(tau) for n_points parameter points.
     physics : Physics
         T, mu_n, mu_s, p, delta; length 1 or n_points.
-    method : {"periodic", "march"}
+    method : {"periodic", "march", "radau5"}
         "periodic": Radau IIA (order 3, L-stable) on the periodic grid, solved by Newton on u(0).
         "march": explicit RK2 (Heun, order 2) from rest until periodic.
+        "radau5": event-driven 3-stage Radau IIA (order 5) with one-pass error control
+        (``_radau5_solve``; in development).
     rtol : float
         Target relative error of U and P (see the module docstring for the norm).
     return_series : bool
@@ -597,6 +599,10 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     if len(physics) == 1 and n > 1:
         physics = physics.take(np.zeros(n, dtype=int))
     start = time.perf_counter()
+    if method == "radau5":
+        return _solve_radau5(kinematics, physics, rtol, return_series,
+                             max_steps_per_period or _SPECS["periodic"].max_steps_per_period,
+                             start)
     run = _Refinement(kinematics, physics, method, rtol, return_series,
                       max_steps_per_period or _SPECS[method].max_steps_per_period)
     active = run.active
@@ -608,6 +614,39 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         active = np.sort(np.concatenate(survivors))
         level += 1
     return run.result(time.perf_counter() - start)
+
+
+def _solve_radau5(kinematics, physics, rtol, return_series, max_steps, start):
+    """``solve_periodic`` by the ``radau5`` engine (``_radau5_solve``)."""
+    out = _radau5_solve.solve(kinematics, physics, rtol, max_steps, return_series)
+    status = out["status"]
+    still = out["still"]
+    status[still] = NO_MOTION
+    int_u = np.where(status == CONVERGED, out["int_u"], np.nan)
+    int_pi = np.where(status == CONVERGED, out["int_pi"], np.nan)
+    int_u[still] = 0.0
+    int_pi[still] = 0.0
+    estimate = out["estimate"]
+    estimate[still] = 0.0
+    outputs = _outputs(int_u, int_pi, physics)
+    beyond = (status == CONVERGED) & ~_representable(outputs, int_u)
+    if beyond.any():
+        status[beyond] = OUT_OF_RANGE
+        for key in outputs:
+            if key != "efficiency_upper_bound":
+                outputs[key] = np.where(beyond, np.nan, outputs[key])
+    for key in ("efficiency", "scaled_efficiency", "relative_efficiency"):
+        outputs[key][still] = np.nan
+    u_arr = tau_arr = None
+    if out["series"] is not None:
+        u_arr = [s[0] for s in out["series"]]
+        tau_arr = [s[1] for s in out["series"]]
+        if len({len(s) for s in u_arr}) == 1:
+            u_arr, tau_arr = np.array(u_arr), np.array(tau_arr)
+    return SolveResult(
+        **outputs, status=status, converged=status == CONVERGED, error_estimate=estimate,
+        iterations=out["iterations"], n_tau=out["n_tau"], u=u_arr, tau=tau_arr,
+        seconds=time.perf_counter() - start, method="radau5")
 
 
 @njit(cache=True)

@@ -1,0 +1,98 @@
+"""The global error of the ``radau5`` engine's period integrals: one estimate behind one rule.
+
+Every estimator takes a converged periodic solution (the ``_sweep`` workspace) and returns
+its errors of int u and int Pi (absolute) and, per step, the share of the tolerance it
+finds there; ``combine`` is the one rule that adds them up: the estimators' errors add (they
+count different errors: no cancellation is assumed between them), and the estimate is the
+larger of U's and P's relative errors in the solver's norm (``_solve`` docstring: U relative
+to max(|int u|, 1e-3 V), P relative).  A step whose share is above its length times the
+tolerance asks for refinement: its ceiling for the next adaptive sweep is its length times
+share^(-1/ERROR_ORDER) (``refinement_ceiling``).
+
+The node weights are the discrete adjoint of the shooting (``_periodic.node_weights``): for
+int u, lambda_n, the change of int u of the periodic solution when u jumps by 1 at node n,
+is q_n + m_n lambda_{n+1} with q_n = d(int_step n u)/du_n and m_n = du_{n+1}/du_n, closed
+around the period by 1 / (1 - M); for int Pi the same with q_n = d(int_step n Pi)/du_n.
+A local error e made in step n is a jump at node n + 1: it changes int u by
+lambda_{n+1} e, to first order.
+
+Estimators here:
+
+- ``local_error_estimate``: each step's embedded error (``_radau5.embedded_error``) weighted
+  by the node weights, plus its own quadrature errors.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._radau5 import ERROR_ORDER
+from ._sweep import ERR, FLOOR, LAMBDA, M_MINUS_1, MU, Q_P, Q_U, T
+
+
+@njit(cache=True)
+def node_weights(W, N, one_minus_M):
+    """lambda (int u) and mu (int Pi) at the N nodes into W[LAMBDA], W[MU] (node N is node
+    0), by the backward recursion of ``_periodic.node_weights``."""
+    for row, q_row in ((LAMBDA, Q_U), (MU, Q_P)):
+        total = 0.0
+        carried = 1.0
+        for k in range(N):
+            total += W[q_row, k] * carried
+            carried *= 1.0 + W[M_MINUS_1, k]
+        following = total / one_minus_M
+        W[row, N] = following
+        for n in range(N - 1, -1, -1):
+            following = W[q_row, n] + (1.0 + W[M_MINUS_1, n]) * following
+            W[row, n] = following
+
+
+@njit(cache=True)
+def local_error_estimate(W, N, shares, scale_u, scale_p):
+    """The steps' local errors (``_sweep.estimate_sweep``) carried to the period integrals:
+    returns (error of int u, error of int Pi) and adds each step's weighted error (in the
+    norm: the larger of U's and P's relative shares) to ``shares``.  Each step's errors are
+    counted above its estimate's floor (``_sweep.weighted_error``): the stage values' own
+    error is bounded by the stage tolerance, set so that it stays a small share of rtol."""
+    e_u = 0.0
+    e_p = 0.0
+    for n in range(N):
+        h = W[T, n + 1] - W[T, n]
+        floor = W[FLOOR, n]
+        lam = abs(W[LAMBDA, n + 1])
+        mu = abs(W[MU, n + 1])
+        eu = max(abs(W[ERR, n]) - floor, 0.0)
+        ev = max(abs(W[ERR + 1, n]) - h * floor, 0.0)
+        ew = max(abs(W[ERR + 2, n]) - h * floor * abs(W[ERR + 2, n])
+                 / max(abs(W[ERR + 1, n]), 1e-300), 0.0)
+        du = lam * eu + ev
+        dp = mu * eu + ew
+        e_u += du
+        e_p += dp
+        shares[n] += max(du / scale_u, dp / scale_p)
+    return e_u, e_p
+
+
+@njit(cache=True)
+def combine(error_u, error_p, scale_u, scale_p):
+    """The estimate from the estimators' summed errors of int u and int Pi."""
+    return max(error_u / scale_u, error_p / scale_p)
+
+
+@njit(cache=True)
+def refinement_ceiling(W, N, shares, target, ceilings):
+    """Per step, the largest step the next adaptive sweep may take inside it: inf where the
+    step's share is within ``target`` times its length, else its length times
+    (target h / share)^(1 / ERROR_ORDER).  Returns how many steps ask for refinement."""
+    asked = 0
+    for n in range(N):
+        h = W[T, n + 1] - W[T, n]
+        ratio = shares[n] / (target * h)
+        if ratio > 1.0:
+            ceilings[n] = h * ratio ** (-1.0 / ERROR_ORDER) if math.isfinite(ratio) else 0.25 * h
+            asked += 1
+        else:
+            ceilings[n] = math.inf
+    return asked

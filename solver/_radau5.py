@@ -1,0 +1,547 @@
+"""The 3-stage Radau IIA step: the pure kernel of the ``radau5`` engine.
+
+Method as data (scipy ``integrate/_ivp/rk.py``, diffrax ``_solver``): the Butcher tableau
+is module constants, and ``radau5_step`` is one implicit step of eq. (Newtonu),
+
+    u' = kappa F(u, tau),      kappa = T^(2-p),
+
+from (tau_n, u_n) over h: the stage equations
+
+    U_i = u_n + h kappa sum_j a_ij F(U_j, tau_n + c_j h),     i = 1, 2, 3,
+
+solved by Newton's method with the exact Jacobian I - h kappa A diag(dF/du(U_j)) (the force
+kernel returns dF/du with F), u_{n+1} = U_3.  Radau IIA with 3 stages has order 5 at the
+step ends (stage order 3), is L-stable and stiffly accurate: where the body sticks the
+friction rate kappa dF/du ~ kappa mu / delta_tau is huge, and the stiff mode is damped to
+0 in one step instead of ringing (Hairer & Wanner, Solving ODEs II, IV.5).  The period
+integrals int u and int Pi ride along as quadratures with the same weights (the augmented
+state (u, int u, int Pi) of the issue; their stage equations are explicit).
+
+The embedded error estimate is RADAU5's (Hairer & Wanner IV.8, eq. (8.19)-(8.20); scipy
+``radau.py``): with Z_i = U_i - u_n,
+
+    err = (MU_REAL / h - J0)^-1 (f0 + sum_i E_i Z_i / h),
+
+f0 = kappa F(u_n, tau_n+) and J0 = kappa dF/du there.  It is the difference of the step and
+an embedded method of order 3, filtered by (I - h gamma0 J0)^-1 so that it stays bounded
+where the problem is stiff; applied to the augmented state it also estimates the local
+errors of the two quadratures (``embedded_error``).
+
+The stage Newton keeps the old engine's safeguards (``_periodic.radau_step``), each measured
+there: a line search on the residual, a cut of sign flips where F has an infinite slope in
+u (0 < p < 1 with delta = 0), and no convergence claimed from a line search that bottomed
+out.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ._force import force_slope_power_sc
+
+_S6 = math.sqrt(6.0)
+#: Radau IIA, 3 stages (Butcher tableau): nodes, matrix and weights (= last row).
+RADAU5_C = np.array([(4.0 - _S6) / 10.0, (4.0 + _S6) / 10.0, 1.0])
+RADAU5_A = np.array([
+    [(88.0 - 7.0 * _S6) / 360.0, (296.0 - 169.0 * _S6) / 1800.0, (-2.0 + 3.0 * _S6) / 225.0],
+    [(296.0 + 169.0 * _S6) / 1800.0, (88.0 + 7.0 * _S6) / 360.0, (-2.0 - 3.0 * _S6) / 225.0],
+    [(16.0 - _S6) / 36.0, (16.0 + _S6) / 36.0, 1.0 / 9.0]])
+RADAU5_B = RADAU5_A[2].copy()
+#: the embedded estimate's combination of the stage increments and the real eigenvalue of
+#: A^-1 (scipy ``radau.py``: E, MU_REAL)
+RADAU5_E = np.array([-13.0 - 7.0 * _S6, -13.0 + 7.0 * _S6, -1.0]) / 3.0
+MU_REAL = 3.0 + 3.0 ** (2.0 / 3.0) - 3.0 ** (1.0 / 3.0)
+#: E A: the embedded estimate's combination for the quadratures, whose stage increments
+#: are h A (stage values of the integrand)
+RADAU5_EA = RADAU5_E @ RADAU5_A
+ORDER = 5
+#: the local errors the step-size control sees are O(h^(ERROR_ORDER + 1)): those of the
+#: defect estimate (``defect_error``; its fallback, the embedded estimate, is O(h^4))
+ERROR_ORDER = 5
+
+MAX_STAGE_ITERATIONS = 40
+
+# the tableau as scalars for the compiled kernels (numba reads module globals as constants)
+C1, C2 = RADAU5_C[0], RADAU5_C[1]
+A11, A12, A13 = RADAU5_A[0]
+A21, A22, A23 = RADAU5_A[1]
+A31, A32, A33 = RADAU5_A[2]
+E1, E2, E3 = RADAU5_E
+EA1, EA2, EA3 = RADAU5_EA
+
+
+class PointPhysics(NamedTuple):
+    """The physics of one parameter point as the kernels see it (eq. Newtonu, eq. tau)."""
+
+    kappa: float   # T^(2-p), the inertia factor in u' = kappa F
+    mu_n: float    # normal resistance coefficient
+    mu_s: float    # tangential resistance coefficient
+    p: float       # force-law exponent, 0 <= p < 2
+    dtau: float    # delta_tau = T delta
+
+
+class StageKinematics(NamedTuple):
+    """sin phi, cos phi and dphi/dtau at the three stage times of a step."""
+
+    S1: float
+    S2: float
+    S3: float
+    C1: float
+    C2: float
+    C3: float
+    om1: float
+    om2: float
+    om3: float
+
+
+class StepSolution(NamedTuple):
+    """One solved Radau IIA step (``radau5_step``).
+
+    U1, U2, U3 : stage values of u (U3 = u_{n+1})
+    P1, P2, P3 : power density Pi at the stages
+    s1, s2, s3 : dU_i/du_n, the stages' sensitivity to the step's start
+    m_minus_1 : du_{n+1}/du_n - 1, formed without cancellation
+    Pu1, Pu2, Pu3 : dPi/du at the stages (for the power's adjoint weights)
+    F3 : F at the last stage (first-order updated to its final value): the next step's f0
+        where phi is smooth at the node (first same as last)
+    d1, d2, d3 : dF/du at the stages
+    iterations : Newton iterations (each one evaluation of F at the three stages)
+    ok : whether the stage Newton converged
+    """
+
+    U1: float
+    U2: float
+    U3: float
+    P1: float
+    P2: float
+    P3: float
+    s1: float
+    s2: float
+    s3: float
+    m_minus_1: float
+    Pu1: float
+    Pu2: float
+    Pu3: float
+    F3: float
+    d1: float
+    d2: float
+    d3: float
+    iterations: int
+    ok: bool
+
+
+class StepError(NamedTuple):
+    """The embedded local-error estimate of a step for the augmented state:
+    u (``u``), int u (``int_u``) and int Pi (``int_pi``)."""
+
+    u: float
+    int_u: float
+    int_pi: float
+
+
+@njit(cache=True)
+def solve3(J, r0, r1, r2):
+    """x with J x = r for a 3 x 3 ``J`` (tuple of 9, row-major), Gaussian elimination with
+    partial pivoting (the stiff stages make the rows differ by up to ~1e10 in size)."""
+    a00, a01, a02, a10, a11, a12, a20, a21, a22 = J
+    # pivot the first column
+    if abs(a10) > abs(a00) and abs(a10) >= abs(a20):
+        a00, a01, a02, r0, a10, a11, a12, r1 = a10, a11, a12, r1, a00, a01, a02, r0
+    elif abs(a20) > abs(a00):
+        a00, a01, a02, r0, a20, a21, a22, r2 = a20, a21, a22, r2, a00, a01, a02, r0
+    f1 = a10 / a00
+    f2 = a20 / a00
+    a11 -= f1 * a01
+    a12 -= f1 * a02
+    r1 -= f1 * r0
+    a21 -= f2 * a01
+    a22 -= f2 * a02
+    r2 -= f2 * r0
+    if abs(a21) > abs(a11):
+        a11, a12, r1, a21, a22, r2 = a21, a22, r2, a11, a12, r1
+    f = a21 / a11
+    a22 -= f * a12
+    r2 -= f * r1
+    x2 = r2 / a22
+    x1 = (r1 - a12 * x2) / a11
+    x0 = (r0 - a01 * x1 - a02 * x2) / a00
+    return x0, x1, x2
+
+
+@njit(cache=True)
+def stage_matrix(hk, d1, d2, d3):
+    """I - h kappa A diag(d) for the Radau IIA matrix A, row-major (``hk`` = h kappa)."""
+    z1 = hk * d1
+    z2 = hk * d2
+    z3 = hk * d3
+    return (1.0 - A11 * z1, -A12 * z2, -A13 * z3,
+            -A21 * z1, 1.0 - A22 * z2, -A23 * z3,
+            -A31 * z1, -A32 * z2, 1.0 - A33 * z3)
+
+
+@njit(cache=True)
+def _residual(u_n, hk, U1, U2, U3, F1, F2, F3):
+    return (U1 - u_n - hk * (A11 * F1 + A12 * F2 + A13 * F3),
+            U2 - u_n - hk * (A21 * F1 + A22 * F2 + A23 * F3),
+            U3 - u_n - hk * (A31 * F1 + A32 * F2 + A33 * F3))
+
+
+@njit(cache=True)
+def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol):
+    """Solve one Radau IIA step from u_n over h, starting Newton at (U1, U2, U3).
+
+    Parameters
+    ----------
+    u_n : float
+        u at the step's start.
+    U1, U2, U3 : float
+        Starting stage values (a prediction: the previous step's collocation polynomial,
+        or the previous sweep's stages moved along their sensitivities).
+    h : float
+        Step length in tau.
+    kin : StageKinematics
+        sin phi, cos phi, dphi/dtau at tau_n + c_i h (one side of a corner: the step's).
+    phys : PointPhysics
+    atol : float
+        Absolute tolerance of the stage values (the Newton step, or the error left after it
+        at the observed contraction (Hairer & Wanner IV.8), must be below it).
+
+    Returns
+    -------
+    StepSolution
+    """
+    kappa, mu_n, mu_s, p, dtau = phys
+    hk = h * kappa
+    F1, d1, P1, Pu1 = force_slope_power_sc(U1, kin.S1, kin.C1, kin.om1, mu_n, mu_s, p, dtau)
+    F2, d2, P2, Pu2 = force_slope_power_sc(U2, kin.S2, kin.C2, kin.om2, mu_n, mu_s, p, dtau)
+    F3, d3, P3, Pu3 = force_slope_power_sc(U3, kin.S3, kin.C3, kin.om3, mu_n, mu_s, p, dtau)
+    R1, R2, R3 = _residual(u_n, hk, U1, U2, U3, F1, F2, F3)
+    ok = False
+    it = 0
+    previous = math.inf
+    flipped1 = flipped2 = flipped3 = False
+    # the sign-flip cut only where F has an infinite slope at u = 0 (see _periodic.radau_step)
+    singular = 0.0 < p < 1.0 and dtau == 0.0
+    for it in range(1, MAX_STAGE_ITERATIONS + 1):
+        J = stage_matrix(hk, d1, d2, d3)
+        x1, x2, x3 = solve3(J, -R1, -R2, -R3)
+        size = max(abs(x1), abs(x2), abs(x3))
+        if size <= atol or (size < previous < math.inf
+                            and size * size <= atol * (previous - size)):
+            U1 += x1
+            U2 += x2
+            U3 += x3
+            P1 += Pu1 * x1
+            P2 += Pu2 * x2
+            P3 += Pu3 * x3
+            F3 += d3 * x3
+            ok = math.isfinite(U1) and math.isfinite(U2) and math.isfinite(U3)
+            break
+        cut = 1.0
+        if flipped1 and U1 * (U1 + x1) < 0.0 and abs(U1 + x1) > 0.5 * abs(U1):
+            cut = min(cut, -0.5 * U1 / x1)
+        if flipped2 and U2 * (U2 + x2) < 0.0 and abs(U2 + x2) > 0.5 * abs(U2):
+            cut = min(cut, -0.5 * U2 / x2)
+        if flipped3 and U3 * (U3 + x3) < 0.0 and abs(U3 + x3) > 0.5 * abs(U3):
+            cut = min(cut, -0.5 * U3 / x3)
+        if cut < 1.0:
+            x1 *= cut
+            x2 *= cut
+            x3 *= cut
+        norm0 = R1 * R1 + R2 * R2 + R3 * R3
+        lam = 1.0
+        for _ in range(40):
+            T1 = U1 + lam * x1
+            T2 = U2 + lam * x2
+            T3 = U3 + lam * x3
+            G1, g1, Q1, Qu1 = force_slope_power_sc(T1, kin.S1, kin.C1, kin.om1, mu_n, mu_s,
+                                                   p, dtau)
+            G2, g2, Q2, Qu2 = force_slope_power_sc(T2, kin.S2, kin.C2, kin.om2, mu_n, mu_s,
+                                                   p, dtau)
+            G3, g3, Q3, Qu3 = force_slope_power_sc(T3, kin.S3, kin.C3, kin.om3, mu_n, mu_s,
+                                                   p, dtau)
+            S1, S2, S3 = _residual(u_n, hk, T1, T2, T3, G1, G2, G3)
+            if S1 * S1 + S2 * S2 + S3 * S3 <= (1.0 - 1e-4 * lam) * norm0 or lam < 1e-9:
+                break
+            lam *= 0.5
+        flipped1 = singular and U1 * T1 < 0.0
+        flipped2 = singular and U2 * T2 < 0.0
+        flipped3 = singular and U3 * T3 < 0.0
+        U1, U2, U3, F1, F2, F3 = T1, T2, T3, G1, G2, G3
+        d1, d2, d3, R1, R2, R3 = g1, g2, g3, S1, S2, S3
+        P1, P2, P3, Pu1, Pu2, Pu3 = Q1, Q2, Q3, Qu1, Qu2, Qu3
+        if not (math.isfinite(U1) and math.isfinite(U2) and math.isfinite(U3)):
+            break
+        if (lam * size <= atol and lam >= 1e-9) or (R1 == 0.0 and R2 == 0.0 and R3 == 0.0):
+            ok = True
+            break
+        previous = size if lam == 1.0 and cut == 1.0 else math.inf
+    # sensitivities at the converged stages: J s = 1, and s - 1 = J^-1 (h kappa A d)
+    J = stage_matrix(hk, d1, d2, d3)
+    z1 = hk * d1
+    z2 = hk * d2
+    z3 = hk * d3
+    v1 = A11 * z1 + A12 * z2 + A13 * z3
+    v2 = A21 * z1 + A22 * z2 + A23 * z3
+    v3 = A31 * z1 + A32 * z2 + A33 * z3
+    e1, e2, e3 = solve3(J, v1, v2, v3)
+    return StepSolution(U1, U2, U3, P1, P2, P3, 1.0 + e1, 1.0 + e2, 1.0 + e3, e3,
+                        Pu1, Pu2, Pu3, F3, d1, d2, d3, it, ok)
+
+
+@njit(cache=True)
+def embedded_error(u_n, f0, J0, Pi0, Pi_u0, step, h):
+    """RADAU5's embedded estimate of the step's local error in (u, int u, int Pi).
+
+    ``f0``, ``J0`` are kappa F and kappa dF/du at (tau_n+, u_n), ``Pi0``, ``Pi_u0`` the power
+    density and its u-derivative there, ``step`` the ``StepSolution``.  For the augmented
+    right-hand side (kappa F, u, Pi) with Jacobian [[J0, 0, 0], [1, 0, 0], [Pi_u0, 0, 0]],
+    (MU_REAL / h - J_aug)^-1 applied to f0_aug + sum_i E_i Z_i / h gives, with the
+    quadratures' stage increments h A (U, Pi):
+
+        err_u   = r_u / (MU_REAL / h - J0),   r_u = f0 + sum E_i (U_i - u_n) / h
+        err_int_u  = (h / MU_REAL) (u_n + sum (EA)_j U_j + err_u)
+        err_int_pi = (h / MU_REAL) (Pi0 + sum (EA)_j Pi_j + Pi_u0 err_u)
+    """
+    r_u = f0 + (E1 * (step.U1 - u_n) + E2 * (step.U2 - u_n) + E3 * (step.U3 - u_n)) / h
+    err_u = r_u / (MU_REAL / h - J0)
+    scale = h / MU_REAL
+    err_v = scale * (u_n + EA1 * step.U1 + EA2 * step.U2 + EA3 * step.U3 + err_u)
+    err_w = scale * (Pi0 + EA1 * step.P1 + EA2 * step.P2 + EA3 * step.P3 + Pi_u0 * err_u)
+    return StepError(err_u, err_v, err_w)
+
+
+@njit(cache=True)
+def dense_value(theta, u_n, U1, U2, U3):
+    """The collocation polynomial of a step at theta = (tau - tau_n) / h: the cubic through
+    (0, u_n), (c1, U1), (c2, U2), (1, U3)."""
+    l0 = (theta - C1) * (theta - C2) * (theta - 1.0) / ((-C1) * (-C2) * (-1.0))
+    l1 = theta * (theta - C2) * (theta - 1.0) / (C1 * (C1 - C2) * (C1 - 1.0))
+    l2 = theta * (theta - C1) * (theta - 1.0) / (C2 * (C2 - C1) * (C2 - 1.0))
+    l3 = theta * (theta - C1) * (theta - C2) / ((1.0 - C1) * (1.0 - C2))
+    return l0 * u_n + l1 * U1 + l2 * U2 + l3 * U3
+
+
+@njit(cache=True)
+def step_integrals(h, step):
+    """(int u, int Pi) over the step by the Radau weights (order 5)."""
+    return (h * (A31 * step.U1 + A32 * step.U2 + A33 * step.U3),
+            h * (A31 * step.P1 + A32 * step.P2 + A33 * step.P3))
+
+
+@njit(cache=True)
+def step_weights(h, step):
+    """(d int_step u / du_n, d int_step Pi / du_n): the step's own share of the adjoint."""
+    return (h * (A31 * step.s1 + A32 * step.s2 + A33 * step.s3),
+            h * (A31 * step.Pu1 * step.s1 + A32 * step.Pu2 * step.s2
+                 + A33 * step.Pu3 * step.s3))
+
+
+# ---------------------------------------------------------------- the defect estimate
+#: where the defect estimate samples a step besides its start and its stages (where the
+#: defect vanishes): one point between the first two stages, one between the last two
+THETA_MID = 0.5
+THETA_LATE = 0.85
+#: the defect estimate moves by about this many times a change of the stage values (the
+#: polynomial's slope at the start, divided by h, times h): its floor is this times the
+#: stages' error (the Newton tolerance plus rounding), which no smaller step reduces
+NOISE_GAIN = 16.0
+_EPS = float(np.finfo(np.float64).eps)
+#: the defect divided by the stages' node polynomial, linear through the start and THETA_MID,
+#: must predict the late sample within this share of it; else the step's solution is not in
+#: the asymptotic regime and the embedded estimate (conservative) is used
+DEFECT_FIT = 0.5
+
+
+#: up to this |h kappa dF/du| the resolvent of the defect estimate is integrated with the
+#: slope varying along the step (8-point Gauss-Legendre: ~1e-3 relative at the limit)
+VARIABLE_SLOPE_LIMIT = 16.0
+_GX, _GW = np.polynomial.legendre.leggauss(8)
+GL8_X = 0.5 * (_GX + 1.0)
+GL8_W = 0.5 * _GW
+
+
+class SampleKinematics(NamedTuple):
+    """sin phi, cos phi and dphi/dtau at tau_n + THETA_MID h and tau_n + THETA_LATE h."""
+
+    S_mid: float
+    C_mid: float
+    om_mid: float
+    S_late: float
+    C_late: float
+    om_late: float
+
+
+def _interpolatory_weights(nodes):
+    """Weights of the interpolatory quadrature on [0, 1] with these nodes."""
+    k = np.arange(nodes.size)
+    return np.linalg.solve(np.vander(nodes, increasing=True).T, 1.0 / (k + 1.0))
+
+
+#: a 6-point rule on the start, the stages and the two samples (exact to degree 5): its
+#: difference from the Radau rule estimates the Radau rule's error for the power density
+_SIX = _interpolatory_weights(np.array([0.0, C1, THETA_MID, C2, THETA_LATE, 1.0]))
+W6_0, W6_1, W6_MID, W6_2, W6_LATE, W6_3 = _SIX
+
+
+@njit(cache=True)
+def node_polynomial(theta):
+    """(theta - c1)(theta - c2)(theta - 1): it vanishes at the stages, where the collocation
+    polynomial's defect does."""
+    return (theta - C1) * (theta - C2) * (theta - 1.0)
+
+
+@njit(cache=True)
+def dense_slope(theta, u_n, U1, U2, U3):
+    """d/dtheta of ``dense_value``."""
+    d0 = ((theta - C2) * (theta - 1.0) + (theta - C1) * (theta - 1.0)
+          + (theta - C1) * (theta - C2)) / (-C1 * C2)
+    d1 = ((theta - C2) * (theta - 1.0) + theta * (theta - 1.0) + theta * (theta - C2)) \
+        / (C1 * (C1 - C2) * (C1 - 1.0))
+    d2 = ((theta - C1) * (theta - 1.0) + theta * (theta - 1.0) + theta * (theta - C1)) \
+        / (C2 * (C2 - C1) * (C2 - 1.0))
+    d3 = ((theta - C1) * (theta - C2) + theta * (theta - C2) + theta * (theta - C1)) \
+        / ((1.0 - C1) * (1.0 - C2))
+    return d0 * u_n + d1 * U1 + d2 * U2 + d3 * U3
+
+
+@njit(cache=True)
+def exponential_moments(z, q1, q2, q3, q4, q5):
+    """(sum_k q_k I_k(z), sum_k q_k G_k(z)), k = 1..5, with I_k(z) = int_0^1 x^k e^(zx) dx and
+    G_k(z) = int_0^1 x^k (e^(zx) - 1) / z dx: by their power series for |z| <= 1 (no
+    cancellation), else by I_0 = expm1(z) / z, I_k = (e^z - k I_(k-1)) / z (stable for
+    |z| > 1: each step divides the error by |z| / k)."""
+    if abs(z) <= 1.0:
+        s_i = 0.0
+        s_g = 0.0
+        term = 1.0  # z^m / m!
+        for m in range(40):
+            s_i += term * (q1 / (m + 2.0) + q2 / (m + 3.0) + q3 / (m + 4.0)
+                           + q4 / (m + 5.0) + q5 / (m + 6.0))
+            s_g += term / (m + 1.0) * (q1 / (m + 3.0) + q2 / (m + 4.0) + q3 / (m + 5.0)
+                                       + q4 / (m + 6.0) + q5 / (m + 7.0))
+            term *= z / (m + 1.0)
+            if abs(term) < 1e-18:
+                break
+        return s_i, s_g
+    ez = math.exp(min(z, 700.0))
+    moment = math.expm1(min(z, 700.0)) / z
+    s_i = 0.0
+    s_g = 0.0
+    for k in range(1, 6):
+        moment = (ez - k * moment) / z
+        q = q1 if k == 1 else q2 if k == 2 else q3 if k == 3 else q4 if k == 4 else q5
+        s_i += q * moment
+        s_g += q * (moment - 1.0 / (k + 1.0)) / z
+    return s_i, s_g
+
+
+@njit(cache=True)
+def _resolvent_moment(z1, z2, z3, a, b, c):
+    """int_0^1 exp(int_s^1 z(r) dr) w(s) (a + b s + c s^2) ds, z the quadratic through
+    (c1, z1), (c2, z2), (1, z3) (h kappa dF/du at the stages), by 8-point Gauss-Legendre."""
+    # z(r) = al + be r + ga r^2 through the three stages
+    d12 = (z2 - z1) / (C2 - C1)
+    d23 = (z3 - z2) / (1.0 - C2)
+    ga = (d23 - d12) / (1.0 - C1)
+    be = d12 - ga * (C1 + C2)
+    al = z1 - be * C1 - ga * C1 * C1
+    top = al + 0.5 * be + ga / 3.0
+    total = 0.0
+    for j in range(8):
+        x = GL8_X[j]
+        exponent = top - (al * x + 0.5 * be * x * x + ga * x * x * x / 3.0)
+        total += GL8_W[j] * math.exp(min(exponent, 700.0)) * node_polynomial(x) \
+            * (a + x * (b + c * x))
+    return total
+
+
+@njit(cache=True)
+def estimate_floor(u_n, step, atol):
+    """The level below which ``defect_error``'s estimate of u's local error is the stage values'
+    own error (Newton's tolerance ``atol`` and rounding) seen through the defect, not the
+    method's: NOISE_GAIN (atol + 2 eps (|u_n| + |U1| + |U2| + |U3|))."""
+    return NOISE_GAIN * (atol + 2.0 * _EPS * (abs(u_n) + abs(step.U1) + abs(step.U2)
+                                             + abs(step.U3)))
+
+
+@njit(cache=True)
+def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
+    """The step's local error in (u, int u, int Pi) from the defect of its collocation
+    polynomial p, delta(theta) = p'(theta) / h - kappa F(p(theta), tau_n + theta h): the
+    error e of p obeys e' = J e - delta (J = kappa dF/du), so
+
+        err_u     = -h   int_0^1 e^(J h (1 - s)) delta(s) ds,
+        err_int_u = -h^2 int_0^1 (e^(J h (1 - s)) - 1) / (J h) delta(s) ds,
+
+    (Hairer, Norsett & Wanner I, II.7, the nonlinear variation-of-constants formula), with J
+    the largest of the stages' kappa dF/du (the least damping: the larger estimate).  The
+    defect vanishes at the stages, so delta = w(s) phi(s) with w = ``node_polynomial``; phi
+    is the quadratic through delta / w at the start (f0: no evaluation), THETA_MID and
+    THETA_LATE (two evaluations of F).  The integrals are ``exponential_moments`` of the
+    degree-5 polynomial w phi.  Because w is orthogonal to the linear polynomials, these
+    errors are O(h^6): the embedded estimate's leading term cancels, and steps can be as
+    long as the method's order allows.  int Pi's error is max |dPi/du| |err_int_u| plus the
+    Radau rule's own quadrature error of Pi(p(theta)) (a 6-point rule through the start, the
+    stages and the samples, minus Radau's).
+
+    Where the line of delta / w through the start and THETA_MID misses the late sample by
+    more than DEFECT_FIT of it (p is not in its asymptotic regime: a feature the samples
+    resolve differently), the embedded estimate is returned instead (``embedded_error``,
+    O(h^4), conservative).  Returns (StepError, whether the defect estimate was used).
+    """
+    kappa, mu_n, mu_s, p, dtau = phys
+    U1, U2, U3 = step.U1, step.U2, step.U3
+    d_0 = dense_slope(0.0, u_n, U1, U2, U3) / h - f0
+    u_m = dense_value(THETA_MID, u_n, U1, U2, U3)
+    F_m, _, P_m, _ = force_slope_power_sc(u_m, samples.S_mid, samples.C_mid, samples.om_mid,
+                                          mu_n, mu_s, p, dtau)
+    d_m = dense_slope(THETA_MID, u_n, U1, U2, U3) / h - kappa * F_m
+    u_l = dense_value(THETA_LATE, u_n, U1, U2, U3)
+    F_l, _, P_l, _ = force_slope_power_sc(u_l, samples.S_late, samples.C_late,
+                                          samples.om_late, mu_n, mu_s, p, dtau)
+    d_l = dense_slope(THETA_LATE, u_n, U1, U2, U3) / h - kappa * F_l
+    phi0 = d_0 / node_polynomial(0.0)
+    phim = d_m / node_polynomial(THETA_MID)
+    phil = d_l / node_polynomial(THETA_LATE)
+    slope1 = (phim - phi0) / THETA_MID
+    curve = ((phil - phim) / (THETA_LATE - THETA_MID) - slope1) / THETA_LATE
+    linear_late = phi0 + slope1 * THETA_LATE
+    misfit = abs(phil - linear_late)
+    if not misfit <= DEFECT_FIT * max(abs(phil), abs(linear_late)):
+        return embedded_error(u_n, f0, J0, Pi0, Pi_u0, step, h), False
+    # phi(s) = a + b s + c s^2 and q(1 - x) = w(1 - x) phi(1 - x) = sum_k q_k x^k
+    a = phi0
+    b = slope1 - curve * THETA_MID
+    c = curve
+    P0 = a + b + c
+    P1 = -b - 2.0 * c
+    P2 = c
+    al = 1.0 - C1
+    be = 1.0 - C2
+    ab = al * be
+    apb = al + be
+    q1 = -ab * P0
+    q2 = apb * P0 - ab * P1
+    q3 = -P0 + apb * P1 - ab * P2
+    q4 = -P1 + apb * P2
+    q5 = -P2
+    z1 = h * kappa * step.d1
+    z2 = h * kappa * step.d2
+    z3 = h * kappa * step.d3
+    s_i, s_g = exponential_moments(max(z1, z2, z3), q1, q2, q3, q4, q5)
+    err_v = -h * h * s_g
+    if max(abs(z1), abs(z2), abs(z3)) <= VARIABLE_SLOPE_LIMIT:
+        # the resolvent with the slope varying along the step (quadratic through the
+        # stages): at leading order its change is as large as the constant slope's own term
+        err_u = -h * _resolvent_moment(z1, z2, z3, a, b, c)
+    else:  # stiff: the resolvent is a layer at the step's end, where the slope is z3
+        err_u = -h * exponential_moments(z3, q1, q2, q3, q4, q5)[0]
+    pi_u = max(abs(Pi_u0), abs(step.Pu1), abs(step.Pu2), abs(step.Pu3))
+    quadrature = h * (W6_0 * Pi0 + W6_1 * step.P1 + W6_MID * P_m + W6_2 * step.P2
+                      + W6_LATE * P_l + W6_3 * step.P3
+                      - (A31 * step.P1 + A32 * step.P2 + A33 * step.P3))
+    return StepError(err_u, err_v, pi_u * abs(err_v) + abs(quadrature)), True

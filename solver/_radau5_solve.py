@@ -1,0 +1,326 @@
+"""The ``radau5`` engine: the periodic steady state of eq. (Newtonu) by event-driven
+3-stage Radau IIA with one-pass error control.
+
+For each parameter point (``solve_point``, one compiled function, all points batched over
+threads by ``solve_points``):
+
+1. **Stops.** The kinematic step ends of the period (``_switching.kinematic_stops``).
+2. **Loose shooting.** Adaptive sweeps (``_sweep.adaptive_sweep``) at the loose tolerance
+   LOOSE_RTOL from the fast limit's u(0), each followed by a Newton step on u(0) with the
+   sweep's monodromy, until u(0) moves by less than the loose tolerance: this finds the
+   periodic orbit's neighbourhood and the node weights cheaply.
+3. **Target sweep.** One adaptive sweep at the target, its steps judged by the loose
+   solution's node weights, then Newton on u(0) by frozen-grid sweeps (``frozen_sweep``:
+   on one step sequence the discrete period map is smooth and its monodromy exact) until
+   the fixed point is within 1e-3 rtol V (the converged sweep is then shifted to it to first
+   order along the stage sensitivities, as in ``_periodic``).
+4. **Estimate.** The node weights of the converged solution (``_global_error.node_weights``)
+   and the estimators' errors, combined by ``_global_error.combine``.  If the estimate
+   exceeds rtol, the steps that asked for it get ceilings and steps 3-4 run again (at most
+   MAX_ROUNDS times), then TOLERANCE_NOT_REACHED.
+
+Failures are NaN plus a status code (``_status``), never silent.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from numba import get_num_threads, njit, prange
+
+from ._global_error import combine, local_error_estimate, node_weights, refinement_ceiling
+from ._periodic import monodromy_factor, one_minus_monodromy, stage_tolerance
+from ._radau5 import ERROR_ORDER, PointPhysics
+from ._status import CONVERGED, NON_FINITE, NOT_PERIODIC, TOLERANCE_NOT_REACHED
+from ._sweep import (CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
+                     SENS, STAGE, T, U, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
+                     new_workspace, snap_events)
+from ._switching import MAX_STOPS, kinematic_stops
+
+#: tolerance of the loose shooting (step 2)
+LOOSE_RTOL = 1e-2
+#: at most this many loose sweeps
+MAX_LOOSE_SWEEPS = 8
+#: the adaptive sweeps aim at this share of the tolerance (the rest is the margin for the
+#: node weights of the converged solution, which the sweep only knew approximately)
+TARGET_SHARE = 0.5
+#: rounds of steps 3-4
+MAX_ROUNDS = 4
+#: frozen-grid Newton sweeps per round
+MAX_FROZEN_SWEEPS = 30
+#: times the state events are moved back onto nodes after the shooting moved them
+MAX_SNAPS = 2
+DEBUG = False
+#: first step of the first sweep
+FIRST_STEP = 1.0 / 16.0
+#: workspace capacity a thread starts with (steps; it doubles when a point needs more)
+START_CAPACITY = 512
+
+
+@njit(cache=True)
+def _period_map(W, N, u0):
+    """(g = u(1) - u(0), 1 - M) of a sweep: the shooting residual and one minus the
+    monodromy (``_periodic.one_minus_monodromy``)."""
+    log_m = 0.0
+    sign_m = 1.0
+    for n in range(N):
+        log_m, sign_m = monodromy_factor(log_m, sign_m, W[M_MINUS_1, n])
+    return W[U, N] - u0, one_minus_monodromy(log_m, sign_m)
+
+
+@njit(cache=True)
+def _newton_update(u0, g, one_minus_M, lo, hi):
+    """Newton's step on u(0) kept inside the bracket [lo, hi] of the fixed point (g > 0 below
+    it, g < 0 above it: friction decelerates a fast body within a period); bisection where
+    Newton leaves the bracket.  Returns (new u0, lo, hi)."""
+    if g > 0.0:
+        lo = max(lo, u0)
+    else:
+        hi = min(hi, u0)
+    candidate = u0 + g / one_minus_M
+    if not (lo < candidate < hi):
+        candidate = 0.5 * (lo + hi)
+    return candidate, lo, hi
+
+
+@njit(cache=True)
+def _integrals(W, N):
+    int_u = 0.0
+    int_p = 0.0
+    for n in range(N):
+        int_u += W[INT_U, n]
+        int_p += W[INT_P, n]
+    return int_u, int_p
+
+
+@njit(cache=True)
+def _shift(W, N, shift):
+    """Move the converged sweep, which starts ``shift`` short of the fixed point, onto it to
+    first order along the sensitivities (no force evaluations)."""
+    for n in range(N):
+        W[U, n] += shift
+        for i in range(3):
+            W[STAGE + i, n] += W[SENS + i, n] * shift
+        W[INT_U, n] += W[Q_U, n] * shift
+        W[INT_P, n] += W[Q_P, n] * shift
+        shift *= 1.0 + W[M_MINUS_1, n]
+    W[U, N] += shift
+
+
+@njit(cache=True)
+def _model(W, N, ceilings):
+    return WeightModel(W[T, :N + 1].copy(), W[LAMBDA, :N + 1].copy(), W[MU, :N + 1].copy(),
+                       ceilings[:N].copy(), N)
+
+
+@njit(cache=True)
+def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W):
+    """The periodic solution of one point; see the module docstring.
+
+    Parameters
+    ----------
+    code, params : the kinematics' kernel encoding (``_kinematics``), one row.
+    corners : (k,) corners of phi in [0, 1).
+    phys : PointPhysics
+    rtol : float
+    vscale : float
+        V = (1/4) int |dphi/dtau| dtau (> 0).
+    u_guess : float
+        Starting u(0) (the fast limit).
+    max_steps : int
+        Steps per period before STEP_BUDGET_EXCEEDED.
+    W : workspace (``_sweep.new_workspace``)
+
+    Returns
+    -------
+    (W, int_u, int_pi, u0, status, n_steps, sweeps, estimate): W possibly grown; the sweep's
+    solution is in its first n_steps columns.
+    """
+    stops = np.empty(MAX_STOPS)
+    n_stops = kinematic_stops(code, params, corners, stops)
+    stop_is_corner = np.zeros(n_stops, dtype=np.bool_)
+    for j in range(n_stops):
+        for c in corners:
+            if stops[j] == c:
+                stop_is_corner[j] = True
+    atol = stage_tolerance(rtol, vscale)
+    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
+    loose = max(LOOSE_RTOL, rtol)
+    u0 = u_guess
+    bound = 1e3 * vscale + 10.0 * abs(u0)
+    empty = np.zeros(1)
+    model = WeightModel(empty, empty, empty, empty, 0)
+    sweeps = 0
+    N = 0
+    nan = math.nan
+    # step 2: loose shooting, judged in u alone, relative to V (int u and int Pi are not
+    # known yet: the floor 1e-3 V of U's norm would make it a thousand times too strict)
+    h_first = FIRST_STEP
+    lo, hi = -bound, bound
+    scale_u = scale_p = 1.0
+    for _ in range(MAX_LOOSE_SWEEPS):
+        W, N, status, _ = adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0,
+                                         h_first, TARGET_SHARE * loose, vscale, math.inf,
+                                         model, stage_tolerance(loose, vscale), W, max_steps,
+                                         True)
+        sweeps += 1
+        if status != CONVERGED:
+            return W, nan, nan, u0, status, N, sweeps, math.inf
+        int_u, int_p = _integrals(W, N)
+        scale_u = max(abs(int_u), 1e-3 * vscale)
+        scale_p = abs(int_p) if int_p != 0.0 else 1.0
+        g, one_minus_M = _period_map(W, N, u0)
+        if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
+            return W, nan, nan, u0, NON_FINITE, N, sweeps, math.inf
+        node_weights(W, N, one_minus_M)
+        model = _model(W, N, np.full(N, math.inf))
+        u_new, lo, hi = _newton_update(u0, g, one_minus_M, lo, hi)
+        moved = abs(u_new - u0)
+        u0 = u_new
+        if moved <= loose * vscale:
+            break
+    # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
+    atol = stage_tolerance(rtol, scale_u)
+    h_first = (W[T, 1] - W[T, 0]) * (rtol / loose) ** (1.0 / ERROR_ORDER)
+    estimate = math.inf
+    ceilings = np.full(N, math.inf)
+    for _ in range(MAX_ROUNDS):
+        W, N, status, _ = adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0,
+                                         h_first, TARGET_SHARE * rtol, scale_u, scale_p, model,
+                                         atol, W, max_steps, True)
+        sweeps += 1
+        if status != CONVERGED:
+            return W, nan, nan, u0, status, N, sweeps, math.inf
+        corner_nodes = np.zeros(N, dtype=np.bool_)
+        for n in range(N - 1):
+            corner_nodes[n + 1] = W[END_KIND, n] == CORNER_STOP
+        converged = False
+        one_minus_M = 1.0
+        g = 0.0
+        for snap in range(MAX_SNAPS + 1):
+            lo, hi = -bound, bound
+            converged = False
+            for _ in range(MAX_FROZEN_SWEEPS):
+                g, one_minus_M = _period_map(W, N, u0)
+                if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
+                    return W, nan, nan, u0, NON_FINITE, N, sweeps, math.inf
+                if abs(g) <= tol_fix * abs(one_minus_M):
+                    converged = True
+                    break
+                u0, lo, hi = _newton_update(u0, g, one_minus_M, lo, hi)
+                status, _ = frozen_sweep(code, params, phys, u0, atol, W, N)
+                sweeps += 1
+                if status != CONVERGED:
+                    return W, nan, nan, u0, status, N, sweeps, math.inf
+            if not converged or snap == MAX_SNAPS or snap_events(code, params, W, N) == 0:
+                break
+            # the moved steps are solved again from the same u(0) before the shooting resumes
+            status, _ = frozen_sweep(code, params, phys, u0, atol, W, N)
+            sweeps += 1
+            if status != CONVERGED:
+                return W, nan, nan, u0, status, N, sweeps, math.inf
+        if not converged or not abs(u0) < 0.999 * bound:
+            return W, nan, nan, u0, NOT_PERIODIC, N, sweeps, math.inf
+        shift = g / one_minus_M
+        _shift(W, N, shift)
+        u0 += shift
+        estimate_sweep(code, params, phys, corner_nodes, atol, W, N)
+        node_weights(W, N, one_minus_M)
+        int_u, int_p = _integrals(W, N)
+        scale_u = max(abs(int_u), 1e-3 * vscale)
+        scale_p = abs(int_p) if int_p != 0.0 else 1.0
+        shares = np.zeros(N)
+        e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
+        estimate = combine(e_u, e_p, scale_u, scale_p)
+        if DEBUG:
+            worst = np.argmax(shares)
+            print("round N", N, "estimate", estimate / rtol, "worst share", shares[worst] / rtol,
+                  "at", W[T, worst], "h", W[T, worst + 1] - W[T, worst], "sweeps", sweeps)
+        if estimate <= rtol:
+            return W, int_u, int_p, u0, CONVERGED, N, sweeps, estimate
+        ceilings = np.empty(N)
+        asked = refinement_ceiling(W, N, shares, TARGET_SHARE * rtol, ceilings)
+        if asked == 0:
+            shrink = 0.9 * (rtol / estimate) ** (1.0 / ERROR_ORDER)
+            for n in range(N):
+                ceilings[n] = shrink * (W[T, n + 1] - W[T, n])
+        model = _model(W, N, ceilings)
+        h_first = min(h_first, W[T, 1] - W[T, 0])
+    return W, nan, nan, u0, TOLERANCE_NOT_REACHED, N, sweeps, estimate
+
+
+@njit(cache=True)
+def _solve_chunk(c, chunks, code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale,
+                 u_guess, max_steps, int_u, int_pi, u0, status, n_steps, sweeps, estimate):
+    """The points c, c + chunks, ... of ``solve_points`` on one workspace."""
+    W = new_workspace(START_CAPACITY)
+    for i in range(c, params.shape[0], chunks):
+        phys = PointPhysics(kappa[i], mu_n[i], mu_s[i], p[i], dtau[i])
+        W, int_u[i], int_pi[i], u0[i], status[i], n_steps[i], sweeps[i], estimate[i] = \
+            solve_point(code, params[i], corners[i], phys, rtol, vscale[i], u_guess[i],
+                        max_steps, W)
+
+
+@njit(cache=True, parallel=True)
+def solve_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale, u_guess,
+                 max_steps, threads):
+    """``solve_point`` over every point: (int_u, int_pi, u0, status, n_steps, sweeps,
+    estimate), each (n_points,).  The points are dealt to the threads' chunks in turn (point
+    i to chunk i mod chunks), so that numba's static split of the chunks gives each thread
+    a share of the hard points; each chunk keeps one workspace."""
+    n = params.shape[0]
+    int_u = np.full(n, np.nan)
+    int_pi = np.full(n, np.nan)
+    u0 = np.full(n, np.nan)
+    status = np.zeros(n, dtype=np.int8)
+    n_steps = np.zeros(n, dtype=np.int64)
+    sweeps = np.zeros(n, dtype=np.int64)
+    estimate = np.full(n, np.inf)
+    chunks = max(min(n, 4 * threads), 1)
+    for c in prange(chunks):
+        _solve_chunk(c, chunks, code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale,
+                     u_guess, max_steps, int_u, int_pi, u0, status, n_steps, sweeps, estimate)
+    return int_u, int_pi, u0, status, n_steps, sweeps, estimate
+
+
+@njit(cache=True)
+def point_series(code, params, corners, phys, rtol, vscale, u_guess, max_steps):
+    """``solve_point`` of one point, returning also (tau at the nodes, u at the nodes)
+    without tau = 1."""
+    W = new_workspace(START_CAPACITY)
+    W, int_u, int_pi, u0, status, N, sweeps, estimate = solve_point(
+        code, params, corners, phys, rtol, vscale, u_guess, max_steps, W)
+    return W[T, :N].copy(), W[U, :N].copy(), status
+
+
+def solve(kinematics, physics, rtol, max_steps, return_series):
+    """Batched ``solve_point`` for ``_solve.solve_periodic(method="radau5")``.
+
+    Returns a dict with int_u, int_pi, status, estimate, n_tau, iterations (sweeps) and,
+    with ``return_series``, per point (tau nodes, u nodes)."""
+    from ._limits import fast_limit_velocity, kinematic_speed
+
+    code, params = kinematics.kernel_encoding()
+    corners = kinematics.corners()
+    vscale = kinematic_speed(kinematics)
+    moving = vscale > 0
+    u_guess = np.zeros(len(kinematics))
+    if moving.any():
+        idx = np.flatnonzero(moving)
+        u_guess[idx] = fast_limit_velocity(kinematics.take(idx), physics.take(idx))
+    out = solve_points(code, params, corners, physics.inertia_factor, physics.mu_n,
+                       physics.mu_s, physics.p, physics.delta_tau, float(rtol),
+                       np.maximum(vscale, 1e-300), u_guess, int(max_steps), get_num_threads())
+    int_u, int_pi, u0, status, n_steps, sweeps, estimate = out
+    series = None
+    if return_series:
+        series = []
+        for i in range(len(kinematics)):
+            phys = PointPhysics(physics.inertia_factor[i], physics.mu_n[i], physics.mu_s[i],
+                                physics.p[i], physics.delta_tau[i])
+            tau, u, _ = point_series(code, params[i], corners[i], phys, float(rtol),
+                                     max(vscale[i], 1e-300), u_guess[i], int(max_steps))
+            series.append((u, tau))
+    return dict(int_u=int_u, int_pi=int_pi, status=status, estimate=estimate, n_tau=n_steps,
+                iterations=sweeps, still=~moving, series=series)

@@ -1,0 +1,197 @@
+"""Switching functions of the ``radau5`` engine: where F(u(tau), tau) is not smooth.
+
+With the link velocity of ``_force`` (normal w(s) = a + b s, a = -S g, b = omega,
+tangential c = C g, g = u + omega S / 4, S = sin phi, C = cos phi) the force integrand has
+a kink where w = 0.  F(u(tau), tau) has a corner in tau (for p = 0 a jump of dF/dtau over a
+width ~ delta_tau) where (``_events`` docstring):
+
+- the kink crosses the link's inner end, w(0) = a = 0: S = 0 or g = 0;
+- it crosses the outer end, w(1/2) = 0: ``outer_end_velocity`` = -S g + omega / 2 = 0;
+- the tangential velocity vanishes, c = 0: C = 0 or g = 0.
+
+And the solution itself changes fast where the links stop rotating, omega = 0 (a turning
+point of phi, ``_turning`` docstring): across a window ~ |u| / |phi''| the force changes by
+O(mu).  A step whose stages do not sample such a feature does not see it, nor does its
+embedded error estimate.  So every one of them is a step end (diffrax ``JumpStepWrapper``,
+DifferentialEquations.jl ``tstops``):
+
+- the functions of tau alone (S, C, omega, and omega' where |omega| has a small interior
+  minimum: a near-tangency opens the same window without a zero) and the corners of phi
+  are known before the sweep: ``kinematic_stops`` finds their zeros once per point;
+- the functions of u (g and the outer end's velocity) are state events: a sign change
+  across a step is located on the step's collocation polynomial (``locate_state_event``,
+  scipy ``ivp.py``'s ``solve_event_equation`` on the dense output) and the step is cut
+  there.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._kinematics import FOURIER, angle_and_rate
+from ._radau5 import dense_value
+
+#: samples per wavenumber (and period) in the search for the zeros of the kinematic
+#: switching functions of a Fourier motion (a function of wavenumber K has at most 2K zeros)
+SAMPLES_PER_WAVENUMBER = 64
+#: a minimum of |omega| below this share of max |omega| is a near-tangency (a stop)
+TANGENCY_SHARE = 0.1
+#: at most this many kinematic stops per period
+MAX_STOPS = 512
+#: two stops closer than this are one
+STOP_GAP = 1e-12
+
+#: the state switching functions, by index
+TANGENTIAL = 0   # g = u + omega S / 4: the link's tangential velocity is C g, its inner
+#                  end's normal velocity -S g
+OUTER_END = 1    # -S g + omega / 2: the normal velocity at the link's outer end
+N_STATE_FUNCTIONS = 2
+
+
+@njit(cache=True)
+def state_function(k, u, S, om):
+    """State switching function ``k`` (TANGENTIAL or OUTER_END) at u, S = sin phi,
+    om = dphi/dtau."""
+    g = u + 0.25 * om * S
+    if k == TANGENTIAL:
+        return g
+    return -S * g + 0.5 * om
+
+
+@njit(cache=True)
+def _kinematic_function(k, code, params, t, side):
+    """The functions of tau alone: 0 sin phi, 1 cos phi, 2 omega, 3 omega' (by a central
+    difference of the analytic omega: only its zeros are used, then refined on omega)."""
+    phi, om = angle_and_rate(code, params, t, side)
+    if k == 0:
+        return math.sin(phi)
+    if k == 1:
+        return math.cos(phi)
+    if k == 2:
+        return om
+    e = 1e-6
+    return (angle_and_rate(code, params, t + e, side)[1]
+            - angle_and_rate(code, params, t - e, side)[1]) / (2.0 * e)
+
+
+@njit(cache=True)
+def _refine_root(k, code, params, a, b, fa, fb, side):
+    """Zero of kinematic function k in [a, b] (fa fb < 0) by Illinois regula falsi."""
+    last = 0
+    c = a
+    for _ in range(200):
+        c = (a * fb - b * fa) / (fb - fa)
+        if b - a <= 4e-16 * max(1.0, abs(c)):
+            break
+        fc = _kinematic_function(k, code, params, c, side)
+        if fc == 0.0:
+            break
+        if fc * fa < 0.0:
+            if last == -1:
+                fa *= 0.5
+            b, fb, last = c, fc, -1
+        else:
+            if last == 1:
+                fb *= 0.5
+            a, fa, last = c, fc, 1
+    return c
+
+
+@njit(cache=True)
+def kinematic_stops(code, params, corners, out):
+    """The step ends every sweep of a point keeps: 0, the corners of phi, the zeros of sin phi,
+    cos phi and omega, and the near-tangencies (minima of |omega| below TANGENCY_SHARE of
+    its maximum).  Writes them sorted into ``out`` (0 first, all in [0, 1)); returns their
+    count.
+
+    The phases between corners are searched separately (each side of a corner with its own
+    phi'), on SAMPLES_PER_WAVENUMBER K samples per period, K the Fourier wavenumber (the
+    power law's phases are monotone: 64 samples per phase)."""
+    K = max(int(params[0]), 1) if code == FOURIER else 1
+    n_samples = SAMPLES_PER_WAVENUMBER * K
+    ends = np.empty(corners.size + 2)
+    ends[0] = 0.0
+    m = 1
+    for c in corners:
+        if 0.0 < c < 1.0:
+            ends[m] = c
+            m += 1
+    ends[m] = 1.0
+    m += 1
+    ends = np.sort(ends[:m])
+    count = 0
+    out[count] = 0.0
+    count += 1
+    omax = 0.0
+    for j in range(m - 1):
+        a, b = ends[j], ends[j + 1]
+        side = 0.5 * (a + b)
+        for i in range(n_samples + 1):
+            t = a + (b - a) * i / n_samples
+            omax = max(omax, abs(angle_and_rate(code, params, t, side)[1]))
+    for j in range(m - 1):
+        a, b = ends[j], ends[j + 1]
+        side = 0.5 * (a + b)
+        if j > 0 and count < out.size:
+            out[count] = a
+            count += 1
+        for k in range(4):
+            t0 = a
+            f0 = _kinematic_function(k, code, params, t0, side)
+            for i in range(1, n_samples + 1):
+                t1 = a + (b - a) * i / n_samples
+                f1 = _kinematic_function(k, code, params, t1, side)
+                if f0 * f1 < 0.0 and count < out.size:
+                    root = _refine_root(k, code, params, t0, t1, f0, f1, side)
+                    keep = True
+                    if k == 3:  # an extremum of omega: a stop only where |omega| is small
+                        om = angle_and_rate(code, params, root, side)[1]
+                        keep = abs(om) < TANGENCY_SHARE * omax
+                    if keep:
+                        out[count] = root
+                        count += 1
+                elif f1 == 0.0 and 0.0 < i < n_samples and count < out.size and k < 3:
+                    out[count] = t1
+                    count += 1
+                t0, f0 = t1, f1
+    stops = np.sort(out[:count])
+    # merge near-duplicates and drop stops at the period's end (1 is 0)
+    kept = 0
+    for i in range(count):
+        t = stops[i]
+        if t >= 1.0 - STOP_GAP or t < 0.0:
+            continue
+        if kept > 0 and t - out[kept - 1] <= STOP_GAP:
+            continue
+        out[kept] = t
+        kept += 1
+    return kept
+
+
+@njit(cache=True)
+def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b):
+    """Zero of state function ``k`` along the step's collocation polynomial in theta in
+    [a, b] (0 <= a < b <= 1), where its values are f_a, f_b of opposite signs: Illinois
+    regula falsi to 1e-13 of the step.  Returns theta."""
+    side = t0 + 0.5 * h
+    last = 0
+    c = a
+    for _ in range(100):
+        c = (a * f_b - b * f_a) / (f_b - f_a)
+        if b - a <= 1e-13:
+            break
+        phi, om = angle_and_rate(code, params, t0 + c * h, side)
+        fc = state_function(k, dense_value(c, u_n, U1, U2, U3), math.sin(phi), om)
+        if fc == 0.0:
+            break
+        if fc * f_a < 0.0:
+            if last == -1:
+                f_a *= 0.5
+            b, f_b, last = c, fc, -1
+        else:
+            if last == 1:
+                f_b *= 0.5
+            a, f_a, last = c, fc, 1
+    return c
