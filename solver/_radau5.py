@@ -108,7 +108,8 @@ class StepSolution(NamedTuple):
     F3 : F at the last stage (first-order updated to its final value): the next step's f0
         where phi is smooth at the node (first same as last)
     d1, d2, d3 : dF/du at the stages
-    iterations : Newton iterations (each one evaluation of F at the three stages)
+    iterations : evaluations of F at the three stages (the start, Newton's and the line
+        search's trials)
     ok : whether the stage Newton converged
     """
 
@@ -220,12 +221,12 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol):
     F3, d3, P3, Pu3 = force_slope_power_sc(U3, kin.S3, kin.C3, kin.om3, mu_n, mu_s, p, dtau)
     R1, R2, R3 = _residual(u_n, hk, U1, U2, U3, F1, F2, F3)
     ok = False
-    it = 0
+    rounds = 1
     previous = math.inf
     flipped1 = flipped2 = flipped3 = False
     # the sign-flip cut only where F has an infinite slope at u = 0 (see _periodic.radau_step)
     singular = 0.0 < p < 1.0 and dtau == 0.0
-    for it in range(1, MAX_STAGE_ITERATIONS + 1):
+    for _ in range(MAX_STAGE_ITERATIONS):
         J = stage_matrix(hk, d1, d2, d3)
         x1, x2, x3 = solve3(J, -R1, -R2, -R3)
         size = max(abs(x1), abs(x2), abs(x3))
@@ -263,6 +264,7 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol):
                                                    p, dtau)
             G3, g3, Q3, Qu3 = force_slope_power_sc(T3, kin.S3, kin.C3, kin.om3, mu_n, mu_s,
                                                    p, dtau)
+            rounds += 1
             S1, S2, S3 = _residual(u_n, hk, T1, T2, T3, G1, G2, G3)
             if S1 * S1 + S2 * S2 + S3 * S3 <= (1.0 - 1e-4 * lam) * norm0 or lam < 1e-9:
                 break
@@ -289,7 +291,7 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol):
     v3 = A31 * z1 + A32 * z2 + A33 * z3
     e1, e2, e3 = solve3(J, v1, v2, v3)
     return StepSolution(U1, U2, U3, P1, P2, P3, 1.0 + e1, 1.0 + e2, 1.0 + e3, e3,
-                        Pu1, Pu2, Pu3, F3, d1, d2, d3, it, ok)
+                        Pu1, Pu2, Pu3, F3, d1, d2, d3, rounds, ok)
 
 
 @njit(cache=True)

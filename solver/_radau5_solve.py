@@ -35,9 +35,11 @@ from ._radau5 import ERROR_ORDER, PointPhysics
 from ._status import CONVERGED, NON_FINITE, NOT_PERIODIC, TOLERANCE_NOT_REACHED
 from ._sweep import (CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
                      SENS, STAGE, T, U, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
-                     new_workspace, snap_events)
+                     event_split_errors, new_workspace, snap_events)
 from ._switching import MAX_STOPS, kinematic_stops
 
+#: the stage tolerance is at most this share of delta_tau (p = 0; ``_stage_atol``)
+BAND_SHARE = 0.01
 #: tolerance of the loose shooting (step 2)
 LOOSE_RTOL = 1e-2
 #: at most this many loose sweeps
@@ -52,10 +54,26 @@ MAX_FROZEN_SWEEPS = 30
 #: times the state events are moved back onto nodes after the shooting moved them
 MAX_SNAPS = 2
 DEBUG = False
+#: the force evaluations of a solve, by phase (``solve_point``'s last output)
+COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE = 0, 1, 2, 3
+N_COSTS = 4
 #: first step of the first sweep
 FIRST_STEP = 1.0 / 16.0
 #: workspace capacity a thread starts with (steps; it doubles when a point needs more)
 START_CAPACITY = 512
+
+
+@njit(cache=True)
+def _stage_atol(rtol, scale, phys):
+    """The stage Newton's tolerance: ``_periodic.stage_tolerance`` of the scale, and for p = 0
+    at most BAND_SHARE delta_tau: where the body sticks F rises by O(mu) across a band of
+    u ~delta_tau wide, and stages solved only to a tolerance wider than it land anywhere on
+    the saturated force (measured: delta 1e-10, tolerance 4e-8 V, u chattering +-1e-6 around
+    rest, 131,072 steps)."""
+    atol = stage_tolerance(rtol, scale)
+    if phys.p == 0.0:
+        atol = min(atol, BAND_SHARE * phys.dtau)
+    return atol
 
 
 @njit(cache=True)
@@ -134,8 +152,9 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
 
     Returns
     -------
-    (W, int_u, int_pi, u0, status, n_steps, sweeps, estimate): W possibly grown; the sweep's
-    solution is in its first n_steps columns.
+    (W, int_u, int_pi, u0, status, n_steps, sweeps, estimate, evaluations): W possibly
+    grown; the sweep's solution is in its first n_steps columns; evaluations (N_COSTS,) the
+    evaluations of F by phase (COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE).
     """
     stops = np.empty(MAX_STOPS)
     n_stops = kinematic_stops(code, params, corners, stops)
@@ -144,7 +163,6 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
         for c in corners:
             if stops[j] == c:
                 stop_is_corner[j] = True
-    atol = stage_tolerance(rtol, vscale)
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
     loose = max(LOOSE_RTOL, rtol)
     u0 = u_guess
@@ -152,6 +170,7 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
     empty = np.zeros(1)
     model = WeightModel(empty, empty, empty, empty, 0)
     sweeps = 0
+    evals = np.zeros(N_COSTS, dtype=np.int64)
     N = 0
     nan = math.nan
     # step 2: loose shooting, judged in u alone, relative to V (int u and int Pi are not
@@ -160,85 +179,97 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
     lo, hi = -bound, bound
     scale_u = scale_p = 1.0
     for _ in range(MAX_LOOSE_SWEEPS):
-        W, N, status, _ = adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0,
-                                         h_first, TARGET_SHARE * loose, vscale, math.inf,
-                                         model, stage_tolerance(loose, vscale), W, max_steps,
-                                         True)
+        W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops,
+                                            u0, h_first, TARGET_SHARE * loose, vscale, math.inf,
+                                            model, _stage_atol(loose, vscale, phys), W, max_steps,
+                                            True)
         sweeps += 1
+        evals[COST_LOOSE] += e
         if status != CONVERGED:
-            return W, nan, nan, u0, status, N, sweeps, math.inf
+            return W, nan, nan, u0, status, N, sweeps, math.inf, evals
         int_u, int_p = _integrals(W, N)
         scale_u = max(abs(int_u), 1e-3 * vscale)
         scale_p = abs(int_p) if int_p != 0.0 else 1.0
         g, one_minus_M = _period_map(W, N, u0)
         if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-            return W, nan, nan, u0, NON_FINITE, N, sweeps, math.inf
+            return W, nan, nan, u0, NON_FINITE, N, sweeps, math.inf, evals
         node_weights(W, N, one_minus_M)
         model = _model(W, N, np.full(N, math.inf))
         u_new, lo, hi = _newton_update(u0, g, one_minus_M, lo, hi)
         moved = abs(u_new - u0)
         u0 = u_new
+        if DEBUG:
+            print("loose N", N, "moved/V", moved / vscale, "1-M", one_minus_M)
         if moved <= loose * vscale:
             break
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
-    atol = stage_tolerance(rtol, scale_u)
+    atol = _stage_atol(rtol, scale_u, phys)
     h_first = (W[T, 1] - W[T, 0]) * (rtol / loose) ** (1.0 / ERROR_ORDER)
     estimate = math.inf
     ceilings = np.full(N, math.inf)
     for _ in range(MAX_ROUNDS):
-        W, N, status, _ = adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0,
-                                         h_first, TARGET_SHARE * rtol, scale_u, scale_p, model,
-                                         atol, W, max_steps, True)
+        W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops,
+                                            u0, h_first, TARGET_SHARE * rtol, scale_u, scale_p,
+                                            model, atol, W, max_steps, True)
         sweeps += 1
+        evals[COST_ADAPTIVE] += e
         if status != CONVERGED:
-            return W, nan, nan, u0, status, N, sweeps, math.inf
+            return W, nan, nan, u0, status, N, sweeps, math.inf, evals
         corner_nodes = np.zeros(N, dtype=np.bool_)
         for n in range(N - 1):
             corner_nodes[n + 1] = W[END_KIND, n] == CORNER_STOP
-        converged = False
-        one_minus_M = 1.0
-        g = 0.0
         for snap in range(MAX_SNAPS + 1):
             lo, hi = -bound, bound
             converged = False
+            one_minus_M = 1.0
+            g = 0.0
             for _ in range(MAX_FROZEN_SWEEPS):
                 g, one_minus_M = _period_map(W, N, u0)
                 if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-                    return W, nan, nan, u0, NON_FINITE, N, sweeps, math.inf
+                    return W, nan, nan, u0, NON_FINITE, N, sweeps, math.inf, evals
                 if abs(g) <= tol_fix * abs(one_minus_M):
                     converged = True
                     break
                 u0, lo, hi = _newton_update(u0, g, one_minus_M, lo, hi)
-                status, _ = frozen_sweep(code, params, phys, u0, atol, W, N)
+                status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
                 sweeps += 1
+                evals[COST_FROZEN] += e
                 if status != CONVERGED:
-                    return W, nan, nan, u0, status, N, sweeps, math.inf
-            if not converged or snap == MAX_SNAPS or snap_events(code, params, W, N) == 0:
+                    return W, nan, nan, u0, status, N, sweeps, math.inf, evals
+            if not converged or not abs(u0) < 0.999 * bound:
+                return W, nan, nan, u0, NOT_PERIODIC, N, sweeps, math.inf, evals
+            shift = g / one_minus_M
+            _shift(W, N, shift)
+            u0 += shift
+            evals[COST_ESTIMATE] += estimate_sweep(code, params, phys, corner_nodes, atol, W, N)[1]
+            split = np.zeros(N, dtype=np.bool_)
+            evals[COST_ESTIMATE] += event_split_errors(code, params, phys, atol, W, N, split)[1]
+            node_weights(W, N, one_minus_M)
+            int_u, int_p = _integrals(W, N)
+            scale_u = max(abs(int_u), 1e-3 * vscale)
+            scale_p = abs(int_p) if int_p != 0.0 else 1.0
+            shares = np.zeros(N)
+            e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
+            estimate = combine(e_u, e_p, scale_u, scale_p)
+            if DEBUG:
+                worst = np.argmax(shares)
+                print("round N", N, "estimate", estimate / rtol, "worst share",
+                      shares[worst] / rtol, "at", W[T, worst], "h",
+                      W[T, worst + 1] - W[T, worst], "sweeps", sweeps, "split", split.sum())
+            if estimate <= rtol:
+                return W, int_u, int_p, u0, CONVERGED, N, sweeps, estimate, evals
+            # events off the nodes whose split asks for it are moved onto nodes (the
+            # step sequence is kept), other errors refine in a new adaptive sweep
+            wanted = np.zeros(N, dtype=np.bool_)
+            for n in range(N):
+                wanted[n] = split[n] and shares[n] > TARGET_SHARE * rtol * (W[T, n + 1] - W[T, n])
+            if snap == MAX_SNAPS or snap_events(code, params, phys, atol, W, N, wanted) == 0:
                 break
-            # the moved steps are solved again from the same u(0) before the shooting resumes
-            status, _ = frozen_sweep(code, params, phys, u0, atol, W, N)
+            status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
             sweeps += 1
+            evals[COST_FROZEN] += e
             if status != CONVERGED:
-                return W, nan, nan, u0, status, N, sweeps, math.inf
-        if not converged or not abs(u0) < 0.999 * bound:
-            return W, nan, nan, u0, NOT_PERIODIC, N, sweeps, math.inf
-        shift = g / one_minus_M
-        _shift(W, N, shift)
-        u0 += shift
-        estimate_sweep(code, params, phys, corner_nodes, atol, W, N)
-        node_weights(W, N, one_minus_M)
-        int_u, int_p = _integrals(W, N)
-        scale_u = max(abs(int_u), 1e-3 * vscale)
-        scale_p = abs(int_p) if int_p != 0.0 else 1.0
-        shares = np.zeros(N)
-        e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
-        estimate = combine(e_u, e_p, scale_u, scale_p)
-        if DEBUG:
-            worst = np.argmax(shares)
-            print("round N", N, "estimate", estimate / rtol, "worst share", shares[worst] / rtol,
-                  "at", W[T, worst], "h", W[T, worst + 1] - W[T, worst], "sweeps", sweeps)
-        if estimate <= rtol:
-            return W, int_u, int_p, u0, CONVERGED, N, sweeps, estimate
+                return W, nan, nan, u0, status, N, sweeps, math.inf, evals
         ceilings = np.empty(N)
         asked = refinement_ceiling(W, N, shares, TARGET_SHARE * rtol, ceilings)
         if asked == 0:
@@ -247,26 +278,28 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
                 ceilings[n] = shrink * (W[T, n + 1] - W[T, n])
         model = _model(W, N, ceilings)
         h_first = min(h_first, W[T, 1] - W[T, 0])
-    return W, nan, nan, u0, TOLERANCE_NOT_REACHED, N, sweeps, estimate
+    return W, nan, nan, u0, TOLERANCE_NOT_REACHED, N, sweeps, estimate, evals
 
 
 @njit(cache=True)
 def _solve_chunk(c, chunks, code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale,
-                 u_guess, max_steps, int_u, int_pi, u0, status, n_steps, sweeps, estimate):
+                 u_guess, max_steps, int_u, int_pi, u0, status, n_steps, sweeps, estimate,
+                 evaluations):
     """The points c, c + chunks, ... of ``solve_points`` on one workspace."""
     W = new_workspace(START_CAPACITY)
     for i in range(c, params.shape[0], chunks):
         phys = PointPhysics(kappa[i], mu_n[i], mu_s[i], p[i], dtau[i])
-        W, int_u[i], int_pi[i], u0[i], status[i], n_steps[i], sweeps[i], estimate[i] = \
+        W, int_u[i], int_pi[i], u0[i], status[i], n_steps[i], sweeps[i], estimate[i], e = \
             solve_point(code, params[i], corners[i], phys, rtol, vscale[i], u_guess[i],
                         max_steps, W)
+        evaluations[i, :] = e
 
 
 @njit(cache=True, parallel=True)
 def solve_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale, u_guess,
                  max_steps, threads):
     """``solve_point`` over every point: (int_u, int_pi, u0, status, n_steps, sweeps,
-    estimate), each (n_points,).  The points are dealt to the threads' chunks in turn (point
+    estimate), each (n_points,), and the evaluations of F, (n_points, N_COSTS).  The points are dealt to the threads' chunks in turn (point
     i to chunk i mod chunks), so that numba's static split of the chunks gives each thread
     a share of the hard points; each chunk keeps one workspace."""
     n = params.shape[0]
@@ -277,11 +310,13 @@ def solve_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale
     n_steps = np.zeros(n, dtype=np.int64)
     sweeps = np.zeros(n, dtype=np.int64)
     estimate = np.full(n, np.inf)
+    evaluations = np.zeros((n, N_COSTS), dtype=np.int64)
     chunks = max(min(n, 4 * threads), 1)
     for c in prange(chunks):
         _solve_chunk(c, chunks, code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale,
-                     u_guess, max_steps, int_u, int_pi, u0, status, n_steps, sweeps, estimate)
-    return int_u, int_pi, u0, status, n_steps, sweeps, estimate
+                     u_guess, max_steps, int_u, int_pi, u0, status, n_steps, sweeps, estimate,
+                     evaluations)
+    return int_u, int_pi, u0, status, n_steps, sweeps, estimate, evaluations
 
 
 @njit(cache=True)
@@ -289,7 +324,7 @@ def point_series(code, params, corners, phys, rtol, vscale, u_guess, max_steps):
     """``solve_point`` of one point, returning also (tau at the nodes, u at the nodes)
     without tau = 1."""
     W = new_workspace(START_CAPACITY)
-    W, int_u, int_pi, u0, status, N, sweeps, estimate = solve_point(
+    W, int_u, int_pi, u0, status, N, sweeps, estimate, _ = solve_point(
         code, params, corners, phys, rtol, vscale, u_guess, max_steps, W)
     return W[T, :N].copy(), W[U, :N].copy(), status
 
@@ -312,7 +347,7 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
     out = solve_points(code, params, corners, physics.inertia_factor, physics.mu_n,
                        physics.mu_s, physics.p, physics.delta_tau, float(rtol),
                        np.maximum(vscale, 1e-300), u_guess, int(max_steps), get_num_threads())
-    int_u, int_pi, u0, status, n_steps, sweeps, estimate = out
+    int_u, int_pi, u0, status, n_steps, sweeps, estimate, evaluations = out
     series = None
     if return_series:
         series = []
@@ -323,4 +358,4 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
                                      max(vscale[i], 1e-300), u_guess[i], int(max_steps))
             series.append((u, tau))
     return dict(int_u=int_u, int_pi=int_pi, status=status, estimate=estimate, n_tau=n_steps,
-                iterations=sweeps, still=~moving, series=series)
+                iterations=sweeps, still=~moving, series=series, evaluations=evaluations)

@@ -129,6 +129,8 @@ class SolveResult:
     grids), n_tau (steps per period of the final grid);
     u : u(tau) at the final grid's nodes, shape (n_points, n_tau), or None;
     tau : those nodes, shape (n_points, n_tau), or None.
+    force_evaluations : evaluations of F per point by phase (``radau5`` only: loose shooting,
+    target sweeps, frozen-grid sweeps, estimates; shape (n_points, 4)), or None.
     Failed points have NaN in every float output.
     """
 
@@ -150,6 +152,7 @@ class SolveResult:
     tau: np.ndarray | None = None
     seconds: float = 0.0
     method: str = "periodic"
+    force_evaluations: np.ndarray | None = None
 
     def point(self, i):
         """Dict of the scalar outputs of point ``i``."""
@@ -646,7 +649,8 @@ def _solve_radau5(kinematics, physics, rtol, return_series, max_steps, start):
     return SolveResult(
         **outputs, status=status, converged=status == CONVERGED, error_estimate=estimate,
         iterations=out["iterations"], n_tau=out["n_tau"], u=u_arr, tau=tau_arr,
-        seconds=time.perf_counter() - start, method="radau5")
+        seconds=time.perf_counter() - start, method="radau5",
+        force_evaluations=out["evaluations"])
 
 
 @njit(cache=True)

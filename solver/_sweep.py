@@ -39,7 +39,8 @@ from ._radau5 import (C1, C2, StepError, THETA_LATE, THETA_MID, SampleKinematics
 from ._status import CONVERGED, NON_FINITE, STAGE_SOLVE_FAILED, STEP_BUDGET_EXCEEDED, \
     TOLERANCE_NOT_REACHED
 from ._step_control import MIN_FACTOR, predict_factor
-from ._switching import N_STATE_FUNCTIONS, locate_state_event, state_function
+from ._switching import (N_STATE_FUNCTIONS, STOP, TANGENTIAL, exit_functions, locate_exit,
+                         locate_state_event, rate_slope, state_function)
 
 # ---------------------------------------------------------------- workspace fields
 T = 0            # node times tau_n, n = 0 .. N (tau_N = 1)
@@ -72,15 +73,28 @@ STATE_EVENT = 3.0
 
 #: the smallest step (in tau, period 1): below it a sweep fails (TOLERANCE_NOT_REACHED)
 MIN_STEP = 2.0 ** -40
+#: a step this short is accepted whatever its error (which the estimate counts): next to a
+#: power law's corner omega ~ z^(gamma - 1), and for gamma near 1 (1.035 measured) the error
+#: per unit length does not fall as steps shrink, so no step size meets it: the steps
+#: approached the corner geometrically down to MIN_STEP and the sweep failed
+ACCEPT_STEP = 2.0 ** -36
 #: a step is stretched to a stop within this factor of it, and split evenly up to twice it
 STRETCH = 1.25
 #: a state event closer than this share of its step to the step's end is taken to be on it
 EVENT_END_SHARE = 1e-6
 #: state switching functions within this share of their terms' size have no sign
 SIGN_ROUNDING = 64.0 * 2.0 ** -52
+#: a switching function's value has a sign beyond this many stage tolerances
+EVENT_NOISE = 8.0
+#: ... and a sign change is an event where its sides differ by more than this many delta_tau
+CROSSING_BAND = 4.0
+#: the friction's band: the body is at rest where |g| is within this many delta_tau (stops)
+EVENT_BAND = 10.0
 #: a sweep gives up after this many attempted steps per accepted one (plus 16)
-MAX_ATTEMPTS_PER_STEP = 8
+MAX_ATTEMPTS_PER_STEP = 32
 DEBUG = False
+#: a state event within this share of a recorded step's end counts as on it (rounding)
+SPLIT_SHARE = 1e-9
 #: an event is cut at most this many times in a row (the located root moves as the step
 #: shrinks; past this it is accepted where the last cut put it)
 MAX_EVENT_CUTS = 4
@@ -237,24 +251,30 @@ def _record(W, n, t0, h, u_n, sol, err, kin, end_kind):
 
 
 @njit(cache=True)
-def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, band):
+def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol, dtau):
     """The earliest sign change of a state switching function across the step, sampled at
     its start, its stages and its end along the solution: (k, theta_a, theta_b, f_a, f_b),
-    or k = -1 where there is none.  Only values beyond ``band`` times their terms' size have
-    a sign: rounding (a body at rest at tau = 0 has g = +-1e-17).  Not the friction's band
-    of width ~delta_tau: a step that ends just past a corner of F, as a cut to an event
-    located on a longer step's polynomial can, has its end inside it (measured: the cut
-    steps then kept the corner 3 % of the step inside and were rejected, 1e3 rtol over, down
-    to steps of 1e-6)."""
+    or k = -1 where there is none.
+
+    A value has a sign only beyond the noise of the stage values (EVENT_NOISE times the
+    stage tolerance ``atol``, and rounding: a body at rest at tau = 0 has g = +-1e-17), and a
+    sign change is a crossing only where one side lies beyond EVENT_BAND delta_tau: inside
+    the friction's band F is smooth (a stuck g whose sign changes with the force it must
+    hold is no corner; cut there, a sweep at delta 1e-10 took 1e5 steps of 1e-11).  Not
+    both sides beyond it: a step cut to an event located on a longer step's polynomial can
+    end just past the corner, inside the band (measured: such steps kept the corner 3 % of
+    the step inside and were rejected, 1e3 rtol over, down to steps of 1e-6)."""
     best_k = -1
     best_a = 2.0
     best_b = 2.0
     best_fa = 0.0
     best_fb = 0.0
+    noise = EVENT_NOISE * atol
+    sharp = CROSSING_BAND * dtau
     for k in range(N_STATE_FUNCTIONS):
         f_prev = state_function(k, u_n, S0, om0)
         th_prev = 0.0
-        signed = abs(f_prev) > band * (abs(u_n) + abs(om0))
+        signed = abs(f_prev) > max(noise, SIGN_ROUNDING * (abs(u_n) + abs(om0)))
         for i in range(3):
             if i == 0:
                 th, u, S, om = C1, sol.U1, kin.S1, kin.om1
@@ -263,9 +283,9 @@ def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, band):
             else:
                 th, u, S, om = 1.0, sol.U3, kin.S3, kin.om3
             f = state_function(k, u, S, om)
-            if abs(f) <= band * (abs(u) + abs(om)):
+            if abs(f) <= max(noise, SIGN_ROUNDING * (abs(u) + abs(om))):
                 continue
-            if signed and f_prev * f < 0.0:
+            if signed and f_prev * f < 0.0 and abs(f_prev - f) > sharp:
                 if th_prev < best_a:
                     best_k, best_a, best_b, best_fa, best_fb = k, th_prev, th, f_prev, f
                 break
@@ -273,6 +293,83 @@ def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, band):
             th_prev = th
             signed = True
     return best_k, best_a, best_b, best_fa, best_fb
+
+
+@njit(cache=True)
+def _stop_reach(code, params, phys, t, u, f0, band):
+    """How far from (t, u) the line of g = u + omega S / 4, with the slipping body's slope
+    kappa F + (omega S / 4)', reaches the friction's band (p = 0), or -1 where g does not
+    approach it (or is in it already)."""
+    if phys.p != 0.0 or band <= 0.0:
+        return -1.0
+    phi, om = angle_and_rate(code, params, t, t + 1e-9)
+    S = math.sin(phi)
+    g = u + 0.25 * om * S
+    if abs(g) <= band:
+        return -1.0
+    slope = f0 + 0.25 * (rate_slope(code, params, t, t + 1e-9) * S + om * om * math.cos(phi))
+    reach = (math.copysign(band, g) - g) / slope if slope != 0.0 else -1.0
+    return reach if reach > 0.0 else -1.0
+
+
+@njit(cache=True)
+def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, first_cut):
+    """theta in (0, 1] of the earliest event in a solved step, or -1 where it holds none:
+
+    - a sign change of g or of the outer end's velocity (``_first_crossing``), located on
+      the collocation polynomial;
+    - for p = 0, a stop: g enters the friction's band (|g| <= EVENT_BAND delta_tau) from
+      outside and stays in it (no sign change need occur: the body stops and sticks), located
+      where |g| reaches the band's edge.  A stage can stick early on a spurious root of the
+      stage equations where h kappa mu > |u_n| (the polynomial then stops too early: 2.3
+      steps early measured at mu_n/mu_s 3,020), so on a step's first cut (``first_cut``) the
+      stop is not put before the line of g from the step's start, whose slope kappa F(u_n)
+      + (omega S / 4)' is the slipping body's;
+    - for p = 0, an exit: a step that starts in the band, where one of the exit functions
+      (``_switching.exit_functions``) turns positive.
+    """
+    theta = 2.0
+    k, a, b, fa, fb = _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol,
+                                      phys.dtau)
+    if k >= 0:
+        theta = locate_state_event(k, code, params, t0, h, u_n, sol.U1, sol.U2, sol.U3, fa, fb,
+                                   a, b)
+    band = EVENT_BAND * phys.dtau
+    if phys.p == 0.0 and band > 0.0:
+        g0 = state_function(TANGENTIAL, u_n, S0, om0)
+        if abs(g0) > band:
+            g1 = state_function(TANGENTIAL, sol.U1, kin.S1, kin.om1)
+            g2 = state_function(TANGENTIAL, sol.U2, kin.S2, kin.om2)
+            g3 = state_function(TANGENTIAL, sol.U3, kin.S3, kin.om3)
+            if abs(g3) <= band:  # the step ends at rest: where did it stop?
+                th_a, f_a, th_b, f_b = 0.0, abs(g0) - band, 1.0, abs(g3) - band
+                if abs(g2) > band:
+                    th_a, f_a = C2, abs(g2) - band
+                elif abs(g1) > band:
+                    th_a, f_a, th_b, f_b = C1, abs(g1) - band, C2, abs(g2) - band
+                else:
+                    th_b, f_b = C1, abs(g1) - band
+                stop = locate_state_event(STOP, code, params, t0, h, u_n, sol.U1, sol.U2,
+                                          sol.U3, f_a, f_b, th_a, th_b, band)
+                if first_cut:
+                    phi, om = angle_and_rate(code, params, t0, t0 + 0.5 * h)
+                    slope = f0 + 0.25 * (rate_slope(code, params, t0, t0 + 0.5 * h)
+                                         * math.sin(phi) + om * om * math.cos(phi))
+                    reach = (math.copysign(band, g0) - g0) / slope if slope != 0.0 else -1.0
+                    if reach > 0.0:
+                        stop = max(stop, min(reach / h, 1.0))
+                theta = min(theta, stop)
+        else:  # held in the band: does it leave within the step?
+            side = t0 + 0.5 * h
+            up0, down0 = exit_functions(code, params, t0, side, phys, band)
+            up1, down1 = exit_functions(code, params, t0 + h, side, phys, band)
+            if up0 <= 0.0 < up1:
+                theta = min(theta, (locate_exit(0, code, params, t0, t0 + h, up0, up1, side,
+                                                phys, band) - t0) / h)
+            if down0 <= 0.0 < down1:
+                theta = min(theta, (locate_exit(1, code, params, t0, t0 + h, down0, down1,
+                                                side, phys, band) - t0) / h)
+    return theta if theta <= 1.0 else -1.0
 
 
 @njit(cache=True)
@@ -294,8 +391,9 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_fir
 
     Returns
     -------
-    (W, N, status, h_next): the workspace (possibly grown), the number of steps, a status
-    code (CONVERGED when the sweep reached tau = 1), the controller's last proposal.
+    (W, N, status, h_next, evaluations): the workspace (possibly grown), the number of
+    steps, a status code (CONVERGED when the sweep reached tau = 1), the controller's last
+    proposal, and the evaluations of F made.
     """
     t = 0.0
     u = u0
@@ -308,7 +406,6 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_fir
     ratio_old = 0.0
     next_stop = 1
     k_model = 0
-    band = SIGN_ROUNDING
     have_previous = False
     prev_h = 0.0
     prev_u = 0.0
@@ -318,9 +415,12 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_fir
     event_cut = False  # h was just cut to a state event: no stretching to a stop
     attempts = 0
     stretch = True  # the proposal may be stretched to a stop (not after a rejection)
+    evaluations = 1
+    band = EVENT_BAND * phys.dtau
+    stop_reach = _stop_reach(code, params, phys, t, u, f0, band)
     while t < 1.0:
         if n >= max_steps:
-            return W, n, STEP_BUDGET_EXCEEDED, h
+            return W, n, STEP_BUDGET_EXCEEDED, h, evaluations
         t_stop = stops[next_stop] if next_stop < n_stops else 1.0
         lam, mu, ceiling, k_model = _model_at(model, t, k_model)
         h = min(h, ceiling)
@@ -337,9 +437,16 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_fir
                 end_kind = CORNER_STOP
         elif 2.0 * h > room:
             h = 0.5 * room
+        if 64.0 * MIN_STEP < stop_reach < h and not event_cut:
+            # the slipping body reaches the band within the step: end the step there before
+            # solving it (the stage Newton across a stop took up to 356 evaluations of the
+            # stages, measured at delta 1e-10; ending at the stop, a few)
+            h = stop_reach
+            at_stop = False
+            end_kind = ORDINARY
         attempts += 1
         if not h >= MIN_STEP or attempts > MAX_ATTEMPTS_PER_STEP * (n + 16):
-            return W, n, TOLERANCE_NOT_REACHED, h
+            return W, n, TOLERANCE_NOT_REACHED, h, evaluations
         kin = stage_kinematics(code, params, t, h)
         if have_previous:  # the last step's collocation polynomial, extrapolated
             r = h / prev_h
@@ -349,6 +456,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_fir
         else:
             g1 = g2 = g3 = u
         sol, its = solve_step(u, g1, g2, g3, h, kin, phys, atol)
+        evaluations += 3 * its
         if not sol.ok:
             h *= 0.5
             cuts = 0
@@ -357,13 +465,12 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_fir
         # events first: a step whose stages straddle a corner of F has a large error, and
         # shrinking it by the controller would only approach the corner step by step
         if events and cuts < MAX_EVENT_CUTS:
-            k, a, b, fa, fb = _first_crossing(code, params, t, h, u, sol, kin, S0, om0, band)
-            if k >= 0:
-                theta = locate_state_event(k, code, params, t, h, u, sol.U1, sol.U2, sol.U3,
-                                           fa, fb, a, b)
+            theta = find_event(code, params, phys, t, h, u, sol, kin, S0, om0, f0, atol,
+                               cuts == 0)
+            if theta > 0.0:
                 at_start = have_previous and theta * h <= EVENT_END_SHARE * prev_h
                 if DEBUG:
-                    print("event", t, h, k, a, b, theta, at_start)
+                    print("event", t, h, theta, at_start)
                 if theta < 1.0 - EVENT_END_SHARE and theta * h >= MIN_STEP and not at_start:
                     h *= theta
                     cuts += 1
@@ -373,17 +480,26 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_fir
                     end_kind = STATE_EVENT
         err, _ = defect_error(u, f0, J0, P0, Pu0, sol, h,
                               sample_kinematics(code, params, t, h), phys)
+        evaluations += 2
         lam_end, mu_end, _, k_model = _model_at(model, t + h, k_model)
         ratio = weighted_error(err, lam_end, mu_end, scale_u, scale_p,
                                estimate_floor(u, sol, atol), h) / (target * h)
         if DEBUG:
-            print("step", t, h, ratio, sol.iterations, end_kind)
-        if not ratio <= 1.0:
+            print("step", t, h, ratio, sol.iterations, end_kind, u, sol.U1, sol.U2, sol.U3,
+                  err.u, err.int_u, err.int_pi, lam_end, mu_end, f0)
+        if not ratio <= 1.0 and not (h <= ACCEPT_STEP and math.isfinite(ratio)):
             h *= max(MIN_FACTOR, predict_factor(h, h_old, ratio, ratio_old)) \
                 if math.isfinite(ratio) else MIN_FACTOR
             cuts = 0
             stretch = False
             continue
+        if not at_stop and t_stop - (t + h) <= 4.0 * MIN_STEP:
+            at_stop = True  # (a cut to an event that close to the stop leaves no room after it)
+            h = t_stop - t
+            if next_stop < n_stops and stop_is_corner[next_stop]:
+                end_kind = CORNER_STOP
+            elif end_kind == ORDINARY:
+                end_kind = KINEMATIC_STOP
         W = grown(W, n)
         _record(W, n, t, h, u, sol, err, kin, end_kind)
         cuts = 0
@@ -402,15 +518,17 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_fir
         u = sol.U3
         n += 1
         if end_kind == CORNER_STOP:
+            evaluations += 1
             f0, J0, P0, Pu0 = start_values(code, params, t, t + 1e-9, u, phys)
             phi0, om0 = angle_and_rate(code, params, t, t + 1e-9)
             S0 = math.sin(phi0)
         else:
             f0, J0, P0, Pu0 = phys.kappa * sol.F3, phys.kappa * sol.d3, sol.P3, sol.Pu3
             S0, om0 = kin.S3, kin.om3
+        stop_reach = _stop_reach(code, params, phys, t, u, f0, band)
         h = h_next
     W[T, n] = 1.0
-    return W, n, status, h
+    return W, n, status, h, evaluations
 
 
 @njit(cache=True)
@@ -419,7 +537,7 @@ def frozen_sweep(code, params, phys, u0, atol, W, N):
     at their previous values moved along their sensitivities; the step kinematics are
     reused).  The error estimates are left as they were (``estimate_sweep`` makes them).
 
-    Returns (status, stage iterations)."""
+    Returns (status, evaluations of F)."""
     u = u0
     iterations = 0
     for n in range(N):
@@ -432,7 +550,7 @@ def frozen_sweep(code, params, phys, u0, atol, W, N):
         sol, its = solve_step(u, W[STAGE, n] + W[SENS, n] * du,
                               W[STAGE + 1, n] + W[SENS + 1, n] * du,
                               W[STAGE + 2, n] + W[SENS + 2, n] * du, h, kin, phys, atol)
-        iterations += its
+        iterations += 3 * its
         if not sol.ok:
             return (STAGE_SOLVE_FAILED if math.isfinite(sol.U3) else NON_FINITE), iterations
         zero = StepError(W[ERR, n], W[ERR + 1, n], W[ERR + 2, n])
@@ -450,6 +568,7 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
     the embedded estimate."""
     kappa = phys.kappa
     fallbacks = 0
+    evaluations = 2 * N
     f0 = J0 = P0 = Pu0 = 0.0
     for n in range(N):
         t0 = W[T, n]
@@ -457,6 +576,7 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
         u = W[U, n]
         if n == 0 or corner_nodes[n]:
             f0, J0, P0, Pu0 = start_values(code, params, t0, t0 + 0.5 * h, u, phys)
+            evaluations += 1
         step = StepSolution(W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n], W[POWER, n],
                             W[POWER + 1, n], W[POWER + 2, n], W[SENS, n], W[SENS + 1, n],
                             W[SENS + 2, n], W[M_MINUS_1, n], W[PU_STAGE, n],
@@ -470,7 +590,7 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
         W[ERR + 2, n] = err.int_pi
         W[FLOOR, n] = estimate_floor(u, step, atol)
         f0, J0, P0, Pu0 = kappa * step.F3, kappa * step.d3, step.P3, step.Pu3
-    return fallbacks
+    return fallbacks, evaluations
 
 
 @njit(cache=True)
@@ -482,34 +602,22 @@ def _stage_kinematics_into(code, params, W, n):
 
 
 @njit(cache=True)
-def snap_events(code, params, W, N):
+def snap_events(code, params, phys, atol, W, N, wanted):
     """Move nodes onto the state events that lie inside the recorded steps of ``W`` (the
     events an adaptive sweep put on nodes move when the shooting then moves u(0)): the event
     in step n is located on its collocation polynomial (``_switching.locate_state_event``)
     and the nearer of the step's two nodes moves onto it, unless that node is a kinematic
     stop (or tau = 0, 1), in which case the other one does, unless it is one too.  The
     moved steps' stage kinematics are recomputed; their stages are left for the next
-    ``frozen_sweep`` to correct.  Returns how many nodes moved."""
+    ``frozen_sweep`` to correct.  Only the steps ``wanted`` (N,) are looked at.  Returns how
+    many nodes moved."""
     moved = 0
     for n in range(N):
+        if not wanted[n]:
+            continue
         t0 = W[T, n]
         h = W[T, n + 1] - t0
-        if n == 0:
-            phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
-            S0 = math.sin(phi0)
-        else:
-            S0, om0 = W[SIN + 2, n - 1], W[OMEGA + 2, n - 1]
-        sol = StepSolution(W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n], 0.0, 0.0, 0.0, 0.0,
-                           0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, True)
-        kin = StageKinematics(W[SIN, n], W[SIN + 1, n], W[SIN + 2, n], W[COS, n],
-                              W[COS + 1, n], W[COS + 2, n], W[OMEGA, n], W[OMEGA + 1, n],
-                              W[OMEGA + 2, n])
-        k, a, b, fa, fb = _first_crossing(code, params, t0, h, W[U, n], sol, kin, S0, om0,
-                                          SIGN_ROUNDING)
-        if k < 0:
-            continue
-        theta = locate_state_event(k, code, params, t0, h, W[U, n], sol.U1, sol.U2, sol.U3,
-                                   fa, fb, a, b)
+        theta = _interior_event(code, params, phys, atol, W, N, n)
         if theta <= EVENT_END_SHARE or theta >= 1.0 - EVENT_END_SHARE:
             continue
         right_free = n + 1 < N and W[END_KIND, n] != KINEMATIC_STOP \
@@ -530,3 +638,63 @@ def snap_events(code, params, W, N):
             _stage_kinematics_into(code, params, W, n + 1)
         moved += 1
     return moved
+
+
+@njit(cache=True)
+def _interior_event(code, params, phys, atol, W, N, n):
+    """theta of the first event (``find_event``) strictly inside recorded step n, or -1."""
+    t0 = W[T, n]
+    h = W[T, n + 1] - t0
+    if n == 0:
+        phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
+        S0 = math.sin(phi0)
+    else:
+        S0, om0 = W[SIN + 2, n - 1], W[OMEGA + 2, n - 1]
+    sol = StepSolution(W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n], 0.0, 0.0, 0.0, 0.0,
+                       0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, True)
+    kin = StageKinematics(W[SIN, n], W[SIN + 1, n], W[SIN + 2, n], W[COS, n], W[COS + 1, n],
+                          W[COS + 2, n], W[OMEGA, n], W[OMEGA + 1, n], W[OMEGA + 2, n])
+    theta = find_event(code, params, phys, t0, h, W[U, n], sol, kin, S0, om0, 0.0, atol,
+                       False)
+    return theta if SPLIT_SHARE < theta < 1.0 - SPLIT_SHARE else -1.0
+
+
+@njit(cache=True)
+def event_split_errors(code, params, phys, atol, W, N, split):
+    """The error of the recorded steps that hold a state event off their ends (the shooting
+    moved it after the adaptive sweep had put it on a node): each such step is solved again
+    as two steps split at the event, and the change of its end value and integrals replaces
+    its estimate where larger (the defect's samples need not see a corner between them).
+    ``split`` (N,) is set for those steps.  Returns (their count, evaluations of F)."""
+    count = 0
+    evaluations = 0
+    for n in range(N):
+        split[n] = False
+        theta = _interior_event(code, params, phys, atol, W, N, n)
+        if theta < 0.0:
+            continue
+        t0 = W[T, n]
+        h = W[T, n + 1] - t0
+        u_n = W[U, n]
+        U1, U2, U3 = W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n]
+        h1 = theta * h
+        h2 = h - h1
+        first, its1 = solve_step(u_n, dense_value(C1 * theta, u_n, U1, U2, U3),
+                              dense_value(C2 * theta, u_n, U1, U2, U3),
+                              dense_value(theta, u_n, U1, U2, U3), h1,
+                              stage_kinematics(code, params, t0, h1), phys, atol)
+        r = 1.0 - theta
+        second, its2 = solve_step(first.U3, dense_value(theta + C1 * r, u_n, U1, U2, U3),
+                               dense_value(theta + C2 * r, u_n, U1, U2, U3), U3, h2,
+                               stage_kinematics(code, params, t0 + h1, h2), phys, atol)
+        evaluations += 3 * (its1 + its2)
+        if not (first.ok and second.ok):
+            continue
+        iu1, ip1 = step_integrals(h1, first)
+        iu2, ip2 = step_integrals(h2, second)
+        W[ERR, n] = max(abs(W[ERR, n]), abs(second.U3 - U3))
+        W[ERR + 1, n] = max(abs(W[ERR + 1, n]), abs(iu1 + iu2 - W[INT_U, n]))
+        W[ERR + 2, n] = max(abs(W[ERR + 2, n]), abs(ip1 + ip2 - W[INT_P, n]))
+        split[n] = True
+        count += 1
+    return count, evaluations

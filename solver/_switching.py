@@ -30,6 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ._force import force_slope_power_sc
 from ._kinematics import FOURIER, angle_and_rate
 from ._radau5 import dense_value
 
@@ -47,17 +48,75 @@ STOP_GAP = 1e-12
 TANGENTIAL = 0   # g = u + omega S / 4: the link's tangential velocity is C g, its inner
 #                  end's normal velocity -S g
 OUTER_END = 1    # -S g + omega / 2: the normal velocity at the link's outer end
-N_STATE_FUNCTIONS = 2
+STOP = 2         # |g| - band: the junction comes to rest (p = 0: the body sticks)
+N_STATE_FUNCTIONS = 2  # those that are located at their sign changes (not STOP)
 
 
 @njit(cache=True)
-def state_function(k, u, S, om):
-    """State switching function ``k`` (TANGENTIAL or OUTER_END) at u, S = sin phi,
-    om = dphi/dtau."""
+def state_function(k, u, S, om, band=0.0):
+    """State switching function ``k`` (TANGENTIAL, OUTER_END or STOP, with the friction's
+    ``band``) at u, S = sin phi, om = dphi/dtau."""
     g = u + 0.25 * om * S
     if k == TANGENTIAL:
         return g
+    if k == STOP:
+        return abs(g) - band
     return -S * g + 0.5 * om
+
+
+@njit(cache=True)
+def rate_slope(code, params, t, side):
+    """d omega / d tau (phi'') by a central difference of the analytic omega on ``side``:
+    only the exit function's sign uses it."""
+    e = 1e-7
+    return (angle_and_rate(code, params, t + e, side)[1]
+            - angle_and_rate(code, params, t - e, side)[1]) / (2.0 * e)
+
+
+@njit(cache=True)
+def exit_functions(code, params, t, side, phys, band):
+    """(psi_up, psi_down) at t for a body held in the friction's band, g = u + omega S / 4
+    ~ 0 (p = 0): with u_s = -omega S / 4 the velocity that keeps the junction at rest,
+
+        psi_up   = kappa F(u_s + band) - u_s',    psi_down = u_s' - kappa F(u_s - band),
+
+    the force at the band's edges against the one the rest needs.  The body stays in the
+    band while both are negative and leaves it (upward, downward) where one turns positive:
+    a transversal zero, where g itself leaves zero tangentially (its second derivative
+    jumps there).  Functions of tau alone (u is u_s)."""
+    phi, om = angle_and_rate(code, params, t, side)
+    S = math.sin(phi)
+    C = math.cos(phi)
+    u_s = -0.25 * om * S
+    rate = -0.25 * (rate_slope(code, params, t, side) * S + om * om * C)
+    F_up = force_slope_power_sc(u_s + band, S, C, om, phys.mu_n, phys.mu_s, phys.p,
+                                phys.dtau)[0]
+    F_down = force_slope_power_sc(u_s - band, S, C, om, phys.mu_n, phys.mu_s, phys.p,
+                                  phys.dtau)[0]
+    return phys.kappa * F_up - rate, rate - phys.kappa * F_down
+
+
+@njit(cache=True)
+def locate_exit(which, code, params, a, b, fa, fb, side, phys, band):
+    """Zero of exit function ``which`` (0 up, 1 down) in [a, b] (fa fb < 0), Illinois."""
+    last = 0
+    c = a
+    for _ in range(100):
+        c = (a * fb - b * fa) / (fb - fa)
+        if b - a <= 1e-13 * max(1.0, abs(c)):
+            break
+        fc = exit_functions(code, params, c, side, phys, band)[which]
+        if fc == 0.0:
+            break
+        if fc * fa < 0.0:
+            if last == -1:
+                fa *= 0.5
+            b, fb, last = c, fc, -1
+        else:
+            if last == 1:
+                fb *= 0.5
+            a, fa, last = c, fc, 1
+    return c
 
 
 @njit(cache=True)
@@ -171,7 +230,7 @@ def kinematic_stops(code, params, corners, out):
 
 
 @njit(cache=True)
-def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b):
+def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b, band=0.0):
     """Zero of state function ``k`` along the step's collocation polynomial in theta in
     [a, b] (0 <= a < b <= 1), where its values are f_a, f_b of opposite signs: Illinois
     regula falsi to 1e-13 of the step.  Returns theta."""
@@ -183,7 +242,7 @@ def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b):
         if b - a <= 1e-13:
             break
         phi, om = angle_and_rate(code, params, t0 + c * h, side)
-        fc = state_function(k, dense_value(c, u_n, U1, U2, U3), math.sin(phi), om)
+        fc = state_function(k, dense_value(c, u_n, U1, U2, U3), math.sin(phi), om, band)
         if fc == 0.0:
             break
         if fc * f_a < 0.0:
