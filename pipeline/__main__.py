@@ -12,8 +12,10 @@ import sys
 import time
 from pathlib import Path
 
-from ._run import Session, run_scene
-from ._scene import Scene, SceneError, load_scene, parse_scene
+from ._registry import load_scene, parse_scene
+from ._run import run_scene
+from ._scene import Scene, SceneError
+from ._schedule import Session
 from ._store import StoreBusy, StoreMismatch
 
 EXIT_BAD_SCENE = 2
