@@ -24,7 +24,7 @@ import numpy as np
 
 from ._scene import Execution, ParseContext, parse_shape, type_name, scene_hash
 
-__all__ = ["STUDY_KINDS", "StudyCase", "StudyPoint", "StudyScene", "Sweep", "is_study", "parse_study",
+__all__ = ["STUDY_KINDS", "StudyCase", "StudyPoint", "StudyScene", "Sweep", "parse_study",
            "parse_study_scene"]
 
 STUDY_KINDS = ("accuracy", "stiffness")
@@ -436,12 +436,5 @@ def parse_study(doc: dict, text: str, file: str) -> StudyScene:
 
 
 def parse_study_scene(doc: dict, ctx, text: str) -> StudyScene:
-    """``parse_study`` with the signature of the scene-kind registry (``_scene.SCENE_KINDS``)."""
+    """``parse_study`` with the signature of a scene kind's parser (``_kind.SceneKind.parse``)."""
     return parse_study(doc, text, ctx.file)
-
-
-def is_study(doc) -> bool:
-    """True when the TOML document declares a study kind (dispatch from ``parse_scene``)."""
-    head = doc.get("scene") if isinstance(doc, dict) else None
-    return isinstance(head, dict) and head.get("kind", "grid") in STUDY_KINDS
-
