@@ -492,43 +492,43 @@ def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
     }
     for name, (values, dtype, attrs) in coords.items():
         create_array(g, name, shape=values.shape, chunks=values.shape, dtype=dtype, fill=0,
-                dims=(name,), attrs=attrs)[:] = values
+                     dims=(name,), attrs=attrs)[:] = values
     starts = scene.start_values()
     for j, name in enumerate(("start_A0", "start_A1")):
         create_array(g, name, shape=(n_s,), chunks=(n_s,), dtype=np.float64, fill=np.nan,
-                dims=("start",), attrs={"long_name": f"A_{j} of the start, uniform on (0, 1) [rad]"}
-                )[:] = starts[:, j]
+                     dims=("start",), attrs={"long_name": f"A_{j} of the start, uniform on (0, 1) [rad]"}
+                     )[:] = starts[:, j]
     chunks = _start_chunks(scene)
     create_array(g, "status", shape=scene.shape, chunks=chunks, dtype=np.int8, fill=NOT_COMPUTED,
-            dims=DIMS, attrs={"long_name": "optimiser stop reason", "flag_meanings": status_meanings()})
+                 dims=DIMS, attrs={"long_name": "optimiser stop reason", "flag_meanings": status_meanings()})
     create_array(g, "period_at_bound", shape=scene.shape, chunks=chunks, dtype=np.int8,
-            fill=NOT_COMPUTED, dims=DIMS,
-            attrs={"long_name": "1: the period ended at its box (1e-3 .. 1e4 x the start's): no "
-                                "interior optimum (T runs off, as p -> 2); never kept; -1 not computed"})
+                 fill=NOT_COMPUTED, dims=DIMS,
+                 attrs={"long_name": "1: the period ended at its box (1e-3 .. 1e4 x the start's): no "
+                                     "interior optimum (T runs off, as p -> 2); never kept; -1 not computed"})
     create_array(g, "ill_conditioned", shape=scene.shape, chunks=chunks, dtype=np.int8,
-            fill=NOT_COMPUTED, dims=DIMS,
-            attrs={"long_name": "1: ill-conditioned (Hessian condition above threshold, or the period "
-                                "at its bound: p near 2); 0: no; -1 not computed"})
+                 fill=NOT_COMPUTED, dims=DIMS,
+                 attrs={"long_name": "1: ill-conditioned (Hessian condition above threshold, or the period "
+                                     "at its bound: p near 2); 0: no; -1 not computed"})
     for name, text_ in START_FLOATS.items():
         create_array(g, name, shape=scene.shape, chunks=chunks, dtype=np.float64, fill=np.nan,
-                dims=DIMS, attrs={"long_name": text_})
+                     dims=DIMS, attrs={"long_name": text_})
     for name, text_ in START_INTS.items():
         create_array(g, name, shape=scene.shape, chunks=chunks, dtype=np.int32, fill=0, dims=DIMS,
-                attrs={"long_name": text_})
+                     attrs={"long_name": text_})
     create_array(g, "coefficients", shape=scene.shape + (n_c,), chunks=chunks + (n_c,),
-            dtype=np.float64, fill=np.nan, dims=DIMS + ("coefficient",),
-            attrs={"long_name": "optimal [A_0, A_k, B_k] as found (zero beyond the cell's Kmax) [rad]"})
+                 dtype=np.float64, fill=np.nan, dims=DIMS + ("coefficient",),
+                 attrs={"long_name": "optimal [A_0, A_k, B_k] as found (zero beyond the cell's Kmax) [rad]"})
     sizes = {"anisotropy_ratio": n_r, "max_wavenumber": n_k, "p": n_p, "rank": scene.keep.best,
              "coefficient": n_c, "tau": scene.keep.n_tau}
     for name, (dims, dtype, fill, long_name) in reduction_specs(scene).items():
         shape = tuple(sizes[d] for d in dims)
         create_array(g, name, shape=shape, chunks=shape, dtype=dtype, fill=fill, dims=dims,
-                attrs={"long_name": long_name, "reduction": "distinct_optima"})
+                     attrs={"long_name": long_name, "reduction": "distinct_optima"})
     grid = _chunk_grid(scene)
     sg = g.create_group(STATE_GROUP)
     create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
-            dims=tuple(f"chunk_{d}" for d in DIMS),
-            attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+                 dims=tuple(f"chunk_{d}" for d in DIMS),
+                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
     g.attrs[ATTRS_KEY] = {
         "format_version": FORMAT_VERSION, "kind": KIND, "kind_version": KIND_VERSION,
         "provenance": provenance(scene),

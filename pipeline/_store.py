@@ -259,7 +259,7 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
     g = open_group(store, "w")
     for a in scene.axes:
         create_array(g, a.name, shape=(a.size,), chunks=(a.size,), dtype=np.float64, fill=np.nan,
-                dims=(a.name,), attrs={**axis_attrs(a.name), "spacing": a.spacing})[:] = a.array()
+                     dims=(a.name,), attrs={**axis_attrs(a.name), "spacing": a.spacing})[:] = a.array()
     shape = scene.shape
     for name in scene.outputs + ("status",):
         dtype, fill = output_dtype(name)
@@ -279,33 +279,33 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
                          "sets": [list(x) for x in s.sets]}
             if s.dim not in g:
                 create_array(g, s.dim, shape=(len(s.labels),), chunks=(len(s.labels),), dtype=np.float64,
-                        fill=np.nan, dims=(s.dim,), attrs=attrs)[:] = np.asarray(s.labels)
+                             fill=np.nan, dims=(s.dim,), attrs=attrs)[:] = np.asarray(s.labels)
         rchunks = tuple(max(1, n) for n in rshape)
         for name, (dtype, fill, attrs) in arrays.items():
             create_array(g, name, shape=rshape, chunks=rchunks, dtype=dtype, fill=fill, dims=dims,
-                    attrs={**attrs, "reduction": r.name})
+                         attrs={**attrs, "reduction": r.name})
     if scene.series is not None:
         ser = scene.series
         n = len(ser.points)
         create_array(g, "series_point", shape=(n,), chunks=(n,), dtype=np.int32, fill=-1, dims=("series_point",),
-                attrs={"long_name": "index of a point where u(tau) is stored"})[:] = np.arange(n)
+                     attrs={"long_name": "index of a point where u(tau) is stored"})[:] = np.arange(n)
         create_array(g, "series_tau", shape=(ser.n_tau,), chunks=(ser.n_tau,), dtype=np.float64, fill=np.nan,
-                dims=("series_tau",), attrs={"long_name": "scaled time tau = t/T", "units": "1"}
-                )[:] = np.arange(ser.n_tau) / ser.n_tau
+                     dims=("series_tau",), attrs={"long_name": "scaled time tau = t/T", "units": "1"}
+                     )[:] = np.arange(ser.n_tau) / ser.n_tau
         for d in scene.dims:
             create_array(g, f"series_{d}", shape=(n,), chunks=(n,), dtype=np.float64, fill=np.nan,
-                    dims=("series_point",), attrs=axis_attrs(d))[:] = [dict(p)[d] for p in ser.points]
+                         dims=("series_point",), attrs=axis_attrs(d))[:] = [dict(p)[d] for p in ser.points]
         create_array(g, "series_u", shape=(n, ser.n_tau), chunks=(n, ser.n_tau), dtype=np.float64, fill=np.nan,
-                dims=("series_point", "series_tau"),
-                attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau"})
+                     dims=("series_point", "series_tau"),
+                     attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau"})
         create_array(g, "series_status", shape=(n,), chunks=(n,), dtype=np.int8, fill=NOT_COMPUTED,
-                dims=("series_point",), attrs={"long_name": "solver status of the series points",
-                                               "flag_meanings": status_meanings()})
+                     dims=("series_point",), attrs={"long_name": "solver status of the series points",
+                                                    "flag_meanings": status_meanings()})
     grid = tuple(-(-s // c) for s, c in zip(shape, chunks))
     sg = g.create_group(STATE_GROUP)
     create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
-            dims=tuple(f"chunk_{d}" for d in scene.dims),
-            attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+                 dims=tuple(f"chunk_{d}" for d in scene.dims),
+                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
     g.attrs[ATTRS_KEY] = {
         "format_version": FORMAT_VERSION,
         "provenance": provenance(scene),
