@@ -223,14 +223,14 @@ def create_study_skeleton(store: Path, scene: StudyScene, points_per_chunk: int)
     for name, (values, attrs) in point_parameters(scene).items():
         fill = -1 if values.dtype.kind == "i" else np.nan
         create_array(g, name, shape=values.shape, chunks=(c,), dtype=values.dtype, fill=fill, dims=("point",),
-                attrs=attrs)[:] = values
+                     attrs=attrs)[:] = values
     for name, (adims, dtype, fill, attrs) in study_arrays(scene).items():
         shape = tuple(dims[d] for d in adims)
         create_array(g, name, shape=shape, chunks=(c,) + shape[1:], dtype=dtype, fill=fill, dims=adims, attrs=attrs)
     n_chunks = -(-scene.n_points // c)
     sg = g.create_group(STATE_GROUP)
     create_array(sg, "chunk_done", shape=(n_chunks,), chunks=(1,), dtype=np.uint8, fill=0, dims=("chunk_point",),
-            attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
     g.attrs[ATTRS_KEY] = {
         "format_version": FORMAT_VERSION,
         "kind": scene.kind,
@@ -463,7 +463,8 @@ class StudyKind(SceneKind):
         return int(np.count_nonzero(read_arrays(store, ["status"])["status"] > 0))
 
     def kernel_sets(self, scene) -> tuple[str, ...]:
-        return ("periodic", "march", "fixed_grid")
+        """The reference's periodic method, every compared method, and the fixed grids."""
+        return tuple(dict.fromkeys(("periodic", *scene.methods, "fixed_grid")))
 
 
 STUDY = StudyKind()

@@ -177,7 +177,7 @@ class GridKind(SceneKind):
         return int(np.count_nonzero(read_arrays(store, ["status"])["status"] != 0))
 
     def kernel_sets(self, scene) -> tuple[str, ...]:
-        return ("periodic",) if scene.method == "periodic" else ("periodic", "march")
+        return (scene.method,)
 
 
 GRID = GridKind()

@@ -17,11 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: kernel sets by name, and the calls that compile them
+from ._solve import METHODS
+
+#: kernel sets by name, and the calls that compile them: one per method of ``solve_periodic``
 KERNEL_SETS = {
-    "periodic": "solve_periodic with method periodic (every family, series output)",
-    "march": "solve_periodic with method march",
-    "fixed_grid": "solve_fixed_grid with either method",
+    **{method: f"solve_periodic with method {method} (every family, series output)" for method in METHODS},
+    "fixed_grid": "solve_fixed_grid with methods periodic and march",
     "gradient": "objective_gradient and optimize_motion",
 }
 
@@ -79,14 +80,17 @@ def _solve(kernel_set: str) -> None:
     from ._physics import Physics
     from ._solve import solve_fixed_grid, solve_periodic
 
-    physics = Physics.from_scaled(anisotropy_ratio=0.25, scaled_period=1.0, p=0.0, delta=1e-5)
-    harmonic = Harmonic(A0=1.0, A1=0.4)
-    if kernel_set == "periodic":
-        solve_periodic(harmonic, physics, rtol=1e-3, return_series=True)
-        solve_periodic(PowerLaw(1.0, 0.4, 0.5, 3.0, True, 1.0, False), physics, rtol=1e-3)
-        solve_periodic(Fourier([[1.0, 0.4, 0.1]], [[0.0, 0.05]]), physics, rtol=1e-3)
-    elif kernel_set == "march":
-        solve_periodic(harmonic, physics, method="march", rtol=1e-3)
+    # Batches of four points whose grids differ in size: a batch's kernels see strided views of
+    # its arrays (numba compiles those apart from contiguous ones), as a chunk of a scene does.
+    physics = Physics.from_scaled(anisotropy_ratio=np.array([0.0625, 0.25, 4.0, 16.0]),
+                                  scaled_period=np.array([0.5, 1.0, 2.0, 4.0]), p=0.0, delta=1e-5)
+    a0, a1 = np.array([1.2, 1.0, 0.6, 0.4]), np.array([0.3, 0.4, 0.5, 0.35])
+    harmonic = Harmonic(A0=a0, A1=a1)
+    if kernel_set in METHODS:
+        ones = np.ones(4, dtype=bool)
+        for kinematics in (harmonic, PowerLaw(a0, a1, np.full(4, 0.5), np.full(4, 3.0), ones, np.ones(4), ~ones),
+                           Fourier(np.column_stack([a0, a1, 0.1 * a1]), np.column_stack([0 * a1, 0.1 * a1]))):
+            solve_periodic(kinematics, physics, method=kernel_set, rtol=1e-3, return_series=True)
     elif kernel_set == "fixed_grid":
         for method in ("periodic", "march"):
             solve_fixed_grid(harmonic, physics, 16, method=method)
