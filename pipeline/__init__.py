@@ -9,9 +9,13 @@ Public API::
 The command line is ``python -m pipeline run workflows/<scene>.toml``.
 """
 
+from ._kind import RunContext, SceneKind, Step
+from ._registry import KINDS, load_scene, parse_scene
 from ._run import RunSummary, default_store, run_scene
-from ._scene import Axis, Execution, Reduction, Scene, SceneError, Series, load_scene, parse_scene
+from ._scene import Axis, Execution, Reduction, Scene, SceneError, Series
+from ._schedule import Session
 from ._store import StoreBusy, StoreMismatch
 
-__all__ = ["Axis", "Execution", "Reduction", "RunSummary", "Scene", "SceneError", "Series", "StoreBusy", "StoreMismatch",
-           "default_store", "load_scene", "parse_scene", "run_scene"]
+__all__ = ["Axis", "Execution", "KINDS", "Reduction", "RunContext", "RunSummary", "Scene", "SceneError", "SceneKind",
+           "Series", "Session", "Step", "StoreBusy", "StoreMismatch", "default_store", "load_scene", "parse_scene",
+           "run_scene"]

@@ -12,8 +12,10 @@ import sys
 import time
 from pathlib import Path
 
-from ._run import Session, run_scene
-from ._scene import Scene, SceneError, load_scene, parse_scene
+from ._registry import kind_of, load_scene, parse_scene
+from ._run import run_scene, warm_up_kernels
+from ._scene import Scene, SceneError
+from ._schedule import Session
 from ._store import StoreBusy, StoreMismatch
 
 EXIT_BAD_SCENE = 2
@@ -41,9 +43,10 @@ def _parser() -> argparse.ArgumentParser:
     est.add_argument("scenes", nargs="+", help="scene TOML files")
     est.add_argument("--workers", type=int, default=None, help="parallel workers assumed (default: all cores)")
     est.add_argument("--probe", type=int, default=32, help="points solved per scene (default 32)")
-    paper = sub.add_parser("paper", help="run every shipped scene (or only quick), print the total time, build the report")
+    paper = sub.add_parser("paper", help="run every shipped scene, print the total time, build the report")
     paper.add_argument("--quick", action="store_true",
-                       help="every scene at reduced resolution (num / 4, step x 2), stores under OUT/quick/")
+                       help="every figure's scene at reduced resolution (num / 4, step x 2), without the two "
+                            "studies (accuracy, stiffness); stores under OUT/quick/")
     paper.add_argument("--out", default="out", help="directory of the stores (default out/)")
     for p in (run, paper):
         if p is run:
@@ -56,24 +59,29 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+#: ``paper --quick`` leaves the studies out: they time solvers for minutes and show no figure of
+#: the paper (``python -m pipeline run workflows/accuracy.toml`` runs one alone).
+QUICK_SCENES = tuple(name for name in PAPER_SCENES if name not in ("accuracy", "stiffness"))
+_AXIS_NUM = re.compile(r"(\{[^{}\n]*\bnum\s*=\s*)(\d+)")  # num of an inline axis table
+_LINE_NUM = re.compile(r"^(\s*num\s*=\s*)(\d+)", re.MULTILINE)  # a table's num (optima: starts)
+_STEP = re.compile(r"\bstep\s*=\s*([0-9.]+)")
+
+
 def quick_variant(path) -> "Scene":
-    """The scene at ``path`` at reduced resolution: every ``num`` divided by 4 (at least 4),
-    every ``step`` doubled.  For ``paper --quick``; the reduced scene hashes differently, so
-    its stores live apart from the full ones."""
+    """The scene at ``path`` at reduced resolution, for ``paper --quick``: an axis given by
+    ``num`` points keeps a quarter of them, at least 3 (so a maximum can lie inside), a ``num``
+    on its own line (an optima scene's starts) a quarter, at least 4, and every ``step`` doubles.
+    The reduced scene hashes differently, so its stores live apart from the full ones."""
     text = Path(path).read_text(encoding="utf-8")
-    text = re.sub(r"\bnum\s*=\s*(\d+)", lambda m: f"num = {max(4, int(m.group(1)) // 4)}", text)
-    text = re.sub(r"\bstep\s*=\s*([0-9.]+)", lambda m: f"step = {2 * float(m.group(1))!r}", text)
+    text = _AXIS_NUM.sub(lambda m: f"{m.group(1)}{max(3, int(m.group(2)) // 4)}", text)
+    text = _LINE_NUM.sub(lambda m: f"{m.group(1)}{max(4, int(m.group(2)) // 4)}", text)
+    text = _STEP.sub(lambda m: f"step = {2 * float(m.group(1))!r}", text)
     scene = parse_scene(text, f"{path} (quick variant)")
     # a scene kind may reduce further (optima: its [quick] table)
     return scene.quick_variant() if hasattr(scene, "quick_variant") else scene
 
 
-def _run_one(path, store, args, session=None) -> int:
-    try:
-        scene = quick_variant(path) if getattr(args, "quick", False) else load_scene(path)
-    except SceneError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_BAD_SCENE
+def _run_one(scene, store, args, session=None) -> int:
     try:
         summary = run_scene(scene, store, scheduler=args.scheduler, workers=args.workers,
                             overwrite=args.overwrite, progress=not args.no_progress, session=session)
@@ -117,23 +125,31 @@ def main(argv=None) -> int:
         print("error: --workers: must be >= 1", file=sys.stderr)
         return EXIT_BAD_SCENE
     if args.command == "run":
-        return _run_one(args.scene, args.store, args)
+        try:
+            scene = load_scene(args.scene)
+        except SceneError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_BAD_SCENE
+        return _run_one(scene, args.store, args)
     if args.command == "estimate":
         return _estimate(args)
-    names = PAPER_SCENES
+    names = QUICK_SCENES if args.quick else PAPER_SCENES
     out = Path(args.out) / "quick" if args.quick else Path(args.out)
     # Validate every scene before running any, so a bad file costs nothing.
+    scenes = []
     for name in names:
         try:
-            (quick_variant if args.quick else load_scene)(WORKFLOWS / f"{name}.toml")
+            scenes.append((quick_variant if args.quick else load_scene)(WORKFLOWS / f"{name}.toml"))
         except SceneError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_BAD_SCENE
     t0 = time.perf_counter()
-    # One pool of workers for every scene: each worker imports (and JIT-compiles) the solver once.
+    # Compile the solver's kernels once, here, for every scene; the workers load them from the cache.
+    warm_up_kernels(tuple(dict.fromkeys(k for scene in scenes for k in kind_of(scene).kernel_sets(scene))))
+    # One pool of workers for every scene: each worker imports the solver and loads its kernels once.
     with Session(args.scheduler or "processes", args.workers) as session:
-        for name in names:
-            rc = _run_one(WORKFLOWS / f"{name}.toml", out / f"{name}.zarr", args, session)
+        for name, scene in zip(names, scenes):
+            rc = _run_one(scene, out / f"{name}.zarr", args, session)
             if rc:
                 return rc
     print(f"paper: {len(names)} scenes, total wall {time.perf_counter() - t0:.1f} s", flush=True)

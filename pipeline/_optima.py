@@ -52,13 +52,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ._scene import Execution, _Ctx, _parse_axis, _value, scene_hash
-from ._store import (ATTRS_KEY, FORMAT_VERSION, STATE_GROUP, StoreMismatch, _create,
-                     _open_group, mark_done, open_existing, provenance, read_done, record_run,
-                     remove_partials, set_state, write_region)
+from ._kind import RunContext, SceneKind, Step
+from ._scene import Execution, ParseContext, parse_axis, parse_value, scene_hash
+from ._store import (ATTRS_KEY, FORMAT_VERSION, STATE_GROUP, create_array, mark_done, open_group,
+                     provenance, read_arrays, write_arrays, write_region)
 
-__all__ = ["OptimaScene", "parse_optima_scene", "run_optima_scene", "distinct_optima",
-           "fourier_samples", "STOP_CODES"]
+__all__ = ["OPTIMA", "OptimaKind", "OptimaScene", "parse_optima_scene", "distinct_optima",
+           "fourier_samples", "STOP_CODES", "KIND_VERSION", "create_optima_skeleton",
+           "compute_optima_chunk", "reduce_optima"]
 
 KIND = "optima"
 #: version of this kind's array layout (checked by readers beside FORMAT_VERSION)
@@ -192,7 +193,7 @@ class OptimaScene:
             doc["starts"]["num"] = q["starts"]
         if "max_iterations" in q:
             doc.setdefault("optimizer", {})["max_iterations"] = q["max_iterations"]
-        return _build(_Ctx(f"{self.path} (quick)"), doc, self.text)
+        return _build(ParseContext(f"{self.path} (quick)"), doc, self.text)
 
 
 _STARTS_KEYS = {"num": "random starts per cell", "seed": "seed of the starts' generator",
@@ -210,7 +211,7 @@ _KEEP_KEYS = {"best": "distinct optima kept per cell", "n_tau": "phi samples per
 _EXECUTION_KEYS = {"starts_per_task": "", "scheduler": "", "workers": "", "store": ""}
 
 
-def parse_optima_scene(doc: dict, ctx: _Ctx, text: str) -> OptimaScene:
+def parse_optima_scene(doc: dict, ctx: ParseContext, text: str) -> OptimaScene:
     """Validate a parsed TOML ``doc`` of kind "optima" (errors name the key, one line)."""
     return _build(ctx, doc, text)
 
@@ -233,7 +234,7 @@ def _wavenumbers(ctx, obj, key) -> tuple[int, ...]:
     return vals
 
 
-def _build(ctx: _Ctx, doc: dict, text: str) -> OptimaScene:
+def _build(ctx: ParseContext, doc: dict, text: str) -> OptimaScene:
     ctx.table(doc, "", _TOP_KEYS, required=("scene", "axes", "starts"))
     head = ctx.table(doc["scene"], "scene", {"kind": "", "name": "", "title": "", "figure": "",
                                              "family": ""}, required=("name",))
@@ -243,11 +244,11 @@ def _build(ctx: _Ctx, doc: dict, text: str) -> OptimaScene:
     family = ctx.string(head.get("family", "fourier"), "scene.family", ("fourier",))
     axes = ctx.table(doc["axes"], "axes", {"anisotropy_ratio": "", "max_wavenumber": "", "p": ""},
                      required=("anisotropy_ratio", "max_wavenumber"))
-    ratios = _parse_axis(ctx, "anisotropy_ratio", axes["anisotropy_ratio"], "axes.anisotropy_ratio")
+    ratios = parse_axis(ctx, "anisotropy_ratio", axes["anisotropy_ratio"], "axes.anisotropy_ratio")
     kmax = _wavenumbers(ctx, axes["max_wavenumber"], "axes.max_wavenumber")
-    exponents = (_parse_axis(ctx, "p", axes["p"], "axes.p").values if "p" in axes else (0.0,))
+    exponents = (parse_axis(ctx, "p", axes["p"], "axes.p").values if "p" in axes else (0.0,))
     fixed = ctx.table(doc.get("fixed", {}), "fixed", {"delta": ""})
-    delta = _value(ctx, "delta", fixed.get("delta", 1e-5), "fixed.delta")
+    delta = parse_value(ctx, "delta", fixed.get("delta", 1e-5), "fixed.delta")
     if delta == 0 and min(exponents) == 0:
         raise ctx.err("fixed.delta", "delta = 0 needs p > 0")
 
@@ -293,7 +294,7 @@ def _build(ctx: _Ctx, doc: dict, text: str) -> OptimaScene:
     if "max_wavenumber" in quick:
         _wavenumbers(ctx, quick["max_wavenumber"], "quick.max_wavenumber")
     if "p" in quick:
-        _parse_axis(ctx, "p", quick["p"], "quick.p")
+        parse_axis(ctx, "p", quick["p"], "quick.p")
     if "starts" in quick:
         ctx.integer(quick["starts"], "quick.starts", lo=1)
     if "max_iterations" in quick:
@@ -469,7 +470,7 @@ def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
 
     if store.exists():
         shutil.rmtree(store)
-    g = _open_group(store, "w")
+    g = open_group(store, "w")
     n_r, n_k, n_p, n_s = scene.shape
     n_c = scene.n_coefficients
     coords = {
@@ -490,44 +491,44 @@ def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
                 {"long_name": "scaled time tau = t/T", "units": "1"}),
     }
     for name, (values, dtype, attrs) in coords.items():
-        _create(g, name, shape=values.shape, chunks=values.shape, dtype=dtype, fill=0,
-                dims=(name,), attrs=attrs)[:] = values
+        create_array(g, name, shape=values.shape, chunks=values.shape, dtype=dtype, fill=0,
+                     dims=(name,), attrs=attrs)[:] = values
     starts = scene.start_values()
     for j, name in enumerate(("start_A0", "start_A1")):
-        _create(g, name, shape=(n_s,), chunks=(n_s,), dtype=np.float64, fill=np.nan,
-                dims=("start",), attrs={"long_name": f"A_{j} of the start, uniform on (0, 1) [rad]"}
-                )[:] = starts[:, j]
+        create_array(g, name, shape=(n_s,), chunks=(n_s,), dtype=np.float64, fill=np.nan,
+                     dims=("start",), attrs={"long_name": f"A_{j} of the start, uniform on (0, 1) [rad]"}
+                     )[:] = starts[:, j]
     chunks = _start_chunks(scene)
-    _create(g, "status", shape=scene.shape, chunks=chunks, dtype=np.int8, fill=NOT_COMPUTED,
-            dims=DIMS, attrs={"long_name": "optimiser stop reason", "flag_meanings": status_meanings()})
-    _create(g, "period_at_bound", shape=scene.shape, chunks=chunks, dtype=np.int8,
-            fill=NOT_COMPUTED, dims=DIMS,
-            attrs={"long_name": "1: the period ended at its box (1e-3 .. 1e4 x the start's): no "
-                                "interior optimum (T runs off, as p -> 2); never kept; -1 not computed"})
-    _create(g, "ill_conditioned", shape=scene.shape, chunks=chunks, dtype=np.int8,
-            fill=NOT_COMPUTED, dims=DIMS,
-            attrs={"long_name": "1: ill-conditioned (Hessian condition above threshold, or the period "
-                                "at its bound: p near 2); 0: no; -1 not computed"})
+    create_array(g, "status", shape=scene.shape, chunks=chunks, dtype=np.int8, fill=NOT_COMPUTED,
+                 dims=DIMS, attrs={"long_name": "optimiser stop reason", "flag_meanings": status_meanings()})
+    create_array(g, "period_at_bound", shape=scene.shape, chunks=chunks, dtype=np.int8,
+                 fill=NOT_COMPUTED, dims=DIMS,
+                 attrs={"long_name": "1: the period ended at its box (1e-3 .. 1e4 x the start's): no "
+                                     "interior optimum (T runs off, as p -> 2); never kept; -1 not computed"})
+    create_array(g, "ill_conditioned", shape=scene.shape, chunks=chunks, dtype=np.int8,
+                 fill=NOT_COMPUTED, dims=DIMS,
+                 attrs={"long_name": "1: ill-conditioned (Hessian condition above threshold, or the period "
+                                     "at its bound: p near 2); 0: no; -1 not computed"})
     for name, text_ in START_FLOATS.items():
-        _create(g, name, shape=scene.shape, chunks=chunks, dtype=np.float64, fill=np.nan,
-                dims=DIMS, attrs={"long_name": text_})
+        create_array(g, name, shape=scene.shape, chunks=chunks, dtype=np.float64, fill=np.nan,
+                     dims=DIMS, attrs={"long_name": text_})
     for name, text_ in START_INTS.items():
-        _create(g, name, shape=scene.shape, chunks=chunks, dtype=np.int32, fill=0, dims=DIMS,
-                attrs={"long_name": text_})
-    _create(g, "coefficients", shape=scene.shape + (n_c,), chunks=chunks + (n_c,),
-            dtype=np.float64, fill=np.nan, dims=DIMS + ("coefficient",),
-            attrs={"long_name": "optimal [A_0, A_k, B_k] as found (zero beyond the cell's Kmax) [rad]"})
+        create_array(g, name, shape=scene.shape, chunks=chunks, dtype=np.int32, fill=0, dims=DIMS,
+                     attrs={"long_name": text_})
+    create_array(g, "coefficients", shape=scene.shape + (n_c,), chunks=chunks + (n_c,),
+                 dtype=np.float64, fill=np.nan, dims=DIMS + ("coefficient",),
+                 attrs={"long_name": "optimal [A_0, A_k, B_k] as found (zero beyond the cell's Kmax) [rad]"})
     sizes = {"anisotropy_ratio": n_r, "max_wavenumber": n_k, "p": n_p, "rank": scene.keep.best,
              "coefficient": n_c, "tau": scene.keep.n_tau}
     for name, (dims, dtype, fill, long_name) in reduction_specs(scene).items():
         shape = tuple(sizes[d] for d in dims)
-        _create(g, name, shape=shape, chunks=shape, dtype=dtype, fill=fill, dims=dims,
-                attrs={"long_name": long_name, "reduction": "distinct_optima"})
+        create_array(g, name, shape=shape, chunks=shape, dtype=dtype, fill=fill, dims=dims,
+                     attrs={"long_name": long_name, "reduction": "distinct_optima"})
     grid = _chunk_grid(scene)
     sg = g.create_group(STATE_GROUP)
-    _create(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
-            dims=tuple(f"chunk_{d}" for d in DIMS),
-            attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+    create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
+                 dims=tuple(f"chunk_{d}" for d in DIMS),
+                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
     g.attrs[ATTRS_KEY] = {
         "format_version": FORMAT_VERSION, "kind": KIND, "kind_version": KIND_VERSION,
         "provenance": provenance(scene),
@@ -546,7 +547,6 @@ def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: fl
                    a1: float) -> dict:
     """One optimisation from the start (A_0, A_1) = (a0, a1); a record of the store's fields."""
     import solver
-    from solver._optimize import optimize_motion
 
     physics = solver.Physics.from_scaled(ratio, scene.start_scaled_period, p=p, delta=scene.delta)
     A = np.zeros((1, kmax + 1))
@@ -555,7 +555,7 @@ def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: fl
     opt = scene.optimizer
     t0 = time.perf_counter()
     try:
-        res = optimize_motion(template, physics, objective=opt.objective, power=opt.power,
+        res = solver.optimize_motion(template, physics, objective=opt.objective, power=opt.power,
                               direction=opt.direction or None,
                               gtol=opt.gtol, max_iterations=opt.max_iterations,
                               grid_rtol=opt.grid_rtol, grid_rounds=opt.grid_rounds)
@@ -582,8 +582,10 @@ def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: fl
     }
 
 
-def compute_optima_chunk(store: str, scene: OptimaScene, index: tuple[int, ...]) -> dict:
-    """Optimise every start of chunk ``index``, write its arrays, then mark it done."""
+def compute_optima_chunk(store: str, scene: OptimaScene, chunks: tuple[int, ...],
+                         index: tuple[int, ...]) -> dict:
+    """Optimise every start of chunk ``index`` (one cell, ``starts_per_task`` starts), write its
+    arrays, then mark it done.  ``chunks`` is the store's layout, (1, 1, 1, starts per task)."""
     i_r, i_k, i_p, i_c = index
     c = scene.starts_per_task
     first, last = i_c * c, min((i_c + 1) * c, scene.n_starts)
@@ -604,7 +606,7 @@ def compute_optima_chunk(store: str, scene: OptimaScene, index: tuple[int, ...])
     shape4 = (1, 1, 1, n)
     values = {k: v.reshape(shape4) for k, v in values.items()}
     region = (slice(i_r, i_r + 1), slice(i_k, i_k + 1), slice(i_p, i_p + 1), slice(first, last))
-    chunks = _start_chunks(scene)
+    chunks = tuple(chunks)
     path = Path(store)
     write_region(path, region, index, chunks, scene.shape, values)
     n_c = scene.n_coefficients
@@ -662,71 +664,36 @@ PER_START = ("status", "U", "efficiency", "relative_efficiency", "scaled_period"
 
 
 # ---------------------------------------------------------------------------------------------
-# the driver
+# the kind
 
 
-def run_optima_scene(scene: OptimaScene, store=None, *, scheduler=None, workers=None,
-                     overwrite=False, progress=True, echo=print, session=None):
-    """Run an optima scene into ``store``, resuming what an earlier run left undone.
+def reduce_step(run: RunContext) -> None:
+    """The kept distinct optima of every cell, in the driver (numpy, seconds)."""
+    write_arrays(run.store, reduce_optima(run.scene, read_arrays(run.store, PER_START)))
 
-    The same contract as ``run_scene`` (lock, refusal of a different scene, resumable chunks,
-    provenance, run record); the reduction runs in the driver (numpy, seconds).
-    """
-    import dask
 
-    from ._run import RunSummary, _compute, _consolidate, _load, _Progress, _write, scene_run
+class OptimaKind(SceneKind):
+    """Ensembles of optimisations: chunks of starts of one cell, then the distinct optima."""
 
-    t_start = time.perf_counter()
-    with scene_run(scene, store, scheduler, workers, session) as run:
-        store, scheduler, n_workers, sched = run.store, run.scheduler, run.n_workers, run.sched
-        meta = open_existing(store)
-        if meta is not None and (meta["provenance"]["scene_hash"] != scene.hash or overwrite):
-            old = meta["provenance"]["scene_hash"]
-            if old != scene.hash and not overwrite:
-                raise StoreMismatch(
-                    f"{store}: built from a different scene ({meta['provenance']['scene_file']}, hash "
-                    f"{old[:12]}) than {scene.path} (hash {scene.hash[:12]}); rerun with --overwrite to "
-                    "replace it, or choose another --store")
-            meta = None
-        if meta is None:
-            create_optima_skeleton(store, scene)
-            meta = open_existing(store)
-        else:
-            remove_partials(store)
-        done = read_done(store)
-        pending = [tuple(int(i) for i in idx) for idx in zip(*np.nonzero(~done))]
-        computed = sum(min(scene.starts_per_task, scene.n_starts - i[-1] * scene.starts_per_task)
-                       for i in pending)
-        t_solve = time.perf_counter()
-        solve_seconds = 0.0
-        if pending:
-            tasks = [dask.delayed(compute_optima_chunk, pure=False)(
-                str(store), scene, idx, dask_key_name="pipeline-optima-" + "-".join(map(str, idx)))
-                for idx in pending]
-            bar = _Progress(len(tasks), scene.starts_per_task, scene.name, progress,
-                            rate_unit="optimisations/s")
-            _compute(tasks, sched, bar)
-            solve_seconds = time.perf_counter() - t_solve
-            set_state(store, chunks_complete=True, reductions_complete=False)
-        reduce_now = bool(pending) or not meta["state"].get("reductions_complete")
-        if reduce_now:
-            _write(store, reduce_optima(scene, _load(store, PER_START)))
-        status = _load(store, ["status"])["status"]
-        failures = int(np.count_nonzero(status == STOP_CODES["error"]))
-        if reduce_now:
-            set_state(store, chunks_complete=True, reductions_complete=True)
-            import datetime as _dt
+    names = (KIND,)
+    rate_unit = "optimisations/s"
+    chunk_task = staticmethod(compute_optima_chunk)
 
-            record_run(store, {
-                "finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                "wall_seconds": round(time.perf_counter() - t_start, 3),
-                "solve_seconds": round(solve_seconds, 3),
-                "computed_points": computed,
-                "computed_chunks": len(pending), "total_chunks": int(done.size),
-                "failures": failures, "scheduler": scheduler, "workers": n_workers})
-            _consolidate(store)
-    return RunSummary(scene=scene.name, store=str(store), points=scene.n_points,
-                      computed_points=computed, computed_chunks=len(pending),
-                      total_chunks=int(done.size), failures=failures,
-                      wall_seconds=time.perf_counter() - t_start, solve_seconds=solve_seconds,
-                      reductions_computed=reduce_now)
+    def parse(self, doc, ctx, text):
+        return parse_optima_scene(doc, ctx, text)
+
+    def create_skeleton(self, run: RunContext) -> None:
+        create_optima_skeleton(run.store, run.scene)
+
+    def steps(self, scene) -> tuple[Step, ...]:
+        return (Step("reductions", "reductions_complete", reduce_step),)
+
+    def failures(self, store: Path, scene) -> int:
+        """Optimisations that raised (stop reason "error"); other stops are outcomes."""
+        return int(np.count_nonzero(read_arrays(store, ["status"])["status"] == STOP_CODES["error"]))
+
+    def kernel_sets(self, scene) -> tuple[str, ...]:
+        return ("periodic", "gradient")
+
+
+OPTIMA = OptimaKind()

@@ -34,8 +34,16 @@ __all__ = [
     "SceneError",
     "Series",
     "Subsets",
-    "load_scene",
-    "parse_scene",
+    "ParseContext",
+    "parse_axis",
+    "parse_grid_scene",
+    "parse_shape",
+    "parse_value",
+    "read_scene_file",
+    "read_toml",
+    "scene_hash",
+    "type_name",
+    "axis_attrs",
     "FAMILY_PARAMETERS",
     "QUANTITIES",
     "DIAGNOSTICS",
@@ -265,6 +273,7 @@ class Scene:
     execution: Execution
     science: dict = field(compare=False, repr=False)
     text: str = field(default="", compare=False, repr=False)
+    kind: str = "grid"
 
     # -- convenience -------------------------------------------------------
     @property
@@ -307,7 +316,10 @@ def scene_hash(science: dict) -> str:
 # ---------------------------------------------------------------------------
 
 
-class _Ctx:
+class ParseContext:
+    """Validation of one scene file's values: each check returns the value or raises a
+    :class:`SceneError` naming ``file``, the key and the reason (one line)."""
+
     def __init__(self, file: str):
         self.file = file
 
@@ -317,7 +329,7 @@ class _Ctx:
     def table(self, obj, key: str, allowed: dict[str, str], required=()) -> dict:
         """Check ``obj`` is a table with only ``allowed`` keys (key -> description)."""
         if not isinstance(obj, dict):
-            raise self.err(key, f"must be a table, got {_tname(obj)}")
+            raise self.err(key, f"must be a table, got {type_name(obj)}")
         for k in obj:
             if k not in allowed:
                 raise self.err(f"{key}.{k}" if key else k,
@@ -329,19 +341,19 @@ class _Ctx:
 
     def string(self, obj, key, choices=None) -> str:
         if not isinstance(obj, str):
-            raise self.err(key, f"must be a string, got {_tname(obj)}")
+            raise self.err(key, f"must be a string, got {type_name(obj)}")
         if choices is not None and obj not in choices:
             raise self.err(key, f"must be one of {', '.join(choices)}, got {obj!r}")
         return obj
 
     def boolean(self, obj, key) -> bool:
         if not isinstance(obj, bool):
-            raise self.err(key, f"must be true or false, got {_tname(obj)}")
+            raise self.err(key, f"must be true or false, got {type_name(obj)}")
         return obj
 
     def integer(self, obj, key, lo=None) -> int:
         if isinstance(obj, bool) or not isinstance(obj, int):
-            raise self.err(key, f"must be an integer, got {_tname(obj)}")
+            raise self.err(key, f"must be an integer, got {type_name(obj)}")
         if lo is not None and obj < lo:
             raise self.err(key, f"must be >= {lo}, got {obj}")
         return obj
@@ -358,20 +370,20 @@ class _Ctx:
             v = c * math.pi / (float(m.group(2)) if m.group(2) else 1.0)
         else:
             extra = " or a multiple of pi such as \"pi/2\"" if allow_pi else ""
-            raise self.err(key, f"must be a number{extra}, got {_tname(obj)} {obj!r}")
+            raise self.err(key, f"must be a number{extra}, got {type_name(obj)} {obj!r}")
         if not math.isfinite(v):
             raise self.err(key, f"must be finite, got {v}")
         return v
 
     def names(self, obj, key, choices, nonempty=True) -> tuple[str, ...]:
         if not isinstance(obj, list):
-            raise self.err(key, f"must be a list of names, got {_tname(obj)}")
+            raise self.err(key, f"must be a list of names, got {type_name(obj)}")
         if nonempty and not obj:
             raise self.err(key, "must not be empty")
         out = []
         for i, v in enumerate(obj):
             if not isinstance(v, str):
-                raise self.err(f"{key}[{i}]", f"must be a string, got {_tname(v)}")
+                raise self.err(f"{key}[{i}]", f"must be a string, got {type_name(v)}")
             if v not in choices:
                 raise self.err(f"{key}[{i}]", f"{v!r} is not one of {', '.join(choices)}")
             if v in out:
@@ -380,12 +392,12 @@ class _Ctx:
         return tuple(out)
 
 
-def _tname(obj) -> str:
+def type_name(obj) -> str:
     return {dict: "a table", list: "an array", str: "a string", bool: "a boolean",
             int: "an integer", float: "a float"}.get(type(obj), type(obj).__name__)
 
 
-def _shape_value(ctx: _Ctx, obj, key) -> float:
+def parse_shape(ctx: ParseContext, obj, key) -> float:
     """Power-law shape as a signed exponent: +g concave up, -g concave down, 1 linear."""
     if isinstance(obj, str):
         s = obj.strip().lower()
@@ -404,9 +416,9 @@ def _shape_value(ctx: _Ctx, obj, key) -> float:
     return 1.0 if abs(v) == 1 else v
 
 
-def _value(ctx: _Ctx, name: str, obj, key) -> float:
+def parse_value(ctx: ParseContext, name: str, obj, key) -> float:
     if name in ("closing_shape", "opening_shape"):
-        v = _shape_value(ctx, obj, key)
+        v = parse_shape(ctx, obj, key)
     else:
         v = ctx.number(obj, key, allow_pi=(name == "A0"))
     ok, why, _ = _DOMAINS[name]
@@ -442,7 +454,7 @@ def _grid(lo: float, hi: float, num: int | None, step: float | None, include: st
     return g
 
 
-def _parse_axis(ctx: _Ctx, name: str, spec, key: str) -> Axis:
+def parse_axis(ctx: ParseContext, name: str, spec, key: str) -> Axis:
     if name in ("closing_shape", "opening_shape") and isinstance(spec, list):
         spec = {"values": spec}
     if isinstance(spec, list):
@@ -458,10 +470,10 @@ def _parse_axis(ctx: _Ctx, name: str, spec, key: str) -> Axis:
                 raise ctx.err(f"{key}.{k}", "only allowed with range or log2_range")
         raw = spec["values"]
         if not isinstance(raw, list):
-            raise ctx.err(f"{key}.values", f"must be an array, got {_tname(raw)}")
+            raise ctx.err(f"{key}.values", f"must be an array, got {type_name(raw)}")
         if not raw:
             raise ctx.err(f"{key}.values", "empty list")
-        vals = [_value(ctx, name, v, f"{key}.values[{i}]") for i, v in enumerate(raw)]
+        vals = [parse_value(ctx, name, v, f"{key}.values[{i}]") for i, v in enumerate(raw)]
         if any(b <= a for a, b in zip(vals, vals[1:])):
             raise ctx.err(f"{key}.values", "must be strictly increasing (no repeats)")
         return Axis(name, tuple(vals), "list")
@@ -508,7 +520,7 @@ _REDUCTION_KEYS = {
 }
 
 
-def _parse_reduction(ctx: _Ctx, obj, key: str, dims, stored) -> Reduction:
+def _parse_reduction(ctx: ParseContext, obj, key: str, dims, stored) -> Reduction:
     ctx.table(obj, key, _REDUCTION_KEYS, required=("name", "quantity", "over"))
     name = ctx.string(obj["name"], f"{key}.name")
     if not _NAME_RE.match(name):
@@ -579,16 +591,25 @@ _TOP_KEYS = {
 }
 
 
-def parse_scene(text: str, file: str = "<scene>") -> Scene:
-    """Parse and validate scene TOML ``text``; ``file`` is used in error messages."""
-    ctx = _Ctx(file)
+def read_toml(text: str, ctx: "ParseContext") -> dict:
+    """The TOML document ``text``; a syntax error is a :class:`SceneError` naming the file."""
     try:
-        doc = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ctx.err("(toml)", f"not valid TOML: {exc}") from None
-    kind = _scene_kind(ctx, doc)
-    if kind != "grid":
-        return _other_kind_parser(kind)(doc, ctx, text)
+
+
+def read_scene_file(path: str | Path) -> str:
+    """The text of the scene file ``path``; an unreadable file is a :class:`SceneError`."""
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SceneError(str(path), "(file)", f"cannot read: {exc.strerror or exc}") from None
+
+
+def parse_grid_scene(doc: dict, ctx: "ParseContext", text: str) -> Scene:
+    """Validate the parsed TOML ``doc`` of a grid scene (``[scene] kind = "grid"``, the
+    default); ``text`` is kept as provenance.  Errors are :class:`SceneError` naming the key."""
     ctx.table(doc, "", _TOP_KEYS, required=("scene", "axes", "solver", "outputs"))
 
     head = ctx.table(doc["scene"], "scene", {"kind": "", "name": "", "title": "", "figure": "",
@@ -606,12 +627,12 @@ def parse_scene(text: str, file: str = "<scene>") -> Scene:
     if not axes_doc:
         raise ctx.err("axes", "at least one axis is needed")
     fixed_doc = ctx.table(doc.get("fixed", {}), "fixed", allowed)
-    axes = tuple(_parse_axis(ctx, k, v, f"axes.{k}") for k, v in axes_doc.items())
+    axes = tuple(parse_axis(ctx, k, v, f"axes.{k}") for k, v in axes_doc.items())
     fixed: dict[str, float] = {}
     for k, v in fixed_doc.items():
         if k in axes_doc:
             raise ctx.err(f"fixed.{k}", "is also an axis")
-        fixed[k] = _value(ctx, k, v, f"fixed.{k}")
+        fixed[k] = parse_value(ctx, k, v, f"fixed.{k}")
     given = set(axes_doc) | set(fixed)
     for k, v in _DEFAULTS.items():
         if k not in given:
@@ -706,34 +727,15 @@ def parse_scene(text: str, file: str = "<scene>") -> Scene:
         "reductions": [_reduction_json(r) for r in reductions],
         **({"series": {"n_tau": series.n_tau, "points": [dict(p) for p in series.points]}} if series else {}),
     }
-    return Scene(path=file, name=name, title=title, figure=figure, family=family, axes=axes,
+    return Scene(path=ctx.file, name=name, title=title, figure=figure, family=family, axes=axes,
                  fixed=tuple(sorted(fixed.items())), method=method, rtol=rtol, quantities=quantities,
                  diagnostics=diagnostics, reductions=reductions, series=series, execution=execution, science=science, text=text)
-
-
-#: Scene kinds other than the parameter grid: kind -> "module:parser(doc, ctx, text)".
-SCENE_KINDS = {"optima": "pipeline._optima:parse_optima_scene",
-               "accuracy": "pipeline._study_scene:parse_study_scene",
-               "stiffness": "pipeline._study_scene:parse_study_scene"}
-
-
-def _scene_kind(ctx: _Ctx, doc: dict) -> str:
-    head = doc.get("scene")
-    kind = head.get("kind", "grid") if isinstance(head, dict) else "grid"
-    return ctx.string(kind, "scene.kind", ("grid",) + tuple(SCENE_KINDS))
-
-
-def _other_kind_parser(kind: str):
-    import importlib
-
-    module, function = SCENE_KINDS[kind].split(":")
-    return getattr(importlib.import_module(module), function)
 
 
 _MAX_SERIES_POINTS = 64
 
 
-def _parse_series(ctx: _Ctx, obj, dims, fixed) -> Series:
+def _parse_series(ctx: ParseContext, obj, dims, fixed) -> Series:
     ctx.table(obj, "series", {"points": "tables giving every axis value", "n_tau": "uniform nodes per period"},
               required=("points",))
     n_tau = ctx.integer(obj.get("n_tau", 256), "series.n_tau", lo=4)
@@ -746,7 +748,7 @@ def _parse_series(ctx: _Ctx, obj, dims, fixed) -> Series:
     for i, p in enumerate(pts):
         key = f"series.points[{i}]"
         ctx.table(p, key, {d: "" for d in dims}, required=dims)
-        vals = {d: _value(ctx, d, p[d], f"{key}.{d}") for d in dims}
+        vals = {d: parse_value(ctx, d, p[d], f"{key}.{d}") for d in dims}
         a0 = vals.get("A0", fixed.get("A0"))
         a1r = vals.get("A1_ratio", fixed.get("A1_ratio"))
         if a0 is not None and a1r is not None and a0 * (1 + a1r) > math.pi + 1e-12:
@@ -780,16 +782,6 @@ def _reduction_json(r: Reduction) -> dict:
         d["subsets"] = {"kind": s.kind, "axes": list(s.axes), "labels": list(s.labels), "center": s.center,
                         "sets": [list(x) for x in s.sets]}
     return d
-
-
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene file. Raises :class:`SceneError`."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SceneError(str(path), "(file)", f"cannot read: {exc.strerror or exc}") from None
-    return parse_scene(text, str(path))
 
 
 def axis_attrs(name: str) -> dict:

@@ -32,6 +32,9 @@ from ._scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
 
 __all__ = [
     "ATTRS_KEY",
+    "FORMAT_VERSION",
+    "NOT_COMPUTED",
+    "STATE_GROUP",
     "StoreBusy",
     "StoreMismatch",
     "create_skeleton",
@@ -45,6 +48,16 @@ __all__ = [
     "remove_partials",
     "provenance",
     "set_state",
+    "record_run",
+    "status_meanings",
+    "create_array",
+    "open_group",
+    "read_arrays",
+    "write_arrays",
+    "consolidate",
+    "store_meta",
+    "is_complete",
+    "STATE_FLAGS",
 ]
 
 ATTRS_KEY = "pipeline"
@@ -179,7 +192,8 @@ def output_dtype(name: str):
     return np.dtype(np.float64), np.nan
 
 
-def _open_group(store: Path, mode: str):
+def open_group(store: Path, mode: str):
+    """The store's root group (Zarr format 3, metadata read unconsolidated)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return zarr.open_group(store=str(store), mode=mode, zarr_format=3, use_consolidated=False)
@@ -227,7 +241,8 @@ def reduction_arrays(scene: Scene, r: Reduction) -> tuple[tuple[str, ...], tuple
     return dims, shape, arrays
 
 
-def _create(group, name, *, shape, chunks, dtype, fill, dims, attrs):
+def create_array(group, name, *, shape, chunks, dtype, fill, dims, attrs):
+    """A new array ``name`` in ``group`` (replacing one of that name), labelled by ``dims``."""
     return group.create_array(name, shape=shape, chunks=chunks, dtype=dtype, fill_value=fill,
                               dimension_names=list(dims), attributes=attrs, overwrite=True)
 
@@ -241,10 +256,10 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
     """
     if store.exists():
         shutil.rmtree(store)
-    g = _open_group(store, "w")
+    g = open_group(store, "w")
     for a in scene.axes:
-        _create(g, a.name, shape=(a.size,), chunks=(a.size,), dtype=np.float64, fill=np.nan,
-                dims=(a.name,), attrs={**axis_attrs(a.name), "spacing": a.spacing})[:] = a.array()
+        create_array(g, a.name, shape=(a.size,), chunks=(a.size,), dtype=np.float64, fill=np.nan,
+                     dims=(a.name,), attrs={**axis_attrs(a.name), "spacing": a.spacing})[:] = a.array()
     shape = scene.shape
     for name in scene.outputs + ("status",):
         dtype, fill = output_dtype(name)
@@ -252,7 +267,7 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
         if name == "status":
             attrs["flag_meanings"] = status_meanings()
             attrs["long_name"] = "solver status: 0 converged; any other code is a failure (outputs NaN)"
-        _create(g, name, shape=shape, chunks=chunks, dtype=dtype, fill=fill, dims=scene.dims, attrs=attrs)
+        create_array(g, name, shape=shape, chunks=chunks, dtype=dtype, fill=fill, dims=scene.dims, attrs=attrs)
     for r in scene.reductions:
         dims, rshape, arrays = reduction_arrays(scene, r)
         if r.subsets is not None:
@@ -263,34 +278,34 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
                 attrs = {"long_name": f"index of the set of exponents allowed for {', '.join(s.axes)}",
                          "sets": [list(x) for x in s.sets]}
             if s.dim not in g:
-                _create(g, s.dim, shape=(len(s.labels),), chunks=(len(s.labels),), dtype=np.float64,
-                        fill=np.nan, dims=(s.dim,), attrs=attrs)[:] = np.asarray(s.labels)
+                create_array(g, s.dim, shape=(len(s.labels),), chunks=(len(s.labels),), dtype=np.float64,
+                             fill=np.nan, dims=(s.dim,), attrs=attrs)[:] = np.asarray(s.labels)
         rchunks = tuple(max(1, n) for n in rshape)
         for name, (dtype, fill, attrs) in arrays.items():
-            _create(g, name, shape=rshape, chunks=rchunks, dtype=dtype, fill=fill, dims=dims,
-                    attrs={**attrs, "reduction": r.name})
+            create_array(g, name, shape=rshape, chunks=rchunks, dtype=dtype, fill=fill, dims=dims,
+                         attrs={**attrs, "reduction": r.name})
     if scene.series is not None:
         ser = scene.series
         n = len(ser.points)
-        _create(g, "series_point", shape=(n,), chunks=(n,), dtype=np.int32, fill=-1, dims=("series_point",),
-                attrs={"long_name": "index of a point where u(tau) is stored"})[:] = np.arange(n)
-        _create(g, "series_tau", shape=(ser.n_tau,), chunks=(ser.n_tau,), dtype=np.float64, fill=np.nan,
-                dims=("series_tau",), attrs={"long_name": "scaled time tau = t/T", "units": "1"}
-                )[:] = np.arange(ser.n_tau) / ser.n_tau
+        create_array(g, "series_point", shape=(n,), chunks=(n,), dtype=np.int32, fill=-1, dims=("series_point",),
+                     attrs={"long_name": "index of a point where u(tau) is stored"})[:] = np.arange(n)
+        create_array(g, "series_tau", shape=(ser.n_tau,), chunks=(ser.n_tau,), dtype=np.float64, fill=np.nan,
+                     dims=("series_tau",), attrs={"long_name": "scaled time tau = t/T", "units": "1"}
+                     )[:] = np.arange(ser.n_tau) / ser.n_tau
         for d in scene.dims:
-            _create(g, f"series_{d}", shape=(n,), chunks=(n,), dtype=np.float64, fill=np.nan,
-                    dims=("series_point",), attrs=axis_attrs(d))[:] = [dict(p)[d] for p in ser.points]
-        _create(g, "series_u", shape=(n, ser.n_tau), chunks=(n, ser.n_tau), dtype=np.float64, fill=np.nan,
-                dims=("series_point", "series_tau"),
-                attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau"})
-        _create(g, "series_status", shape=(n,), chunks=(n,), dtype=np.int8, fill=NOT_COMPUTED,
-                dims=("series_point",), attrs={"long_name": "solver status of the series points",
-                                               "flag_meanings": status_meanings()})
+            create_array(g, f"series_{d}", shape=(n,), chunks=(n,), dtype=np.float64, fill=np.nan,
+                         dims=("series_point",), attrs=axis_attrs(d))[:] = [dict(p)[d] for p in ser.points]
+        create_array(g, "series_u", shape=(n, ser.n_tau), chunks=(n, ser.n_tau), dtype=np.float64, fill=np.nan,
+                     dims=("series_point", "series_tau"),
+                     attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau"})
+        create_array(g, "series_status", shape=(n,), chunks=(n,), dtype=np.int8, fill=NOT_COMPUTED,
+                     dims=("series_point",), attrs={"long_name": "solver status of the series points",
+                                                    "flag_meanings": status_meanings()})
     grid = tuple(-(-s // c) for s, c in zip(shape, chunks))
     sg = g.create_group(STATE_GROUP)
-    _create(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
-            dims=tuple(f"chunk_{d}" for d in scene.dims),
-            attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+    create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
+                 dims=tuple(f"chunk_{d}" for d in scene.dims),
+                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
     g.attrs[ATTRS_KEY] = {
         "format_version": FORMAT_VERSION,
         "provenance": provenance(scene),
@@ -313,7 +328,7 @@ def open_existing(store: Path) -> dict | None:
     if not (store / "zarr.json").is_file():
         raise StoreMismatch(f"{store}: exists and is not a Zarr store; refusing to touch it")
     try:
-        g = _open_group(store, "r")
+        g = open_group(store, "r")
         meta = dict(g.attrs).get(ATTRS_KEY)
     except Exception:  # an unreadable group is an interrupted skeleton
         return None
@@ -323,7 +338,7 @@ def open_existing(store: Path) -> dict | None:
 
 
 def set_state(store: Path, **state) -> None:
-    g = _open_group(store, "r+")
+    g = open_group(store, "r+")
     meta = dict(g.attrs[ATTRS_KEY])
     meta["state"] = {**meta["state"], **state}
     g.attrs[ATTRS_KEY] = meta
@@ -331,7 +346,7 @@ def set_state(store: Path, **state) -> None:
 
 def record_run(store: Path, run: dict) -> None:
     """Record the latest run that computed something (``run``), and accumulate compute time."""
-    g = _open_group(store, "r+")
+    g = open_group(store, "r+")
     meta = dict(g.attrs[ATTRS_KEY])
     previous = meta.get("run", {})
     run = dict(run)
@@ -393,3 +408,40 @@ def mark_done(store: Path, chunk_index: tuple[int, ...]) -> None:
         warnings.simplefilter("ignore")
         done = zarr.open_array(store=str(store), path=DONE_ARRAY, mode="r+")
         done[tuple(slice(i, i + 1) for i in chunk_index)] = 1
+
+
+def read_arrays(store: Path, names) -> dict[str, np.ndarray]:
+    """The whole arrays ``names`` of ``store``, in memory."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return {n: zarr.open_array(store=str(store), path=n, mode="r")[...] for n in names}
+
+
+def write_arrays(store: Path, arrays: dict[str, np.ndarray]) -> None:
+    """Write whole arrays (the driver's reductions), cast to each stored array's dtype."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for n, v in arrays.items():
+            a = zarr.open_array(store=str(store), path=n, mode="r+")
+            a[...] = np.asarray(v).astype(a.dtype)
+
+
+def consolidate(store: Path) -> None:
+    """Write the consolidated metadata (readers open the store with one read)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        zarr.consolidate_metadata(str(store), zarr_format=3)
+
+
+def store_meta(store: Path) -> dict:
+    """The ``pipeline`` attributes of ``store`` (provenance, layout, state, run)."""
+    return dict(open_group(store, "r").attrs)[ATTRS_KEY]
+
+
+#: Flags of ``pipeline.state`` besides ``skeleton_complete``; a store is complete when all are set.
+STATE_FLAGS = ("chunks_complete", "reductions_complete", "series_complete")
+
+
+def is_complete(state: dict) -> bool:
+    """Every part of the store written (``state``: the ``pipeline.state`` attribute)."""
+    return all(state.get(flag) for flag in STATE_FLAGS)

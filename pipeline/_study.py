@@ -28,13 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ._store import (ATTRS_KEY, FORMAT_VERSION, NOT_COMPUTED, STATE_GROUP, StoreMismatch, _create,
-                     _open_group, mark_done, open_existing, provenance, read_done, record_run, remove_partials,
-                     set_state, status_meanings, write_region)
-from ._study_scene import StudyScene
+from ._kind import RunContext, SceneKind
+from ._store import (ATTRS_KEY, FORMAT_VERSION, NOT_COMPUTED, STATE_GROUP, create_array, mark_done, open_group,
+                     provenance, read_arrays, status_meanings, write_region)
+from ._study_scene import STUDY_KINDS, StudyScene, parse_study_scene
 
-__all__ = ["run_study", "compute_study_chunk", "study_arrays", "solver_norm_errors", "NOT_APPLICABLE",
-           "CHECK_MARCH", "CHECK_FIXED", "NO_ANSWER"]
+__all__ = ["STUDY", "StudyKind", "compute_study_chunk", "create_study_skeleton", "result_dims", "study_arrays",
+           "solver_norm_errors", "NOT_APPLICABLE", "CHECK_MARCH", "CHECK_FIXED", "NO_ANSWER"]
 
 #: Baseline status of a point the LSODA baseline does not cover (it takes harmonic motions only).
 NOT_APPLICABLE = -2
@@ -46,7 +46,6 @@ NO_ANSWER = -1
 #: Timing of one solve: the fastest of up to 3 calls while they take under 0.5 s in total.
 TIMING_REPEATS = 3
 TIMING_BUDGET = 0.5
-_WARM = False
 
 
 # ---------------------------------------------------------------------------
@@ -54,7 +53,9 @@ _WARM = False
 # ---------------------------------------------------------------------------
 
 
-def _dims(scene: StudyScene) -> dict[str, int]:
+def result_dims(scene: StudyScene) -> dict[str, int]:
+    """Sizes of the dimensions of the result arrays (point, method, rtol and the accuracy study's
+    n_steps, baseline_tol)."""
     d = {"point": scene.n_points, "method": len(scene.methods), "rtol": len(scene.rtols)}
     if scene.kind == "accuracy":
         if scene.fixed_steps:
@@ -111,7 +112,7 @@ def study_arrays(scene: StudyScene) -> dict[str, tuple[tuple[str, ...], np.dtype
             "P_used": (sol, f8, nan, {"long_name": "P kept after the fallback"}),
             "true_error_used": (sol, f8, nan, {"long_name": "true error of the kept answer"}),
         })
-    dims = _dims(scene)
+    dims = result_dims(scene)
     if "n_steps" in dims:
         fx = ("point", "method", "n_steps")
         out.update({
@@ -204,8 +205,8 @@ def create_study_skeleton(store: Path, scene: StudyScene, points_per_chunk: int)
 
     if store.exists():
         shutil.rmtree(store)
-    g = _open_group(store, "w")
-    dims = _dims(scene)
+    g = open_group(store, "w")
+    dims = result_dims(scene)
     coords = {"point": np.arange(scene.n_points, dtype=np.int32),
               "method": np.arange(len(scene.methods), dtype=np.int32),
               "rtol": np.asarray(scene.rtols), "n_steps": np.asarray(scene.fixed_steps, dtype=np.int32),
@@ -217,19 +218,19 @@ def create_study_skeleton(store: Path, scene: StudyScene, points_per_chunk: int)
                    "baseline_tol": {"long_name": "LSODA rtol of the scipy baseline"}}
     for d, size in dims.items():
         v = coords[d]
-        _create(g, d, shape=(size,), chunks=(size,), dtype=v.dtype, fill=0, dims=(d,), attrs=coord_attrs[d])[:] = v
+        create_array(g, d, shape=(size,), chunks=(size,), dtype=v.dtype, fill=0, dims=(d,), attrs=coord_attrs[d])[:] = v
     c = points_per_chunk
     for name, (values, attrs) in point_parameters(scene).items():
         fill = -1 if values.dtype.kind == "i" else np.nan
-        _create(g, name, shape=values.shape, chunks=(c,), dtype=values.dtype, fill=fill, dims=("point",),
-                attrs=attrs)[:] = values
+        create_array(g, name, shape=values.shape, chunks=(c,), dtype=values.dtype, fill=fill, dims=("point",),
+                     attrs=attrs)[:] = values
     for name, (adims, dtype, fill, attrs) in study_arrays(scene).items():
         shape = tuple(dims[d] for d in adims)
-        _create(g, name, shape=shape, chunks=(c,) + shape[1:], dtype=dtype, fill=fill, dims=adims, attrs=attrs)
+        create_array(g, name, shape=shape, chunks=(c,) + shape[1:], dtype=dtype, fill=fill, dims=adims, attrs=attrs)
     n_chunks = -(-scene.n_points // c)
     sg = g.create_group(STATE_GROUP)
-    _create(sg, "chunk_done", shape=(n_chunks,), chunks=(1,), dtype=np.uint8, fill=0, dims=("chunk_point",),
-            attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+    create_array(sg, "chunk_done", shape=(n_chunks,), chunks=(1,), dtype=np.uint8, fill=0, dims=("chunk_point",),
+                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
     g.attrs[ATTRS_KEY] = {
         "format_version": FORMAT_VERSION,
         "kind": scene.kind,
@@ -254,20 +255,6 @@ def solver_norm_errors(U, P, U_ref, P_ref, period, vscale):
         e_u = relative_u_error(np.asarray(U, float), np.asarray(U_ref, float), period, vscale)
         e_p = np.abs(np.asarray(P, float) - P_ref) / np.abs(P_ref)
     return e_u, e_p
-
-
-def _warm_up(methods) -> None:
-    """Compile (or load) the numba kernels once per process, so no timed solve pays for it."""
-    global _WARM
-    if _WARM:
-        return
-    import solver
-
-    kin, phys = solver.Harmonic(1.0, 0.5), solver.Physics.from_scaled(1.0, 1.0)
-    for m in methods:
-        solver.solve_periodic(kin, phys, method=m, rtol=1e-3)
-        solver.solve_fixed_grid(kin, phys, 16, method=m)
-    _WARM = True
 
 
 def _best_time(solve):
@@ -411,10 +398,14 @@ def _baselines(scene, case, ref, T, vscale):
 # ---------------------------------------------------------------------------
 
 
-def compute_study_chunk(store: str, scene: StudyScene, points_per_chunk: int, index: int) -> dict:
-    """Solve the points of chunk ``index``, write whole chunks of every result array, then mark it done."""
+def compute_study_chunk(store: str, scene: StudyScene, chunks: tuple[int], index: tuple[int]) -> dict:
+    """Solve the points of chunk ``index`` (``chunks``: the layout, (points per chunk,)), write
+    whole chunks of every result array, then mark it done."""
     import numba
 
+    import solver
+
+    (points_per_chunk,), (index,) = chunks, index
     store_path = Path(store)
     lo, hi = index * points_per_chunk, min((index + 1) * points_per_chunk, scene.n_points)
     vscale = point_parameters_vscale(scene, lo, hi)
@@ -424,7 +415,7 @@ def compute_study_chunk(store: str, scene: StudyScene, points_per_chunk: int, in
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        _warm_up(scene.methods)
+        solver.warm_up(STUDY.kernel_sets(scene))  # no timed solve pays for loading the kernels
         t0 = time.perf_counter()
         rows = [_solve_point(scene, scene.points[i], vscale[i - lo]) for i in range(lo, hi)]
         seconds = time.perf_counter() - t0
@@ -452,62 +443,28 @@ def point_parameters_vscale(scene: StudyScene, lo: int, hi: int) -> np.ndarray:
     return np.array([solver.kinematic_speed(scene.points[i].case.kinematics())[0] for i in range(lo, hi)])
 
 
-def run_study(scene: StudyScene, store=None, *, scheduler=None, workers=None, overwrite=False, progress=True,
-              echo=print, session=None):
-    """Run study ``scene`` into ``store``, resuming whatever an earlier run left undone.
+class StudyKind(SceneKind):
+    """Studies: chunks of points, each solved by every method at every tolerance; no reductions
+    (the report compares them across the whole store)."""
 
-    Same contract as :func:`pipeline.run_scene` (returns its ``RunSummary``; raises
-    ``StoreMismatch`` / ``StoreBusy``). ``RunSummary.failures`` counts (point, method, rtol)
-    solves with a nonzero status.
-    """
-    import dask
+    names = STUDY_KINDS
+    rate_unit = "points/s"
+    chunk_task = staticmethod(compute_study_chunk)
 
-    from ._run import RunSummary, _compute, _load, _Progress, scene_run
+    def parse(self, doc, ctx, text):
+        return parse_study_scene(doc, ctx, text)
 
-    t_start = time.perf_counter()
-    with scene_run(scene, store, scheduler, workers, session) as run:
-        store, scheduler, n_workers, sched = run.store, run.scheduler, run.n_workers, run.sched
-        meta = open_existing(store)
-        if meta is not None and (meta["provenance"]["scene_hash"] != scene.hash or overwrite):
-            if not overwrite:
-                raise StoreMismatch(
-                    f"{store}: built from a different scene ({meta['provenance']['scene_file']}, hash "
-                    f"{meta['provenance']['scene_hash'][:12]}) than {scene.path} (hash {scene.hash[:12]}); rerun "
-                    "with --overwrite to replace it, or choose another --store")
-            meta = None
-        if meta is None:
-            ppc = scene.execution.points_per_task or default_points_per_task(scene)
-            create_study_skeleton(store, scene, ppc)
-            meta = open_existing(store)
-        else:
-            remove_partials(store)
-        ppc = int(meta["layout"]["chunks"][0])
-        done = read_done(store)
-        pending = [int(i) for i in np.flatnonzero(~done)]
-        t_solve = time.perf_counter()
-        computed = 0
-        if pending:
-            tasks = [dask.delayed(compute_study_chunk, pure=False)(str(store), scene, ppc, i,
-                                                                  dask_key_name=f"pipeline-study-{i}")
-                     for i in pending]
-            bar = _Progress(len(tasks), scene.n_points / len(done), scene.name, progress, rate_unit="points/s")
-            computed = sum(r["points"] for r in _compute(tasks, sched, bar))
-        solve_seconds = time.perf_counter() - t_solve
-        failures = int(np.count_nonzero(_load(store, ["status"])["status"] > 0))
-        if pending or not meta["state"].get("chunks_complete"):
-            set_state(store, chunks_complete=True)
-            import datetime as _dt
+    def create_skeleton(self, run: RunContext) -> None:
+        scene = run.scene
+        create_study_skeleton(run.store, scene, scene.execution.points_per_task or default_points_per_task(scene))
 
-            from ._run import _consolidate
+    def failures(self, store: Path, scene) -> int:
+        """(point, method, rtol) solves with a failure status (> 0)."""
+        return int(np.count_nonzero(read_arrays(store, ["status"])["status"] > 0))
 
-            record_run(store, {
-                "finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                "wall_seconds": round(time.perf_counter() - t_start, 3), "solve_seconds": round(solve_seconds, 3),
-                "computed_points": computed, "computed_chunks": len(pending), "total_chunks": len(done),
-                "failures": failures, "scheduler": scheduler, "workers": n_workers})
-            _consolidate(store)
-    return RunSummary(scene=scene.name, store=str(store), points=scene.n_points, computed_points=computed,
-                      computed_chunks=len(pending), total_chunks=len(done), failures=failures,
-                      wall_seconds=time.perf_counter() - t_start, solve_seconds=solve_seconds,
-                      reductions_computed=False)
+    def kernel_sets(self, scene) -> tuple[str, ...]:
+        """The reference's periodic method, every compared method, and the fixed grids."""
+        return tuple(dict.fromkeys(("periodic", *scene.methods, "fixed_grid")))
 
+
+STUDY = StudyKind()

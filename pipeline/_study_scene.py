@@ -22,9 +22,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ._scene import Execution, _Ctx, _shape_value, _tname, scene_hash
+from ._scene import Execution, ParseContext, parse_shape, type_name, scene_hash
 
-__all__ = ["STUDY_KINDS", "StudyCase", "StudyPoint", "StudyScene", "Sweep", "is_study", "parse_study",
+__all__ = ["STUDY_KINDS", "StudyCase", "StudyPoint", "StudyScene", "Sweep", "parse_study",
            "parse_study_scene"]
 
 STUDY_KINDS = ("accuracy", "stiffness")
@@ -194,7 +194,7 @@ class StudyScene:
 # ---------------------------------------------------------------------------
 
 
-def _positive(ctx: _Ctx, obj, key) -> float:
+def _positive(ctx: ParseContext, obj, key) -> float:
     """A positive number, also written "2^x"."""
     if isinstance(obj, str) and _POW2_RE.match(obj):
         v = 2.0 ** float(_POW2_RE.match(obj).group(1))
@@ -205,7 +205,7 @@ def _positive(ctx: _Ctx, obj, key) -> float:
     return v
 
 
-def _physics_value(ctx: _Ctx, name: str, obj, key) -> float:
+def _physics_value(ctx: ParseContext, name: str, obj, key) -> float:
     if name in ("anisotropy_ratio", "scaled_period"):
         return _positive(ctx, obj, key)
     v = ctx.number(obj, key)
@@ -216,17 +216,17 @@ def _physics_value(ctx: _Ctx, name: str, obj, key) -> float:
     return v
 
 
-def _coefficients(ctx: _Ctx, obj, key) -> tuple[float, ...]:
+def _coefficients(ctx: ParseContext, obj, key) -> tuple[float, ...]:
     if not isinstance(obj, list) or not obj:
-        raise ctx.err(key, f"must be a non-empty array of numbers, got {_tname(obj)}")
+        raise ctx.err(key, f"must be a non-empty array of numbers, got {type_name(obj)}")
     return tuple(ctx.number(v, f"{key}[{i}]", allow_pi=True) for i, v in enumerate(obj))
 
 
-def _shape_entry(ctx: _Ctx, family: str, name: str, obj, key):
+def _shape_entry(ctx: ParseContext, family: str, name: str, obj, key):
     if name in ("A", "B"):
         return _coefficients(ctx, obj, key)
     if name in ("closing_shape", "opening_shape"):
-        return _shape_value(ctx, obj, key)
+        return parse_shape(ctx, obj, key)
     v = ctx.number(obj, key, allow_pi=name in ("A0", "A1"))
     if name == "A1" and v < 0:
         raise ctx.err(key, f"amplitude must be >= 0, got {v:g}")
@@ -235,7 +235,7 @@ def _shape_entry(ctx: _Ctx, family: str, name: str, obj, key):
     return v
 
 
-def _parse_case(ctx: _Ctx, obj, key: str, base: dict) -> StudyCase:
+def _parse_case(ctx: ParseContext, obj, key: str, base: dict) -> StudyCase:
     allowed = {"name": "", "family": "", **{k: "" for k in _PHYSICS_KEYS}}
     for keys in _FAMILY_KEYS.values():
         allowed.update({k: "" for k in keys})
@@ -266,7 +266,7 @@ def _parse_case(ctx: _Ctx, obj, key: str, base: dict) -> StudyCase:
     return StudyCase(name, family, tuple(shape), **phys)
 
 
-def _values(ctx: _Ctx, obj, key: str, kind: str) -> tuple[float, ...]:
+def _values(ctx: ParseContext, obj, key: str, kind: str) -> tuple[float, ...]:
     """A list of numbers, or ``{log10_range | log2_range | range = [a, b], step = s}`` (from a
     towards b in steps of s; a and b may be in either order)."""
     if isinstance(obj, list):
@@ -292,7 +292,7 @@ def _values(ctx: _Ctx, obj, key: str, kind: str) -> tuple[float, ...]:
     return tuple(float(base ** v) if base else float(v) for v in x)
 
 
-def _parse_sweep(ctx: _Ctx, obj, key: str) -> Sweep:
+def _parse_sweep(ctx: ParseContext, obj, key: str) -> Sweep:
     ctx.table(obj, key, {"parameter": "", "values": "", "log10_range": "", "log2_range": "", "range": "",
                          "step": ""}, required=("parameter",))
     parameter = ctx.string(obj["parameter"], f"{key}.parameter", tuple(SWEEP_PARAMETERS))
@@ -330,7 +330,7 @@ _TOP = {"scene": "", "solver": "", "reference": "", "baseline": "", "base": "", 
 
 def parse_study(doc: dict, text: str, file: str) -> StudyScene:
     """Validate the TOML document ``doc`` of a study scene (``[scene] kind`` accuracy or stiffness)."""
-    ctx = _Ctx(file)
+    ctx = ParseContext(file)
     ctx.table(doc, "", _TOP, required=("scene", "solver"))
     head = ctx.table(doc["scene"], "scene", {"name": "", "title": "", "figure": "", "kind": ""},
                      required=("name", "kind"))
@@ -436,12 +436,5 @@ def parse_study(doc: dict, text: str, file: str) -> StudyScene:
 
 
 def parse_study_scene(doc: dict, ctx, text: str) -> StudyScene:
-    """``parse_study`` with the signature of the scene-kind registry (``_scene.SCENE_KINDS``)."""
+    """``parse_study`` with the signature of a scene kind's parser (``_kind.SceneKind.parse``)."""
     return parse_study(doc, text, ctx.file)
-
-
-def is_study(doc) -> bool:
-    """True when the TOML document declares a study kind (dispatch from ``parse_scene``)."""
-    head = doc.get("scene") if isinstance(doc, dict) else None
-    return isinstance(head, dict) and head.get("kind", "grid") in STUDY_KINDS
-

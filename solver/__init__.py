@@ -21,6 +21,7 @@ from ._physics import Physics, physical_from_scaled, scaled_from_physical
 from ._optimize import OptimizeResult, optimize_motion
 from ._solve import METHODS, SolveResult, solve_fixed_grid, solve_periodic
 from ._status import STATUS_REASONS  # noqa: E402
+from ._warmup import KERNEL_SETS, kernel_cache, warm_up  # noqa: E402  (compile ahead: pipeline's driver)
 
 restore_cache_dir(_numba_cache_dir)  # other packages' kernels keep their own
 

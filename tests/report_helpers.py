@@ -253,7 +253,7 @@ def synthetic_study_store(store: Path, scene) -> Path:
     _study.create_study_skeleton(store, scene, 64)
     rng = np.random.default_rng(0)
     spec = _study.study_arrays(scene)
-    dims = _study._dims(scene)
+    dims = _study.result_dims(scene)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         g = zarr.open_group(str(store), mode="r+", zarr_format=3)

@@ -156,7 +156,7 @@ def test_overwrite_replaces_store(tmp_path):
     other = write_scene(tmp_path, small_scene_text(rtol=5e-4), "other.toml")
     summary = run_scene(load_scene(other), store, scheduler="threads", workers=2, overwrite=True, progress=False)
     assert summary.computed_chunks == summary.total_chunks
-    from pipeline._run import store_meta
+    from pipeline._store import store_meta
 
     assert store_meta(store)["provenance"]["scene_hash"] == load_scene(other).hash
 

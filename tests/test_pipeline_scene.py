@@ -177,7 +177,7 @@ def test_quick_variants_are_smaller_versions_of_every_shipped_scene():
     from pathlib import Path
 
     from pipeline.__main__ import PAPER_SCENES, WORKFLOWS, quick_variant
-    from pipeline._scene import load_scene
+    from pipeline import load_scene
 
     for name in PAPER_SCENES:
         full = load_scene(WORKFLOWS / f"{name}.toml")

@@ -1,0 +1,104 @@
+"""The scene-kind protocol: what the driver (``pipeline._run``) needs of one kind of scene.
+
+A run is a chain of small named steps, the same for every kind (pangeo-forge-recipes'
+``StoreToZarr`` is the model)::
+
+    lock the store -> open or create its skeleton -> pending chunks -> fan out one task per
+    chunk -> the kind's driver-side steps (series, reductions) -> run record, consolidation
+
+A kind supplies the parts that differ:
+
+* ``create_skeleton(run)``: every array, coordinate and attribute of an empty store, before
+  any task runs (``pipeline.kind`` names the kind; format-1 grid stores carry no kind);
+* ``pending_chunks(store)``: the chunk indices without their done marker;
+* ``chunk_task(store, scene, chunks, index)``: a module-level function, run inside a dask task
+  (picklable arguments only), that computes chunk ``index`` of the layout ``chunks``, writes
+  whole aligned chunks of its arrays (``_store.write_region``), then its done marker, and
+  returns ``{"points", "failures", "seconds"}``;
+* ``steps(scene)``: driver-side :class:`Step` objects after the chunks (reductions), each
+  owning one flag of ``pipeline.state``;
+* ``failures(store, scene)``: the count the run summary reports;
+* ``kernel_sets(scene)``: the solver kernel sets its tasks use, compiled once in the driver
+  before work fans out (``solver.warm_up``).
+
+Which report section shows a store is for ``reports`` to choose from the store's kind; the
+pipeline never imports ``reports`` for it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ._schedule import Scheduler
+from ._store import read_done
+
+__all__ = ["RunContext", "SceneKind", "Step"]
+
+
+@dataclass(frozen=True)
+class RunContext:
+    """One scene's run as its kind's skeleton and steps see it.
+
+    ``n_workers`` is the parallelism the run plans for (``--workers``, else every core on the
+    local pools, else 1); ``echo(message, file=...)`` prints a line for the user.
+    """
+
+    scene: object
+    store: Path
+    scheduler: Scheduler
+    n_workers: int
+    progress: bool
+    echo: Callable
+
+
+@dataclass(frozen=True)
+class Step:
+    """A driver-side step after the chunks.
+
+    It runs when its ``state`` flag (``pipeline.state[state]``) is not set, and again after any
+    run that computed chunks when ``after_chunks`` (a reduction over them; a series of its own
+    points does not depend on them).  ``run(context)`` writes the step's arrays; the driver sets
+    the flag after it returns, so a run killed inside a step repeats the step on resume.
+    """
+
+    name: str
+    state: str
+    run: Callable[[RunContext], None]
+    after_chunks: bool = True
+
+
+class SceneKind:
+    """Base of the scene kinds (module docstring); the defaults suit any chunked store."""
+
+    #: ``[scene] kind`` values this kind parses
+    names: tuple[str, ...] = ()
+    #: unit of the progress bar's rate
+    rate_unit = "solves/s"
+    #: the task computing one chunk: a module-level function (picklable by reference)
+    chunk_task: Callable[..., dict]
+
+    def parse(self, doc: dict, ctx, text: str):
+        """The validated scene of the TOML document ``doc`` (``ctx``: a ``ParseContext``)."""
+        raise NotImplementedError
+
+    def create_skeleton(self, run: RunContext) -> None:
+        raise NotImplementedError
+
+    def pending_chunks(self, store: Path) -> list[tuple[int, ...]]:
+        """Chunk indices (C order) whose done marker is not set."""
+        done = read_done(store)
+        return [tuple(int(i) for i in idx) for idx in zip(*np.nonzero(~done))]
+
+    def steps(self, scene) -> tuple[Step, ...]:
+        return ()
+
+    def failures(self, store: Path, scene) -> int:
+        raise NotImplementedError
+
+    def kernel_sets(self, scene) -> tuple[str, ...]:
+        """Solver kernel sets the tasks use (keys of ``solver.KERNEL_SETS``)."""
+        return ("periodic",)

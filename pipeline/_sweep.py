@@ -1,0 +1,183 @@
+"""Scene kind "grid" (the default): a parameter sweep, its series and its reductions.
+
+Tasks receive only picklable arguments (paths, the frozen scene, indices) and open the store
+themselves, so they run unchanged on the local schedulers and on a dask.distributed cluster
+sharing the file system.  Steps after the chunks: u(tau) at the scene's series points (one
+task), then every reduction of the stored grid, whose polishing fans out again.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ._grid import calibrate_points_per_task, chunk_region, chunk_shape, region_parameters, solve_points
+from ._kind import RunContext, SceneKind, Step
+from ._reduce import grid_reduction, objective, polish_cells
+from ._scene import Scene, parse_grid_scene
+from ._schedule import Progress, compute
+from ._store import create_skeleton, mark_done, read_arrays, reduction_arrays, write_arrays, write_region
+
+__all__ = ["GRID", "GridKind", "compute_chunk", "compute_series", "reduce_grid"]
+
+
+def compute_chunk(store: str, scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> dict:
+    """Solve every point of chunk ``index``, write its outputs, then mark it done.
+
+    Returns
+    -------
+    dict
+        ``points``, ``failures`` (nonzero status) and ``seconds`` spent in the solver.
+    """
+    store_path = Path(store)
+    region = chunk_region(index, scene.shape, chunks)
+    params = region_parameters(scene, region)
+    t0 = time.perf_counter()
+    values = solve_points(scene.family, params, scene.outputs, method=scene.method, rtol=scene.rtol)
+    seconds = time.perf_counter() - t0
+    rshape = tuple(sl.stop - sl.start for sl in region)
+    values = {k: np.asarray(v).reshape(rshape) for k, v in values.items()}
+    write_region(store_path, region, index, chunks, scene.shape, values)
+    # Test hook: widen the window between data and marker, where a kill leaves a half-done chunk.
+    time.sleep(float(os.environ.get("TWOLINK_PIPELINE_MARKER_DELAY", "0") or 0))
+    mark_done(store_path, index)  # last: a chunk without its marker is recomputed on resume
+    return {"points": int(np.prod(rshape)), "failures": int(np.count_nonzero(values["status"] != 0)),
+            "seconds": seconds}
+
+
+def compute_series(store: str, scene: Scene) -> int:
+    """Solve the scene's series points and write u(tau), resampled to uniform nodes tau_k = k/n_tau
+    by periodic linear interpolation of the solver's final grid. Returns the number of failures."""
+    import warnings
+
+    import zarr
+
+    s = scene.series
+    params = {d: np.array([dict(p)[d] for p in s.points], dtype=np.float64) for d in scene.dims}
+    for k, v in scene.fixed:
+        params[k] = np.full(len(s.points), v)
+    out = solve_points(scene.family, params, (), method=scene.method, rtol=scene.rtol, series=True)
+    tau = np.arange(s.n_tau) / s.n_tau
+    u = np.full((len(s.points), s.n_tau), np.nan)
+    for i, (ui, ti) in enumerate(zip(out["u"], out["tau"])):
+        if out["status"][i] == 0 and ui.size:
+            u[i] = np.interp(tau, ti, ui, period=1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        zarr.open_array(store=store, path="series_u", mode="r+")[...] = u
+        zarr.open_array(store=store, path="series_status", mode="r+")[...] = out["status"]
+    return int(np.count_nonzero(out["status"] != 0))
+
+
+def reduce_grid(run: RunContext) -> None:
+    """Compute every reduction of the scene from the stored grid and write its arrays; the grid
+    optima of a polished reduction are refined in tasks (batches of cells)."""
+    import dask
+
+    scene, store, sched = run.scene, run.store, run.scheduler
+    for r in scene.reductions:
+        names = {r.quantity, *r.report}
+        data = read_arrays(store, sorted(names))
+        arrays, flat = grid_reduction(scene, r, data)
+        _, rshape, spec = reduction_arrays(scene, r)
+        out = {k: v for k, v in arrays.items()}
+        if r.polish:
+            kept = [a for a in scene.axes if a.name not in r.over]
+            over_shape = tuple(scene.axis(a).size for a in r.over)
+            cells, where = [], []
+            for pos in np.ndindex(*rshape):
+                k = int(flat[pos])
+                if k < 0:
+                    continue
+                params = dict(scene.fixed)
+                for a, i in zip(kept, pos):
+                    params[a.name] = float(a.values[i])
+                for a, i in zip(r.over, np.unravel_index(k, over_shape)):
+                    params[a] = float(scene.axis(a).values[i])
+                subset = pos[-1] if r.subsets is not None else None
+                value = float(objective(r.statistic, np.array([arrays[r.name][pos]]))[0])
+                cells.append({"params": params, "subset": subset, "value": value})
+                where.append(pos)
+            # Batches of cells per task, so a task takes seconds.
+            # compass batches all cells of a task into each solver call: one task per worker;
+            # the scipy methods call the solver point by point: smaller tasks balance better.
+            per_worker = 1 if r.polish_method == "compass" else 4
+            n_tasks = max(1, min(len(cells), per_worker * (sched.workers or os.cpu_count() or 1)))
+            batches = [list(range(i, len(cells), n_tasks)) for i in range(n_tasks)] if cells else []
+            tasks = [dask.delayed(polish_cells, pure=False)(scene, r, [cells[i] for i in b],
+                                                           dask_key_name=f"pipeline-polish-{r.name}-{j}")
+                     for j, b in enumerate(batches)]
+            bar = Progress(len(tasks), len(cells) / max(1, len(tasks)), f"polish {r.name}", run.progress,
+                           unit="tasks", rate_unit="optima/s")
+            results = compute(tasks, sched, bar) if tasks else []
+            pol = {name: np.full(rshape, fill, dtype=dtype) for name, (dtype, fill, _) in spec.items()
+                   if name.startswith(f"{r.name}_polished")}
+            base = f"{r.name}_polished"
+            for b, res in zip(batches, results):
+                for i, rec in zip(b, res):
+                    pos = where[i]
+                    v = rec["values"][r.quantity]
+                    pol[base][pos] = abs(v) if r.statistic == "absmax" else v
+                    if r.statistic == "absmax":
+                        pol[f"{base}_signed"][pos] = v
+                    for a in r.over:
+                        pol[f"{base}_{a}"][pos] = rec["params"][a]
+                    for q in r.report:
+                        if q != r.quantity:
+                            pol[f"{base}_{q}"][pos] = rec["values"][q]
+                    pol[f"{base}_status"][pos] = rec["status"]
+                    pol[f"{base}_evaluations"][pos] = rec["evaluations"]
+            out.update(pol)
+        write_arrays(store, out)
+
+
+def series_step(run: RunContext) -> None:
+    """u(tau) at the scene's series points, in one task."""
+    import dask
+
+    task = dask.delayed(compute_series, pure=False)(str(run.store), run.scene, dask_key_name="pipeline-series")
+    compute([task], run.scheduler, Progress(1, len(run.scene.series.points), f"{run.scene.name} series", run.progress))
+
+
+class GridKind(SceneKind):
+    """The parameter grid (``_scene.Scene``): chunks of grid points, then series and reductions."""
+
+    names = ("grid",)
+    chunk_task = staticmethod(compute_chunk)
+
+    def parse(self, doc, ctx, text):
+        return parse_grid_scene(doc, ctx, text)
+
+    def create_skeleton(self, run: RunContext) -> None:
+        """Chunks of ``[execution] points_per_task`` points, else of about ``TASK_SECONDS`` of
+        work from a timed probe (``_grid.calibrate_points_per_task``)."""
+        scene = run.scene
+        target = scene.execution.points_per_task
+        if target is None:
+            target, rate = calibrate_points_per_task(scene, run.n_workers)
+            if run.progress:
+                run.echo(f"{scene.name}: probe {rate:,.0f} solves/s per worker -> {target} points per task",
+                         file=sys.stderr)
+        create_skeleton(run.store, scene, chunk_shape(scene.shape, target))
+
+    def steps(self, scene) -> tuple[Step, ...]:
+        steps = []
+        if scene.series is not None:
+            steps.append(Step("series", "series_complete", series_step, after_chunks=False))
+        if scene.reductions:
+            steps.append(Step("reductions", "reductions_complete", reduce_grid))
+        return tuple(steps)
+
+    def failures(self, store: Path, scene) -> int:
+        """Grid points whose solve did not converge (status != 0)."""
+        return int(np.count_nonzero(read_arrays(store, ["status"])["status"] != 0))
+
+    def kernel_sets(self, scene) -> tuple[str, ...]:
+        return (scene.method,)
+
+
+GRID = GridKind()

@@ -1,0 +1,94 @@
+"""The pipeline's modules import each other without cycles and without private names.
+
+A name another module imports is public (it may live in a private module, as scipy's
+``_ivp``): ``from ._store import _create`` is a hidden contract.  Imports inside functions
+count: they are how a cycle used to be hidden (``_run`` <-> ``_optima`` / ``_study``, issue 20).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def sibling_imports(package_dir: Path) -> dict[str, dict[str, set[str]]]:
+    """{module: {imported sibling module: names imported from it}} over ``package_dir/*.py``
+    (relative and absolute imports, at any depth of the file)."""
+    package = package_dir.name
+    modules = {p.stem for p in package_dir.glob("*.py")}
+    graph: dict[str, dict[str, set[str]]] = {m: {} for m in modules}
+    for path in sorted(package_dir.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                if node.level == 1:
+                    parts = node.module.split(".") if node.module else []
+                elif node.level == 0 and node.module and node.module.split(".")[0] == package:
+                    parts = node.module.split(".")[1:]
+                else:
+                    continue
+                if parts and parts[0] in modules:
+                    graph[path.stem].setdefault(parts[0], set()).update(a.name for a in node.names)
+                elif not parts:  # from . import _store, _scene
+                    for a in node.names:
+                        if a.name in modules:
+                            graph[path.stem].setdefault(a.name, set())
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    parts = a.name.split(".")
+                    if parts[0] == package and len(parts) > 1 and parts[1] in modules:
+                        graph[path.stem].setdefault(parts[1], set())
+    return graph
+
+
+def import_cycles(graph) -> list[list[str]]:
+    """Every cycle of the module graph found by depth-first search (each as a closed path)."""
+    cycles, state = [], {}
+
+    def visit(m, path):
+        state[m] = "open"
+        for n in sorted(graph.get(m, {})):
+            if n == "__init__" or n == m:
+                continue
+            if state.get(n) == "open":
+                cycles.append(path[path.index(n):] + [n])
+            elif n not in state:
+                visit(n, path + [n])
+        state[m] = "done"
+
+    for m in sorted(graph):
+        if m not in state and m != "__init__":
+            visit(m, [m])
+    return cycles
+
+
+def private_imports(graph) -> list[str]:
+    """``module: from sibling import _name`` for every private name crossing modules."""
+    return [f"{m}: from {n} import {name}" for m, deps in sorted(graph.items()) for n, names in sorted(deps.items())
+            for name in sorted(names) if _private(name)]
+
+
+def test_pipeline_has_no_import_cycles():
+    assert import_cycles(sibling_imports(REPO / "pipeline")) == []
+
+
+def test_pipeline_imports_no_private_names_across_modules():
+    assert private_imports(sibling_imports(REPO / "pipeline")) == []
+
+
+def test_the_checks_fail_on_a_planted_cycle_and_private_name(tmp_path):
+    pkg = tmp_path / "pipeline"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("from ._a import run\n")
+    (pkg / "_a.py").write_text("from ._b import helper\n\ndef run():\n    return helper()\n")
+    (pkg / "_b.py").write_text("def helper():\n    from ._a import _secret\n    return _secret\n")
+    (pkg / "_c.py").write_text("import pipeline._a\nfrom pipeline import _b\n")
+    graph = sibling_imports(pkg)
+    assert import_cycles(graph) == [["_a", "_b", "_a"]]
+    assert private_imports(graph) == ["_b: from _a import _secret"]
+    assert set(graph["_c"]) == {"_a", "_b"}
