@@ -79,17 +79,11 @@ def view_store(sd, view: View):
     """The part of ``sd`` that ``view`` shows (a SceneStore over a subset), or None when the
     store holds none of it (e.g. a quick store without that coordinate)."""
     ds = sd.ds
-    for d, v in view.select.items():
+    wanted = [(d, {"value": v}) for d, v in view.select.items()] + [(d, {"bounds": b}) for d, b in view.ranges.items()]
+    for d, how in wanted:
         if d not in ds.dims:
             return None
-        idx = _indices(np.asarray(ds[d].values, dtype=np.float64), value=v)
-        if not idx.size:
-            return None
-        ds = ds.isel({d: idx})
-    for d, b in view.ranges.items():
-        if d not in ds.dims:
-            return None
-        idx = _indices(np.asarray(ds[d].values, dtype=np.float64), bounds=b)
+        idx = _indices(np.asarray(ds[d].values, dtype=np.float64), **how)
         if not idx.size:
             return None
         ds = ds.isel({d: idx})
