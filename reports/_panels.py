@@ -218,7 +218,8 @@ def quantity_maps(sd, name: str):
             if style == "heatmap+lines":
                 fig.add_trace(go.Contour(x=xs.positions, y=ys.positions, z=_round(z), contours={"coloring": "none"},
                                          line={"width": 0.8, "color": "rgba(40,40,40,0.55)"}, ncontours=10,
-                                         showscale=False, hoverinfo="skip", connectgaps=False, name="contours"),
+                                         showscale=False, showlegend=False, hoverinfo="skip", connectgaps=False,
+                                         name="contours"),
                               row=r + 1, col=c + 1)
     # One update for every panel, then titles on the outer ones (per-panel updates are slow in plotly.py).
     fig.update_xaxes(**{k: w for k, w in xs.axis_layout().items() if k != "title"})

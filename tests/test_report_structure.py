@@ -93,3 +93,27 @@ def test_each_module_imports_on_its_own(module):
     import importlib
 
     importlib.import_module(f"reports.{module}")
+
+
+@pytest.mark.parametrize("n, kinds", [(16, ["heatmap", "contour"]), (64, ["contour"]), (3, ["heatmap"])])
+def test_coarse_maps_are_heatmaps_with_contour_lines(n, kinds):
+    """16 x 16 (harmonic_optimum): the cells as a heatmap with contour lines over them (no
+    legend entry); 64 x 64: one contour map coloured as a heatmap; 3 x 3: the cells alone."""
+    import numpy as np
+    import xarray as xr
+
+    from reports._panels import quantity_maps
+    from reports._read import SceneStore
+
+    a0, r = np.linspace(0.1, 1.5, n), np.linspace(0.05, 0.95, n)
+    z = np.sin(3 * a0)[:, None] * np.cos(2 * r)[None, :]
+    ds = xr.Dataset({"scaled_efficiency": (("A0", "A1_ratio"), z)}, coords={"A0": a0, "A1_ratio": r})
+    sd = SceneStore(path=Path("x.zarr"), meta={"layout": {"dims": ["A0", "A1_ratio"]}}, ds=ds,
+                    science={"outputs": {"quantities": ["scaled_efficiency"]}})
+    fig = quantity_maps(sd, "scaled_efficiency")
+    assert [t.type for t in fig.data] == kinds
+    for t in fig.data:
+        if t.type == "contour" and len(kinds) == 2:
+            assert t.contours.coloring == "none" and t.showlegend is False and t.hoverinfo == "skip"
+        elif t.type == "contour":
+            assert t.contours.coloring == "heatmap"
