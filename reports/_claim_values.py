@@ -64,7 +64,6 @@ class Measurement:
     coarse_value: float = math.nan
     neighbours: list = field(default_factory=list)
     failed: tuple = (0, 0)
-    notes: list = field(default_factory=list)
 
 
 # ---------------------------------------------------------------------------
@@ -558,9 +557,10 @@ def harmonic_phi_span(stores, *, scene, reduction, statistic="max", **select_arg
     m = Measurement(value=(A0 * (1 - r), A0 * (1 + r)), where=where + f" (A0 = {A0:.3g}, A1/A0 = {r:.3g})")
     red = _reduction(sd, reduction)
     m.resolution = _grid_text(sd, red.get("over", [])) + (", polished optimum" if polished else ", grid optimum")
-    steps = [float(np.min(np.diff(sd.ds[d].values))) for d in ("A0",)]
-    m.error = f"grid spacing of A0 {steps[0]:.2g} rad" + (" (polished below it)" if polished else "")
-    m.error_value = steps[0] if not polished else steps[0] / 64
+    step = float(np.min(np.diff(sd.ds["A0"].values)))
+    # the compass polish stops at 1/64 of a grid spacing (pipeline._reduce)
+    m.error = f"grid spacing of A0 {step:.2g} rad" + (" (polished to 1/64 of it)" if polished else "")
+    m.error_value = step / 64 if polished else step
 
     def cell_sel(arr):
         a, _ = select(arr, **select_args)
