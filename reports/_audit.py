@@ -177,7 +177,7 @@ def verdict(claim: Claim, m: Measurement) -> tuple[str, str]:
     if agreeing:
         resolution = (f"grid resolution coarser than the claim's precision: {m.coarse}, and the neighbouring grid "
                       f"value {_num(agreeing[0])} would agree")
-    elif m.coarse and m.coarse_value >= miss:
+    elif m.coarse and m.coarse_value >= miss and m.coarse_side in ("", _side(e, m.value)):
         resolution = f"grid resolution coarser than the claim's precision: {m.coarse}" + (
             f", more than the miss {miss:.2g}" if math.isfinite(m.coarse_value) else "")
     elif math.isfinite(m.error_value) and m.error_value >= miss:

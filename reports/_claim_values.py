@@ -50,6 +50,8 @@ class Measurement:
     edges : arg-max axes at an end of their scanned range, e.g. ("A1/A0 at its lower end 0.059",)
     coarse, coarse_value : for an extremum over a sampled axis, the sampling in words and how
         much the value changes to the neighbouring samples (what the grid can hide)
+    coarse_side : "below" (a maximum: finer sampling can only raise it) or "above" (a minimum);
+        the sampling explains a miss only on that side
     neighbours : for a located coordinate, the coordinates one grid step either side
     failed : (cells without a valid value, cells selected)
     """
@@ -63,6 +65,7 @@ class Measurement:
     coarse: str = ""
     coarse_value: float = math.nan
     neighbours: list = field(default_factory=list)
+    coarse_side: str = ""
     failed: tuple = (0, 0)
 
 
@@ -430,7 +433,7 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
         if not counted and isinstance(value, float) and math.isfinite(value):
             m.error_value = abs(value) * float(sd.science.get("optimizer", {}).get("grid_rtol", math.nan))
     is_axis = reduction and source.get("role", "value") in _reduction(sd, reduction).get("over", [])
-    if statistic in ("max", "min") and index is not None and not is_axis:
+    if statistic in ("max", "min") and index is not None and not is_axis and not source.get("location_along"):
         if location:
             m.neighbours = _neighbour_coords(da, index, location)
             m.coarse = f"{axis_name(location)} located on its grid"
@@ -441,6 +444,8 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
             gap = _unsampled_end(da, index, source.get("ranges") or {})
             if gap:
                 m.coarse, m.coarse_value = gap, math.inf
+            # a finer sampling can only raise a maximum (lower a minimum)
+            m.coarse_side = "below" if statistic == "max" else "above"
     return m
 
 

@@ -347,3 +347,15 @@ def test_audit_json_has_one_object_per_claim_with_the_schema(tmp_path):
     assert by_id["EtaA0A1.max-lower-right"]["our_value"] == 1.8
     assert by_id["UEtaMax.min-speed"]["verdict"] == "not run"
     assert math.isfinite(by_id["EtaA0A1.largest-of-nine"]["our_value"])
+
+
+def test_sampling_explains_a_maximum_only_below_the_paper(plane):
+    """The maximum over a sampled axis can only rise with a finer grid: a maximum below the
+    paper's value may be the sampling, one above it is a difference in the data."""
+    stores, value, *_ = plane
+    top = float(value.max())
+    for paper, expected in ((top * 1.5, "grid resolution coarser"), (top * 0.5, "a difference in the data")):
+        c = Claim(id="t", figure="UEtaMax", claim="c", paper_value="p", expect={"value": paper, "tolerance": 0.01},
+                  compute="stat", args={"scene": "plane", "reduction": "best", "statistic": "max"})
+        row = evaluate_claims([c], list(stores.values()))[0]
+        assert row.verdict == "differs" and expected in row.reason, (paper, row.reason)
