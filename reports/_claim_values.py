@@ -481,7 +481,7 @@ def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=N
     over their shared coordinates (a collapsed side broadcasts), then ``statistic``."""
     import xarray as xr
 
-    parts, excluded = [], 0
+    parts, excluded, unpolished = [], 0, []
     for side in (numerator, denominator):
         side = dict(side)
         scene = side.pop("scene")
@@ -489,6 +489,9 @@ def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=N
         src = _selected(stores, scene, **side)
         sd, da, polished = src.sd, src.da, src.polished
         excluded = max(excluded, src.excluded)
+        if side.get("reduction") and not polished:
+            over = [a for a in _reduction(sd, side["reduction"]).get("over", []) if a in sd.ds.sizes]
+            unpolished.append(f"{sd.name}: grid optima over {_grid_text(sd, over)}, not polished")
         if side_stat:
             v, _, _ = _collapse(da, side_stat)
             da = xr.DataArray(v)
@@ -517,6 +520,8 @@ def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=N
             res.append(f"{sd.name}: rtol {sd.rtol:g}, " + ("polished optima" if pol else "grid optima"))
     m.resolution = "; ".join(dict.fromkeys(res))
     m.error = "ratio of two optima, each within its own resolution"
+    if unpolished:  # a ratio of grid optima: the grid's error is not bounded by anything stored
+        m.coarse, m.coarse_value = "; ".join(dict.fromkeys(unpolished)) + ", an error we cannot bound", math.inf
     return m
 
 

@@ -359,3 +359,20 @@ def test_sampling_explains_a_maximum_only_below_the_paper(plane):
                   compute="stat", args={"scene": "plane", "reduction": "best", "statistic": "max"})
         row = evaluate_claims([c], list(stores.values()))[0]
         assert row.verdict == "differs" and expected in row.reason, (paper, row.reason)
+
+
+def test_a_ratio_of_unpolished_grid_optima_is_named_as_resolution(plane):
+    stores, value, *_ = plane
+    sd = stores["plane"]
+    grid_only = _store("grid_only", sd.ds.drop_vars([v for v in sd.ds.data_vars if "polished" in v]),
+                       sd.reductions)
+    args = {"numerator": {"scene": "grid_only", "reduction": "best", "at": {"scaled_period": 8.0}},
+            "denominator": {"scene": "grid_only", "reduction": "best", "at": {"scaled_period": 0.125}},
+            "statistic": "max"}
+    c = Claim(id="t", figure="EtaVsMinGamma", claim="c", paper_value="p", expect={"max": 0.0}, compute="gain",
+              args=args)
+    row = evaluate_claims([c], [grid_only])[0]
+    assert row.verdict == "differs" and "not polished, an error we cannot bound" in row.reason
+    polished = evaluate_claims([Claim(**{**c.__dict__, "args": {k: ({**v, "scene": "plane"} if isinstance(v, dict) else v)
+                                                               for k, v in args.items()}})], [sd])[0]
+    assert "a difference in the data" in polished.reason
