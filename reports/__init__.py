@@ -6,8 +6,12 @@ Public API::
 
 The command line is ``python -m reports build [STORE ...] --out out/report/``. The site is
 ``index.html`` plus ``plotly.min.js`` (written once, referenced relatively), so it opens from
-disk with no network. Sections are built from the stores that exist; shipped scenes without a
-store are listed as not yet run; a store of another format is refused (:class:`StoreRefused`).
+disk with no network, and ``audit.json``. The page opens with the reproduction audit (every
+quantitative claim of the paper's results, ``reports/claims.toml``, with our value from the
+stores and a verdict), then one section per figure of the paper in the paper's order
+(``reports/figures.toml``), then the studies; figures are drawn when they scroll into view.
+Shipped scenes without a store are listed as not yet run; a store of another format is refused
+(:class:`StoreRefused`).
 """
 
 from ._build import build_report, default_stores

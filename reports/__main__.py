@@ -11,7 +11,8 @@ import sys
 import time
 from pathlib import Path
 
-from ._build import build_report, default_stores
+from ._audit import audit_summary
+from ._build import AUDIT_JSON, build_report, default_stores
 from ._read import StoreRefused
 
 EXIT_REFUSED = 2
@@ -39,6 +40,7 @@ def main(argv=None) -> int:
     size = sum(f.stat().st_size for f in index.parent.iterdir() if f.is_file())
     print(f"report: {index} ({len(stores)} store(s), {size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)",
           flush=True)
+    print(f"audit: {audit_summary(index.parent / AUDIT_JSON)}", flush=True)
     return 0
 
 

@@ -10,12 +10,12 @@ and cost per (Kmax, p).
 
 from __future__ import annotations
 
-import html
 import math
 
 import numpy as np
 
 from ._labels import axis_spec, param_label
+from ._site import esc, provenance_table, scroll_table
 
 __all__ = ["optima_section", "KIND_VERSION"]
 
@@ -25,10 +25,6 @@ KIND_VERSION = 1
 _SYMBOLS = ["square", "cross-thin-open", "triangle-up", "x-thin-open", "diamond", "circle"]
 _STOP_NAMES = ("gradient_tolerance", "max_iterations", "line_search_failed", "ill_conditioned",
                "solve_failed", "no_progress", "error")
-
-
-def _esc(x) -> str:
-    return html.escape(str(x))
 
 
 def _ratio_spec(sd):
@@ -58,22 +54,20 @@ def _provenance_rows(sd) -> str:
     ratios = axes.get("anisotropy_ratio", [])
     ratio_text = (f"2<sup>{math.log2(ratios[0]):g}</sup> … 2<sup>{math.log2(ratios[-1]):g}</sup> "
                   f"({len(ratios)} values)") if ratios else "?"
-    from ._html import provenance_table
-
     return provenance_table(sd, [
         ("ensemble", f"μ<sub>n</sub>/μ<sub>s</sub> {ratio_text} × K<sub>max</sub> "
-                     f"{_esc(axes.get('max_wavenumber'))} × p {_esc(axes.get('p'))} × "
-                     f"{_esc(starts.get('num'))} starts = {n:,} optimisations"),
+                     f"{esc(axes.get('max_wavenumber'))} × p {esc(axes.get('p'))} × "
+                     f"{esc(starts.get('num'))} starts = {n:,} optimisations"),
         ("starts", f"A<sub>0</sub>, A<sub>1</sub> uniform on (0, 1), other coefficients 0, scaled "
-                   f"period {_esc(starts.get('scaled_period'))}, seed {_esc(starts.get('seed'))}"),
-        ("optimiser", f"BFGS + Newton, exact adjoint gradients; objective {_esc(opt.get('objective'))}, "
-                      f"direction {_esc(opt.get('direction'))}, gtol {_esc(opt.get('gtol'))}, "
-                      f"at most {_esc(opt.get('max_iterations'))} steps per grid round, τ grid "
-                      f"rtol {_esc(opt.get('grid_rtol'))}"),
-        ("kept optima", f"{_esc(keep.get('best'))} best distinct per cell among stop reasons "
-                        f"{_esc(', '.join(keep.get('accept', [])))}; equal when max |Δφ| ≤ "
-                        f"{_esc(keep.get('phi_tolerance'))} rad (modulo phase shift and φ → −φ) and "
-                        f"scaled periods within {_esc(keep.get('period_tolerance'))} (relative)"),
+                   f"period {esc(starts.get('scaled_period'))}, seed {esc(starts.get('seed'))}"),
+        ("optimiser", f"BFGS + Newton, exact adjoint gradients; objective {esc(opt.get('objective'))}, "
+                      f"direction {esc(opt.get('direction'))}, gtol {esc(opt.get('gtol'))}, "
+                      f"at most {esc(opt.get('max_iterations'))} steps per grid round, τ grid "
+                      f"rtol {esc(opt.get('grid_rtol'))}"),
+        ("kept optima", f"{esc(keep.get('best'))} best distinct per cell among stop reasons "
+                        f"{esc(', '.join(keep.get('accept', [])))}; equal when max |Δφ| ≤ "
+                        f"{esc(keep.get('phi_tolerance'))} rad (modulo phase shift and φ → −φ) and "
+                        f"scaled periods within {esc(keep.get('period_tolerance'))} (relative)"),
     ])
 
 
@@ -87,7 +81,7 @@ def _outcomes_table(sd) -> str:
     kmax = ds["max_wavenumber"].values
     ps = ds["p"].values
     head = ("<tr><th>p</th><th>K<sub>max</sub></th><th>optimisations</th>"
-            + "".join(f"<th title='{_esc(meanings.get(str(c), ''))}'>{_esc(name)}</th>"
+            + "".join(f"<th title='{esc(meanings.get(str(c), ''))}'>{esc(name.replace('_', ' '))}</th>"
                       for c, name in enumerate(_STOP_NAMES))
             + "<th>ill-conditioned</th><th>period at its bound</th>"
               "<th>seconds per optimisation (median / max)</th>"
@@ -112,12 +106,12 @@ def _outcomes_table(sd) -> str:
                         f"<td class='num'>{kept[:, ik, ip, :].sum(axis=-1).mean():.1f}</td></tr>")
     n_done = int(np.count_nonzero(status >= 0))
     converged = int(np.count_nonzero(status == 0))
-    return (f"<h3>Optimisations, stop reasons and cost</h3><p>{n_done:,} of {status.size:,} "
+    return (f"<h4>Optimisations, stop reasons and cost</h4><p>{n_done:,} of {status.size:,} "
             f"optimisations computed; {converged:,} converged to the gradient tolerance. Starts "
             "flagged ill-conditioned ended with the Hessian's condition number above its threshold "
             "or the period at its bound (p → 2, where λ becomes invariant under T); they are "
             "reported, not retried.</p>"
-            f"<table>{head}{''.join(rows)}</table>")
+            + scroll_table(f"<table>{head}{''.join(rows)}</table>"))
 
 
 def _hover(sd, ir, ik, ip, rank) -> str:
@@ -243,25 +237,25 @@ def best_table(sd) -> str:
             + "".join(f"<td class='num'>{best[ir, ik, ip]:.4g} ({period[ir, ik, ip]:.3g})</td>"
                       for ik in range(len(kmax))) + "</tr>"
             for ir, x in enumerate(spec.positions))
-        parts.append(f"<details><summary>best optima, p = {p:g}</summary><table>{head}{rows}</table></details>")
+        parts.append(f"<details><summary>best optima, p = {p:g}</summary>"
+                     + scroll_table(f"<table>{head}{rows}</table>") + "</details>")
     return "".join(parts)
 
 
 def optima_section(site, sd, anchor: str) -> str:
     """The HTML of one optima store's section (figures through ``site.figure``)."""
     version = sd.meta.get("kind_version")
-    parts = [f"<h2 id='{anchor}'>{_esc(sd.name)}</h2>",
-             f"<p><b>{_esc(sd.title)}</b>" + (f" — paper figures {_esc(sd.figure)}" if sd.figure else "") + "</p>"]
+    parts = [f"<h3 id='{anchor}'>{esc(sd.name)}: {esc(sd.title)}</h3>"]
     if version != KIND_VERSION:
-        parts.append(f"<p class='warn'>optima store layout version {_esc(version)} is not the version "
+        parts.append(f"<p class='warn'>optima store layout version {esc(version)} is not the version "
                      f"this report reads ({KIND_VERSION}); rerun the scene.</p>")
         return "\n".join(parts)
     if not sd.complete:
         parts.append("<p class='warn'>This store is incomplete (run interrupted or still running): "
-                     f"state {_esc(sd.state)}. Optima not computed yet are blank.</p>")
+                     f"state {esc(sd.state)}. Optima not computed yet are blank.</p>")
     parts.append(site.guarded(f"{sd.name} provenance", lambda: _provenance_rows(sd)))
     parts.append(site.guarded(f"{sd.name} outcomes", lambda: _outcomes_table(sd)))
-    parts.append("<h3>Optimal motions</h3><p class='note'>Kept optima are shown in the orientation "
+    parts.append("<h4>Optimal motions</h4><p class='note'>Kept optima are shown in the orientation "
                  "U &lt; 0 (φ → π − φ applied to optima found moving forwards), as the paper "
                  "(which minimised λ). Markers: every kept distinct optimum (faint); lines: the best.</p>")
     parts.append(site.guarded(f"{sd.name} best table", lambda: best_table(sd)))

@@ -18,10 +18,14 @@ import math
 import numpy as np
 
 from ._labels import SIGNED, AxisSpec, axis_spec, format_value, param_label, quantity_label
+from ._motion import params_text
 
-__all__ = ["quantity_maps", "reduction_figures", "series_figure", "reduction_arrays", "MAX_FACET"]
+__all__ = ["quantity_maps", "reduction_figures", "series_figure", "reduction_arrays", "MAX_FACET", "FINE_GRID"]
 
 MAX_FACET = 4
+#: Grids with at least this many points along both map axes are drawn as contour maps; coarser
+#: ones as heatmaps of their cells with contour lines on top.
+FINE_GRID = 48
 _PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
             "#17becf"]
 
@@ -168,7 +172,11 @@ def quantity_maps(sd, name: str):
         cax = {"colorscale": "RdBu_r", "cmin": -vmax, "cmax": vmax, "cmid": 0.0}
     else:
         cax = {"colorscale": "Viridis"}
-    use_contour = sizes[xd] >= 16 and sizes[yd] >= 16 and xs.kind == "linear" and ys.kind == "linear"
+    linear = xs.kind == "linear" and ys.kind == "linear"
+    # Fine grids: a contour map coloured as a heatmap. Coarse ones: the cells as they are (a
+    # heatmap) with contour lines on top, instead of contours interpolated into jagged shapes.
+    style = ("contour" if min(sizes[xd], sizes[yd]) >= FINE_GRID else "heatmap+lines" if min(sizes[xd], sizes[yd]) >= 4
+             else "heatmap") if linear else "heatmap"
     qlab = quantity_label(name, sd.p)
     custom = None
     if xs.kind != "linear" or ys.kind != "linear":
@@ -202,12 +210,17 @@ def quantity_maps(sd, name: str):
                      + "".join(f"<br>{e}" for e in extra) + "<extra></extra>")
             kw = dict(x=xs.positions, y=ys.positions, z=_round(z), coloraxis="coloraxis", hovertemplate=hover,
                       customdata=custom, name=qlab)
-            if use_contour:
-                tr = go.Contour(**kw, contours={"coloring": "heatmap", "showlines": True}, line={"width": 0.5},
-                                ncontours=16, connectgaps=False)
-            else:
-                tr = go.Heatmap(**kw)
-            fig.add_trace(tr, row=r + 1, col=c + 1)
+            if style == "contour":
+                fig.add_trace(go.Contour(**kw, contours={"coloring": "heatmap", "showlines": True},
+                                         line={"width": 0.5}, ncontours=16, connectgaps=False), row=r + 1, col=c + 1)
+                continue
+            fig.add_trace(go.Heatmap(**kw), row=r + 1, col=c + 1)
+            if style == "heatmap+lines":
+                fig.add_trace(go.Contour(x=xs.positions, y=ys.positions, z=_round(z), contours={"coloring": "none"},
+                                         line={"width": 0.8, "color": "rgba(40,40,40,0.55)"}, ncontours=10,
+                                         showscale=False, showlegend=False, hoverinfo="skip", connectgaps=False,
+                                         name="contours"),
+                              row=r + 1, col=c + 1)
     # One update for every panel, then titles on the outer ones (per-panel updates are slow in plotly.py).
     fig.update_xaxes(**{k: w for k, w in xs.axis_layout().items() if k != "title"})
     fig.update_yaxes(**{k: w for k, w in ys.axis_layout().items() if k != "title"})
@@ -521,8 +534,6 @@ def series_figure(sd):
 
     if "series_u" not in sd.ds:
         return None
-    from ._motion import params_text
-
     u = np.asarray(sd.ds["series_u"].values, dtype=np.float64)
     tau = np.asarray(sd.ds["series_tau"].values, dtype=np.float64)
     status = np.asarray(sd.ds["series_status"].values) if "series_status" in sd.ds else np.zeros(u.shape[0])

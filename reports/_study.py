@@ -14,12 +14,13 @@ The reductions here are plain numpy over the stored arrays (tested against brute
 
 from __future__ import annotations
 
-import html
 import math
 
 import numpy as np
 
-__all__ = ["is_study", "study_section", "honesty_records", "honesty_summary", "fitted_order",
+from ._site import esc, fmt, provenance_table, scroll_table
+
+__all__ = ["study_section", "combined_honesty", "honesty_records", "honesty_summary", "fitted_order",
            "honesty_section", "REFERENCE_SHARE"]
 
 #: A reference is trusted for a solve at ``rtol`` when its cross-check difference is at most
@@ -29,14 +30,6 @@ _COLORS = {"periodic": "#1f77b4", "march": "#d62728", "baseline": "#2ca02c"}
 #: one colour per solver status code 0 .. 8 (``solver.STATUS_REASONS``)
 _STATUS_COLORS = ["#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#d62728", "#e377c2", "#bcbd22", "#7f7f7f",
                   "#17becf"]
-
-
-def _esc(x) -> str:
-    return html.escape(str(x))
-
-
-def is_study(sd) -> bool:
-    return sd.meta.get("kind", "grid") in ("accuracy", "stiffness")
 
 
 def _labels(sd, name) -> list[str]:
@@ -105,29 +98,29 @@ def honesty_summary(records) -> dict:
 
 
 def _fmt(x, d=3) -> str:
-    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{d}g}"
+    return fmt(x, d)
 
 
-def honesty_section(records, title="Honest tolerances") -> str:
+def honesty_section(records, title="Honest tolerances", level: int = 4) -> str:
     s = honesty_summary(records)
     fw, f10 = s["fraction_within"], s["fraction_within10"]
     verdict = ("meets" if (fw >= 0.99 and f10 == 1.0) else "misses") if s["judged"] else "cannot judge"
     rows = "".join(
-        f"<tr><td>{_esc(r['scene'])}</td><td>{_esc(r['label'])}</td><td>{_esc(r['method'])}</td>"
+        f"<tr><td>{esc(r['scene'])}</td><td>{esc(r['label'])}</td><td>{esc(r['method'])}</td>"
         f"<td class='num'>{r['rtol']:.0e}</td><td class='num'>{_fmt(r['estimate'])}</td>"
         f"<td class='num'>{_fmt(r['true_error'])}</td><td class='num'><b>{_fmt(r['ratio'])}</b></td>"
         f"<td class='num'>{_fmt(r['check_difference'])}</td></tr>" for r in s["exceptions"])
-    table = (f"<table><tr><th>scene</th><th>point</th><th>method</th><th>rtol</th><th>estimate</th>"
-             f"<th>true error</th><th>true error / rtol</th><th>reference check</th></tr>{rows}</table>"
+    table = (scroll_table(f"<table><tr><th>scene</th><th>point</th><th>method</th><th>rtol</th><th>estimate</th>"
+                          f"<th>true error</th><th>true error / rtol</th><th>reference check</th></tr>{rows}</table>")
              if rows else "<p>No exceptions: every judged solve is within its rtol.</p>")
     unverified = sorted({(r["scene"], r["label"], r["check_difference"]) for r in records
                          if r["status"] == 0 and not r["trusted"]})
     if unverified:
-        items = "".join(f"<li>{_esc(sc)}: {_esc(lb)} (cross-check difference {_fmt(d)})</li>"
+        items = "".join(f"<li>{esc(sc)}: {esc(lb)} (cross-check difference {_fmt(d)})</li>"
                         for sc, lb, d in unverified)
         table += ("<details><summary>Points whose reference is not verified finely enough</summary>"
                   f"<ul>{items}</ul></details>")
-    return (f"<h3>{_esc(title)}</h3><p>Of {s['solves']} solves, {s['converged']} converged; "
+    return (f"<h{level}>{esc(title)}</h{level}><p>Of {s['solves']} solves, {s['converged']} converged; "
             f"{s['judged']} of these are judged against a reference whose cross-check difference is at most "
             f"{REFERENCE_SHARE:g} rtol ({s['unverified']} converged solves have a reference not verified that "
             f"finely and are not judged). True error within rtol: <b>{s['within']}/{s['judged']} = "
@@ -146,17 +139,18 @@ def _reference_table(sd) -> str:
     rows = []
     for i in range(sd.ds.sizes["point"]):
         cm = int(_v(sd, "check_method")[i])
-        rows.append(f"<tr><td>{_esc(point_label(sd, i))}</td><td class='num'>{_fmt(_v(sd, 'U_ref')[i], 8)}</td>"
+        rows.append(f"<tr><td>{esc(point_label(sd, i))}</td><td class='num'>{_fmt(_v(sd, 'U_ref')[i], 8)}</td>"
                     f"<td class='num'>{_fmt(_v(sd, 'P_ref')[i], 8)}</td><td class='num'>{int(_v(sd, 'ref_status')[i])}"
                     f"</td><td class='num'>{int(_v(sd, 'ref_n_tau')[i])}</td>"
-                    f"<td>{_esc(check_labels[cm] if 0 <= cm < len(check_labels) else '—')}</td>"
+                    f"<td>{esc(check_labels[cm] if 0 <= cm < len(check_labels) else '—')}</td>"
                     f"<td class='num'>{_fmt(_v(sd, 'check_difference')[i])}</td></tr>")
     ref = sd.science.get("reference", {})
     return (f"<details><summary>Reference solutions ({len(rows)} points): periodic at rtol {ref.get('rtol', 0):.0e}, "
-            f"cross-checked by {_esc(ref.get('check'))} (check rtol {ref.get('check_rtol', 0):.0e}, fixed grid "
-            f"{ref.get('check_steps')} steps)</summary><table><tr><th>point</th><th>U_ref</th><th>P_ref</th>"
-            f"<th>status</th><th>n_tau</th><th>cross-check</th><th>difference</th></tr>{''.join(rows)}</table>"
-            "</details>")
+            f"cross-checked by {esc(ref.get('check'))} (check rtol {ref.get('check_rtol', 0):.0e}, fixed grid "
+            f"{ref.get('check_steps')} steps)</summary>"
+            + scroll_table("<table><tr><th>point</th><th>U_ref</th><th>P_ref</th><th>status</th><th>n_tau</th>"
+                           f"<th>cross-check</th><th>difference</th></tr>{''.join(rows)}</table>")
+            + "</details>")
 
 
 def _timing_note(sd) -> str:
@@ -172,13 +166,13 @@ def _status_table(sd) -> str:
     st = _v(sd, "status")
     meanings = sd.ds["status"].attrs.get("flag_meanings", {})
     methods, rtols = _labels(sd, "method"), _v(sd, "rtol")
-    head = "".join(f"<th>{_esc(m)} rtol {r:.0e}</th>" for m in methods for r in rtols)
+    head = "".join(f"<th>{esc(m)} rtol {r:.0e}</th>" for m in methods for r in rtols)
     rows = ""
     for code in np.unique(st):
         cells = "".join(f"<td class='num'>{int(np.count_nonzero(st[:, a, b] == code))}</td>"
                         for a in range(len(methods)) for b in range(len(rtols)))
-        rows += f"<tr><td>{int(code)}: {_esc(meanings.get(str(int(code)), '?'))}</td>{cells}</tr>"
-    return f"<table><tr><th>status</th>{head}</tr>{rows}</table>"
+        rows += f"<tr><td>{int(code)}: {esc(meanings.get(str(int(code)), '?'))}</td>{cells}</tr>"
+    return scroll_table(f"<table><tr><th>status</th>{head}</tr>{rows}</table>")
 
 
 # ---------------------------------------------------------------------------
@@ -264,25 +258,25 @@ def _order_table(sd) -> str:
     methods = _labels(sd, "method")
     ou, op = accuracy_orders(sd, "U"), accuracy_orders(sd, "P")
     cols = [m for m in methods] + (["baseline"] if "baseline_tol" in sd.ds else [])
-    head = "".join(f"<th>{_esc(m)}: N-slope U / P</th><th>{_esc(m)}: n_tau-slope U / P</th>"
-                   f"<th>{_esc(m)}: time-slope U / P</th>" for m in cols)
+    head = "".join(f"<th>{esc(m)}: N-slope U / P</th><th>{esc(m)}: n_tau-slope U / P</th>"
+                   f"<th>{esc(m)}: time-slope U / P</th>" for m in cols)
     rows = ""
     for i in range(sd.ds.sizes["point"]):
         cells = "".join(f"<td class='num'>{_fmt(ou[i, m][k], 2)} / {_fmt(op[i, m][k], 2)}</td>"
                         for m in cols for k in range(3))
-        rows += f"<tr><td>{_esc(point_label(sd, i))}</td>{cells}</tr>"
+        rows += f"<tr><td>{esc(point_label(sd, i))}</td>{cells}</tr>"
     return ("<p class='note'>Observed orders: N-slope = −d log(error)/d log N on the fixed uniform grids "
             "(<code>solve_fixed_grid</code>; printed at the dotted curves); n_tau-slope = the same against the "
             "final adaptive grid size over the tolerances (printed at the solid curves); time-slope = "
             "−d log(error)/d log(seconds) over the tolerances (a work-precision slope: higher is cheaper "
             "accuracy; noisy where a solve takes milliseconds). Least squares over the points above the "
-            f"reference's cross-check difference; n/a with fewer than 3.</p><table><tr><th>case</th>{head}</tr>"
-            f"{rows}</table>")
+            "reference's cross-check difference; n/a with fewer than 3.</p>"
+            + scroll_table(f"<table><tr><th>case</th>{head}</tr>{rows}</table>"))
 
 
 def _accuracy_body(site, sd) -> list[str]:
     parts = [_timing_note(sd), site.guarded(f"{sd.name} reference", lambda: _reference_table(sd)),
-             "<h3>Status of the adaptive solves</h3>", site.guarded(f"{sd.name} status", lambda: _status_table(sd))]
+             "<h4>Status of the adaptive solves</h4>", site.guarded(f"{sd.name} status", lambda: _status_table(sd))]
     if "baseline_tol" in sd.ds:
         parts.append("<p class='note'>The scipy baseline is <code>solver.bench.baseline_point</code> (LSODA, "
                      "period by period from rest until periodic, serial, wall-time cap "
@@ -413,10 +407,10 @@ def _delta_table(sd) -> str:
         with np.errstate(invalid="ignore", divide="ignore"):
             du = np.nanmax(np.abs(_v(sd, "U_ref")[sel] - U0)) / abs(U0)
             dp = np.nanmax(np.abs(_v(sd, "P_ref")[sel] - P0)) / abs(P0)
-        rows += (f"<tr><td>{_esc(_labels(sd, 'motion')[m])}</td><td class='num'>{d.max():.0e}…{d.min():.0e}</td>"
+        rows += (f"<tr><td>{esc(_labels(sd, 'motion')[m])}</td><td class='num'>{d.max():.0e}…{d.min():.0e}</td>"
                  f"<td class='num'>{_fmt(du)}</td><td class='num'>{_fmt(dp)}</td></tr>")
-    return ("<table><tr><th>motion</th><th>δ range</th><th>max |ΔU|/|U| vs smallest δ</th>"
-            f"<th>max |ΔP|/P</th></tr>{rows}</table>")
+    return scroll_table("<table><tr><th>motion</th><th>δ range</th><th>max |ΔU|/|U| vs smallest δ</th>"
+                        f"<th>max |ΔP|/P</th></tr>{rows}</table>")
 
 
 def _fallback_text(sd) -> str:
@@ -429,7 +423,7 @@ def _fallback_text(sd) -> str:
         none = int(np.count_nonzero(used[:, a] == -1))
         parts.append(f"{m}: {fell} solves answered by the fallback, {none} without any answer")
     fb = sd.science.get("solver", {}).get("fallback", "none")
-    return f"<p>Fallback <code>{_esc(fb)}</code> (answer kept per solve in <code>used_method</code>): " \
+    return f"<p>Fallback <code>{esc(fb)}</code> (answer kept per solve in <code>used_method</code>): " \
            + "; ".join(parts) + ".</p>"
 
 
@@ -439,24 +433,25 @@ def _failures_by_sweep(sd) -> str:
     rows = ""
     for i in np.argwhere(st > 0):
         p, a, b = i
-        rows += (f"<tr><td>{_esc(point_label(sd, p))}</td><td>{_esc(methods[a])}</td>"
+        rows += (f"<tr><td>{esc(point_label(sd, p))}</td><td>{esc(methods[a])}</td>"
                  f"<td class='num'>{_v(sd, 'rtol')[b]:.0e}</td><td>{int(st[p, a, b])}: "
-                 f"{_esc(meanings.get(str(int(st[p, a, b])), '?'))}</td>"
+                 f"{esc(meanings.get(str(int(st[p, a, b])), '?'))}</td>"
                  f"<td class='num'>{_v(sd, 'seconds')[p, a, b]:.2g}</td></tr>")
-    return (f"<details><summary>Every failed solve ({int(np.count_nonzero(st > 0))})</summary><table><tr>"
-            f"<th>point</th><th>method</th><th>rtol</th><th>status</th><th>seconds</th></tr>{rows}</table></details>")
+    return (f"<details><summary>Every failed solve ({int(np.count_nonzero(st > 0))})</summary>"
+            + scroll_table("<table><tr><th>point</th><th>method</th><th>rtol</th><th>status</th><th>seconds</th></tr>"
+                           f"{rows}</table>") + "</details>")
 
 
 def _stiffness_body(site, sd) -> list[str]:
     parts = [_timing_note(sd), site.guarded(f"{sd.name} reference", lambda: _reference_table(sd)),
-             "<h3>Status of every solve</h3>", site.guarded(f"{sd.name} status", lambda: _status_table(sd)),
+             "<h4>Status of every solve</h4>", site.guarded(f"{sd.name} status", lambda: _status_table(sd)),
              site.guarded(f"{sd.name} fallback", lambda: _fallback_text(sd)),
              site.guarded(f"{sd.name} failures", lambda: _failures_by_sweep(sd))]
     for j, parameter in enumerate(_labels(sd, "sweep")):
-        parts.append(f"<h3>Sweep of {_esc(parameter)}</h3>")
+        parts.append(f"<h4>Sweep of {esc(parameter)}</h4>")
         parts.append(site.guarded(f"{sd.name} maps {parameter}", lambda j=j: site.figure(_sweep_maps(sd, j))))
-    parts.append("<h3>U and P against δ</h3>")
-    parts.append(site.guarded(f"{sd.name} delta", lambda: site._maybe(_delta_figure(sd)) + _delta_table(sd)))
+    parts.append("<h4>U and P against δ</h4>")
+    parts.append(site.guarded(f"{sd.name} delta", lambda: site.maybe_figure(_delta_figure(sd)) + _delta_table(sd)))
     return parts
 
 
@@ -466,8 +461,6 @@ def _stiffness_body(site, sd) -> list[str]:
 
 
 def _provenance(sd) -> str:
-    from ._html import provenance_table
-
     sc = sd.science
     sol = sc.get("solver", {})
     return provenance_table(sd, [
@@ -480,28 +473,25 @@ def _provenance(sd) -> str:
     ])
 
 
-def study_section(site, sd) -> tuple[str, str, str]:
-    """(anchor, toc text, html) of a study store's section."""
-    anchor = f"scene-{sd.name}"
-    parts = [f"<h2 id='{anchor}'>{_esc(sd.name)}</h2>", f"<p><b>{_esc(sd.title)}</b> — study "
-                                                         f"<code>{_esc(sd.meta.get('kind'))}</code></p>"]
+def study_section(site, sd, anchor: str) -> str:
+    """The HTML of one study store's view: title (h3 with id ``anchor``), then its parts (h4)."""
+    parts = [f"<h3 id='{anchor}'>{esc(sd.name)}: {esc(sd.title)} (study <code>{esc(sd.meta.get('kind'))}</code>)</h3>"]
     if not sd.complete:
         parts.append(f"<p class='warn'>This store is incomplete (run interrupted or still running): state "
-                     f"{_esc(sd.state)}. Points not computed yet are blank.</p>")
+                     f"{esc(sd.state)}. Points not computed yet are blank.</p>")
     parts.append(site.guarded(f"{sd.name} provenance", lambda: _provenance(sd)))
     body = _accuracy_body if sd.meta.get("kind") == "accuracy" else _stiffness_body
     parts += body(site, sd)
     parts.append(site.guarded(f"{sd.name} honesty", lambda: honesty_section(honesty_records(sd))))
-    return anchor, f"{_esc(sd.name)} — {_esc(sd.title)}", "\n".join(parts)
+    return "\n".join(parts)
 
 
-def combined_honesty(stores) -> tuple[str, str, str] | None:
-    """The honest-tolerance section over every study store together (None without study stores)."""
-    studies = [sd for sd in stores if is_study(sd)]
+def combined_honesty(studies) -> str | None:
+    """The honest-tolerance view over the study stores ``studies`` together (h3
+    ``honest-tolerances``; None without any)."""
     if not studies:
         return None
     records = [r for sd in studies for r in honesty_records(sd)]
     names = ", ".join(sd.name for sd in studies)
-    body = honesty_section(records, f"Honest tolerances over every study ({names})")
-    head = "<h2 id='honest-tolerances'>Honest tolerances</h2>"
-    return "honest-tolerances", f"Honest tolerances ({names})", head + body
+    return ("<h3 id='honest-tolerances'>Honest tolerances over every study</h3>"
+            + honesty_section(records, f"Every solve of {names}"))

@@ -320,51 +320,8 @@ def synthetic_optima_store(store: Path, scene) -> Path:
 
 
 # ---------------------------------------------------------------------------
-# Headless browser
+# Headless browser, driven over the DevTools protocol on a pipe (no extra packages)
 # ---------------------------------------------------------------------------
-
-#: Runs before plotly.js: records uncaught errors, rejected promises and console.error calls.
-_HOOK = """<script>
-window.__errors = [];
-window.addEventListener('error', function (e) {
-  window.__errors.push('error: ' + (e.message || (e.target && (e.target.src || e.target.href)) || e.type));
-}, true);
-window.addEventListener('unhandledrejection', function (e) { window.__errors.push('rejection: ' + e.reason); });
-(function () { var ce = console.error; console.error = function () {
-  window.__errors.push('console.error: ' + Array.prototype.join.call(arguments, ' ')); ce.apply(console, arguments); }; })();
-</script>"""
-
-#: Runs after load: per plot div, its traces, data points and animation frames, written into the DOM.
-_PROBE = """<script>
-window.addEventListener('load', function () { setTimeout(function () {
-  var plots = [];
-  document.querySelectorAll('.plotly-graph-div').forEach(function (gd) {
-    // Decoded data (gd.data may still hold base64 typed arrays): count the finite values.
-    var finite = function (a) {
-      if (!a || a.length === undefined) return 0;
-      var n = 0;
-      for (var i = 0; i < a.length; i++) {
-        var v = a[i];
-        if (v !== null && typeof v === 'object' && v.length !== undefined) n += finite(v);
-        else if (typeof v === 'number' && isFinite(v)) n += 1;
-      }
-      return n;
-    };
-    var n = 0, traces = (gd._fullData || []);
-    traces.forEach(function (t) { n += finite(t.z || t.y || []); });
-    plots.push({id: gd.id, traces: traces.length, points: n,
-                rendered: !!gd._fullLayout && !!gd.querySelector('.main-svg'),
-                frames: (gd._transitionData && gd._transitionData._frames) ? gd._transitionData._frames.length : 0,
-                sliders: (gd.layout && gd.layout.sliders) ? gd.layout.sliders.length : 0,
-                buttons: (gd.layout && gd.layout.updatemenus) ? gd.layout.updatemenus.length : 0});
-  });
-  var pre = document.createElement('pre');
-  pre.id = '__probe';
-  pre.textContent = JSON.stringify({plotly: typeof Plotly === 'undefined' ? null : Plotly.version,
-                                    errors: window.__errors, plots: plots});
-  document.body.appendChild(pre);
-}, 500); });
-</script>"""
 
 
 def chromium() -> str | None:
@@ -375,15 +332,185 @@ def chromium() -> str | None:
     return None
 
 
+class Browser:
+    """One headless chromium at a given window size, driven through ``--remote-debugging-pipe``
+    (the DevTools protocol as NUL-terminated JSON on file descriptors 3 and 4).
+
+    ``open(url)`` navigates and returns the wall seconds until the page marks itself ready
+    (``<html data-ready>``) together with the page's own figure (ms since navigation start);
+    ``evaluate(js)`` returns a JSON value (promises awaited)."""
+
+    def __init__(self, width: int = 1280, height: int = 800, timeout: float = 180.0):
+        self.timeout = timeout
+        self._tmp = tempfile.TemporaryDirectory()
+        cmd_r, self._cmd_w = os.pipe()
+        self._out_r, out_w = os.pipe()
+
+        def child():
+            a, b = os.dup(cmd_r), os.dup(out_w)
+            os.dup2(a, 3)
+            os.dup2(b, 4)
+            os.set_inheritable(3, True)
+            os.set_inheritable(4, True)
+
+        profile = Path(self._tmp.name) / "profile"
+        self.proc = subprocess.Popen(
+            [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-quic",
+             "--disable-background-networking", "--disable-component-update", "--disable-sync",
+             "--disable-dev-shm-usage", "--remote-debugging-pipe", f"--user-data-dir={profile}",
+             f"--window-size={width},{height}", "about:blank"],
+            preexec_fn=child, close_fds=False, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            env=dict(os.environ, HOME=str(profile)))
+        os.close(cmd_r)
+        os.close(out_w)
+        self._buf, self._id = b"", 0
+        targets = self.call("Target.getTargets")["targetInfos"]
+        page = next(t for t in targets if t["type"] == "page")
+        self.session = self.call("Target.attachToTarget", {"targetId": page["targetId"], "flatten": True})["sessionId"]
+        self.call("Page.enable", session=True)
+        self.call("Emulation.setDeviceMetricsOverride",
+                  {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False}, session=True)
+
+    def call(self, method: str, params: dict | None = None, session: bool = False) -> dict:
+        import select
+        import time
+
+        self._id += 1
+        msg = {"id": self._id, "method": method, "params": params or {}}
+        if session:
+            msg["sessionId"] = self.session
+        os.write(self._cmd_w, json.dumps(msg).encode() + b"\0")
+        deadline = time.monotonic() + self.timeout
+        while True:
+            while b"\0" in self._buf:
+                raw, self._buf = self._buf.split(b"\0", 1)
+                reply = json.loads(raw)
+                if reply.get("id") == self._id:
+                    if "error" in reply:
+                        raise RuntimeError(f"{method}: {reply['error']}")
+                    return reply.get("result", {})
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([self._out_r], [], [], left)[0]:
+                raise TimeoutError(f"chromium did not answer {method} within {self.timeout} s")
+            chunk = os.read(self._out_r, 1 << 20)
+            if not chunk:
+                raise RuntimeError("chromium closed the pipe")
+            self._buf += chunk
+
+    def evaluate(self, expression: str):
+        r = self.call("Runtime.evaluate", {"expression": expression, "returnByValue": True, "awaitPromise": True},
+                      session=True)
+        if "exceptionDetails" in r:
+            raise RuntimeError(f"page error: {r['exceptionDetails']}")
+        return r["result"].get("value")
+
+    def open(self, path: Path) -> tuple[float, float]:
+        """Navigate to ``path``; (wall seconds until data-ready, the page's own ms figure)."""
+        import time
+
+        t0 = time.perf_counter()
+        self.call("Page.navigate", {"url": Path(path).resolve().as_uri()}, session=True)
+        while True:
+            ready = self.evaluate("document.documentElement && document.documentElement.getAttribute('data-ready')")
+            if ready:
+                return time.perf_counter() - t0, float(ready)
+            if time.perf_counter() - t0 > self.timeout:
+                raise TimeoutError(f"{path} never marked itself ready")
+            time.sleep(0.02)
+
+    def close(self):
+        try:
+            self.call("Browser.close")
+            self.proc.wait(10)
+        except Exception:
+            self.proc.kill()
+        finally:
+            for fd in (self._cmd_w, self._out_r):
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+            self._tmp.cleanup()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+#: Runs before anything else in the page: records uncaught errors, rejected promises and console.error.
+_HOOK = """<script>
+window.__errors = [];
+window.addEventListener('error', function (e) {
+  window.__errors.push('error: ' + (e.message || (e.target && (e.target.src || e.target.href)) || e.type));
+}, true);
+window.addEventListener('unhandledrejection', function (e) { window.__errors.push('rejection: ' + e.reason); });
+(function () { var ce = console.error; console.error = function () {
+  window.__errors.push('console.error: ' + Array.prototype.join.call(arguments, ' ')); ce.apply(console, arguments); }; })();
+</script>"""
+
+#: After every figure is drawn: per plot div its traces, data points and animation frames.
+_PLOTS = """(function () {
+  var finite = function (a) {
+    if (!a || a.length === undefined) return 0;
+    var n = 0;
+    for (var i = 0; i < a.length; i++) {
+      var v = a[i];
+      if (v !== null && typeof v === 'object' && v.length !== undefined) n += finite(v);
+      else if (typeof v === 'number' && isFinite(v)) n += 1;
+    }
+    return n;
+  };
+  var plots = [];
+  document.querySelectorAll('.plotly-graph-div').forEach(function (gd) {
+    var n = 0, traces = (gd._fullData || []);
+    traces.forEach(function (t) { n += finite(t.z || t.y || []); });
+    plots.push({id: gd.id, traces: traces.length, points: n,
+                rendered: !!gd._fullLayout && !!gd.querySelector('.main-svg'),
+                frames: (gd._transitionData && gd._transitionData._frames) ? gd._transitionData._frames.length : 0,
+                sliders: (gd.layout && gd.layout.sliders) ? gd.layout.sliders.length : 0,
+                buttons: (gd.layout && gd.layout.updatemenus) ? gd.layout.updatemenus.length : 0});
+  });
+  return plots;
+})()"""
+
+#: Tables wider than their section: every <details> opened first; a table passes when it fits
+#: its container or sits in a box that scrolls horizontally and is no wider than its section.
+TABLE_WIDTHS = """(function () {
+  document.querySelectorAll('details').forEach(function (d) { d.open = true; });
+  var bad = [], n = 0;
+  document.querySelectorAll('table').forEach(function (t) {
+    n += 1;
+    var box = t.parentElement, scrolls = false;
+    for (var e = t.parentElement; e && e.tagName !== 'SECTION'; e = e.parentElement) {
+      var ox = getComputedStyle(e).overflowX;
+      if (ox === 'auto' || ox === 'scroll') { scrolls = true; box = e; break; }
+    }
+    var section = t.closest('section') || document.body;
+    var fits = t.scrollWidth <= t.parentElement.clientWidth + 1;
+    var boxed = scrolls && box.getBoundingClientRect().width <= section.clientWidth + 1;
+    if (!(fits || boxed)) bad.push({section: section.id, width: t.scrollWidth, container: t.parentElement.clientWidth,
+                                    head: (t.rows[0] ? t.rows[0].textContent : '').slice(0, 80)});
+  });
+  var wide = [];
+  document.querySelectorAll('section').forEach(function (s) {
+    if (s.scrollWidth > s.clientWidth + 1) wide.push({section: s.id, width: s.scrollWidth, client: s.clientWidth});
+  });
+  return {tables: n, bad: bad, wide_sections: wide, page: document.documentElement.scrollWidth,
+          viewport: window.innerWidth};
+})()"""
+
+
 def _split_pages(text: str, parts: int) -> list[str]:
-    """``parts`` copies of the page, scene sections dealt round-robin between them (every section in
-    exactly one copy), so several browsers can render a large report in parallel."""
-    pieces = re.split(r"(<section class='scene'>.*?</section>)", text, flags=re.S)
+    """``parts`` copies of the page, sections dealt round-robin between them (every section in
+    exactly one copy), so several browsers can draw a large report in parallel."""
+    pieces = re.split(r"(<section class='(?:scene|figure)' id='[^']*'>.*?</section>)", text, flags=re.S)
     pages = []
     for k in range(parts):
         count, keep = 0, []
         for piece in pieces:
-            if piece.startswith("<section class='scene'>"):
+            if re.match(r"<section class='(?:scene|figure)'", piece):
                 if count % parts == k:
                     keep.append(piece)
                 count += 1
@@ -393,49 +520,61 @@ def _split_pages(text: str, parts: int) -> list[str]:
     return pages
 
 
-def probe(index: Path, timeout: float = 180.0, parts: int | None = None) -> dict:
-    """Open ``index`` (copies with the hooks injected, beside it) in headless chromium and return
-    ``{"plotly": version, "errors": [...], "plots": [{id, traces, points, rendered, frames, ...}]}``.
-
-    The page is split by scene section into ``parts`` pages rendered concurrently (default: one
-    per CPU, at most 4); the results are merged."""
+def with_hook(index: Path) -> str:
     text = index.read_text(encoding="utf-8")
     head = text.index("<head>") + len("<head>")
-    text = text[:head] + _HOOK + text[head:]
-    end = text.rindex("</body>")
-    text = text[:end] + _PROBE + text[end:]
+    return text[:head] + _HOOK + text[head:]
+
+
+def probe(index: Path, timeout: float = 240.0, parts: int | None = None) -> dict:
+    """Open ``index`` (copies with the error hook injected, beside it) in headless chromium, draw
+    every figure (``window.twolinkDrawAll()``) and return ``{"plotly": version, "errors": [...],
+    "plots": [{id, traces, points, rendered, frames, ...}]}``.
+
+    The page is split by section into ``parts`` pages drawn concurrently (default: one per CPU,
+    at most 4); the results are merged."""
+    from concurrent.futures import ThreadPoolExecutor
+
     parts = parts or max(1, min(4, os.cpu_count() or 1))
     pages = []
-    for k, body in enumerate(_split_pages(text, parts)):
+    for k, body in enumerate(_split_pages(with_hook(index), parts)):
         page = index.with_name(f"_probe{k}.html")
         page.write_text(body, encoding="utf-8")
         pages.append(page)
-    procs = []
-    with tempfile.TemporaryDirectory() as tmp:
-        try:
-            for k, page in enumerate(pages):
-                profile = Path(tmp) / f"profile{k}"
-                cmd = [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                       "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                       "--disable-dev-shm-usage", f"--user-data-dir={profile}", "--virtual-time-budget=10000",
-                       "--dump-dom", page.resolve().as_uri()]
-                env = dict(os.environ, HOME=str(profile))
-                procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
-            outs = [p.communicate(timeout=timeout) for p in procs]
-        finally:
-            for p in procs:
-                if p.poll() is None:
-                    p.kill()
-            for page in pages:
-                page.unlink(missing_ok=True)
+
+    def one(page):
+        with Browser(timeout=timeout) as b:
+            b.open(page)
+            b.evaluate("window.twolinkDrawAll()")
+            return {"plotly": b.evaluate("typeof Plotly === 'undefined' ? null : Plotly.version"),
+                    "errors": b.evaluate("window.__errors"), "plots": b.evaluate(_PLOTS)}
+
+    try:
+        with ThreadPoolExecutor(len(pages)) as pool:
+            results = list(pool.map(one, pages))
+    finally:
+        for page in pages:
+            page.unlink(missing_ok=True)
     merged = {"plotly": None, "errors": [], "plots": []}
-    for (stdout, stderr), p in zip(outs, procs):
-        m = re.search(r'<pre id="__probe">(.*?)</pre>', stdout, re.S)
-        if not m:
-            raise AssertionError(f"probe not found in the dumped DOM (rc {p.returncode}); stderr tail:\n"
-                                 f"{stderr[-2000:]}")
-        r = json.loads(html.unescape(m.group(1)))
+    for r in results:
         merged["plotly"] = merged["plotly"] or r["plotly"]
         merged["errors"] += r["errors"]
         merged["plots"] += r["plots"]
     return merged
+
+
+def page_ready(index: Path, width: int = 1280, repeats: int = 1) -> dict:
+    """Open ``index`` as a reader would (1280 px wide) and measure: wall seconds until the page
+    marks itself ready, the page's own figure, how many figures are drawn then, and the table
+    layout (:data:`TABLE_WIDTHS`). The fastest of ``repeats`` openings (a fresh browser each)."""
+    best = None
+    for _ in range(repeats):
+        with Browser(width=width) as b:
+            wall, page_ms = b.open(index)
+            drawn = b.evaluate("document.querySelectorAll('[data-drawn]').length")
+            total = b.evaluate("document.querySelectorAll('div.lazy-plot').length")
+            layout = b.evaluate(TABLE_WIDTHS)
+        r = {"wall_seconds": wall, "page_ms": page_ms, "drawn": drawn, "figures": total, "layout": layout}
+        if best is None or r["wall_seconds"] < best["wall_seconds"]:
+            best = r
+    return best

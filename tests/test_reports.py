@@ -6,6 +6,7 @@ Browser checks are skipped (with the reason) only when chromium is not installed
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -54,40 +55,92 @@ def browser(site):
     return rh.probe(site["index"])
 
 
+@pytest.fixture(scope="module")
+def opened(site):
+    """The report opened as a reader would, 1280 px wide: time to ready, tables' layout."""
+    if rh.chromium() is None:
+        pytest.skip("chromium not installed (apt-get install -y chromium)")
+    return rh.page_ready(site["index"], width=1280, repeats=2)
+
+
 # ---------------------------------------------------------------------------
 # Static structure
 # ---------------------------------------------------------------------------
+
+
+def _view(html: str, anchor: str) -> str:
+    """The HTML of one store view: from its h3 to the next view or section."""
+    start = html.index(f"<h3 id='{anchor}'>")
+    return re.split(r"<div class='view'>|</section>", html[start:], maxsplit=1)[0]
 
 
 def test_plotly_js_included_once_and_offline(site):
     html = site["html"]
     js = site["index"].parent / "plotly.min.js"
     assert js.is_file() and js.stat().st_size > 1 * MB
-    # Referenced once, relatively; never inlined into the page.
+    # Referenced once, relatively (deferred: the first layout does not wait for it); never inlined.
     assert html.count("<script src=") == 1
-    assert html.count('<script src="plotly.min.js"></script>') == 1
+    assert html.count('<script src="plotly.min.js" defer></script>') == 1
     assert "plotly.js v" not in html
-    assert len(re.findall(r"Plotly\.newPlot\(", html)) == html.count('class="plotly-graph-div"') > 20
+    # One loader draws every figure from its JSON spec when it scrolls into view.
+    n_divs = html.count("class='plotly-graph-div lazy-plot'")
+    assert len(re.findall(r"Plotly\.newPlot\(", html)) == 1
+    assert "IntersectionObserver" in html
+    assert len(re.findall(r"<script type='application/json' id='fig-\d+-spec'>", html)) == n_divs > 20
     # Nothing loaded from the network.
     assert not re.search(r"""(src|href)=["']?(https?:)?//""", html)
 
 
-def test_one_section_per_scene_with_toc(site):
+def test_one_view_per_scene_with_toc(site):
     html = site["html"]
     names = sorted(list(rh.SCENES) + SHIPPED)
     for name in names:
         assert f"<a href='#scene-{name}'>" in html, name
-        assert f"<h2 id='scene-{name}'>" in html, name
+        assert f"<h3 id='scene-{name}'>" in html, name
     assert "panel failed" not in html, re.findall(r"panel failed[^<]*", html)
     assert "not yet run" not in html.split("<nav id='toc'>")[1].split("</nav>")[0]
     assert f"report: {site['index'].relative_to(site['root'])}" in site["stdout"]
+
+
+def test_audit_first_then_figures_in_the_papers_order_then_studies(site):
+    from reports._paper import load_figures
+
+    html = site["html"]
+    positions = [html.index(f"<section class='figure' id='fig-{f.label}'>") for f in load_figures()]
+    assert html.index("id='audit'") < html.index("<nav id='toc'>") < positions[0]
+    assert positions == sorted(positions)
+    assert positions[-1] < html.index("id='scene-accuracy'") < html.index("id='honest-tolerances'")
+    # a figure section opens with its label and what the paper found there
+    fig = html.split("id='fig-EtaA0A1'>")[1]
+    assert fig.startswith("<h2>Figure 3 <span class='label'>fig:EtaA0A1</span>")
+    assert "<p class='finding'><b>The paper:</b>" in fig.split("<div class='view'>")[0]
+    # a scene drawing two figures is split between them; test scenes land under their figure
+    diag1 = html.split("id='fig-UPEtaDiag1'>")[1].split("</section>")[0]
+    assert "id='scene-harmonic_diagonals'" in diag1 and "anisotropy_ratio = 16" in diag1
+    assert "id='scene-harmonic_diagonals-2'" in html.split("id='fig-UPEtaDiag2'>")[1].split("</section>")[0]
+    assert "id='scene-tiny_plane'" in html.split("id='fig-UEtaMax'>")[1].split("</section>")[0]
+
+
+def test_audit_is_written_and_every_claim_reads_the_full_resolution_scenes(site):
+    """Synthetic stores of every shipped scene at full resolution: every claim finds its cells
+    (agrees or differs, never not run) and audit.json matches the table."""
+    from reports._audit import load_claims
+
+    doc = json.loads((site["index"].parent / "audit.json").read_text())
+    assert [o["id"] for o in doc] == [c.id for c in load_claims()]
+    not_run = [(o["id"], o["reason"]) for o in doc if o["verdict"] == "not run"]
+    assert not not_run, not_run
+    audit = site["html"].split("id='audit'>")[1].split("</section>")[0]
+    assert audit.count("<tr id='claim-") == len(doc)
+    for o in doc[:5]:
+        assert f"<tr id='claim-{o['id']}'>" in audit
 
 
 def test_section_states_provenance_failures_and_errors(site):
     import pipeline
 
     html = site["html"]
-    section = html.split("<h2 id='scene-tiny_plane'>")[1].split("<section")[0]
+    section = _view(html, "scene-tiny_plane")
     scene = pipeline.parse_scene(rh.PLANE)
     assert scene.hash[:16] in section
     for key in ("package version", "created (UTC)", "run time", "git commit"):
@@ -97,7 +150,7 @@ def test_section_states_provenance_failures_and_errors(site):
     assert "Solver error estimate over the" in section
     assert "grid and polished maxima side by side" in section
     # The synthetic stores carry failures with status 6: counted and explained.
-    grid = html.split("<h2 id='scene-harmonic_grid'>")[1].split("<section")[0]
+    grid = _view(html, "scene-harmonic_grid")
     n_failed = len(range(0, 9 * 64 * 64, 997))
     assert f"<b>{n_failed:,} failures</b>" in grid
     assert "finest grid reached before the error estimate fell below rtol" in grid
@@ -110,18 +163,19 @@ def test_optima_section_has_motions_curves_and_outcomes(site):
     import pipeline
 
     html = site["html"]
-    section = html.split("<h2 id='scene-tiny_optima'>")[1].split("<section")[0]
+    section = _view(html, "scene-tiny_optima")
     assert pipeline.parse_scene(rh.OPTIMA).hash[:16] in section
     for key in ("package version", "created (UTC)", "run time", "git commit", "ensemble"):
         assert f"<th>{key}</th>" in section
     assert "2 ratios" not in section and "= 8 optimisations" in section
     assert "Optimisations, stop reasons and cost" in section and "ill-conditioned" in section
     # one phi(tau) figure and one efficiency/period figure per p; hover carries the coefficients
-    assert section.count('class="plotly-graph-div"') == 2
-    assert "Best optimal" in section and "λ/λ<sub>ub</sub>" in section
-    assert "A1 = " in section and "K<sub>max</sub> = 2" in section
-    forces = html.split("<h2 id='scene-force_laws'>")[1].split("<section")[0]
-    assert forces.count('class="plotly-graph-div"') == 2 * 3  # p = 0.5, 1, 1.5
+    assert section.count("class='plotly-graph-div lazy-plot'") == 2
+    spec = section.split("<script type='application/json'")[1]
+    assert "Best optimal" in spec and "A1 = " in spec and "K\\u003csub\\u003emax" in spec
+    # force_laws: one view per p (figures OptMotionsp0p5, p1, p1p5), two figures each
+    for anchor in ("scene-force_laws", "scene-force_laws-2", "scene-force_laws-3"):
+        assert _view(html, anchor).count("class='plotly-graph-div lazy-plot'") == 2, anchor
 
 
 def test_report_of_all_scenes_under_25_mb(site):
@@ -136,12 +190,36 @@ def test_report_of_all_scenes_under_25_mb(site):
 
 
 def test_every_figure_renders_with_data(site, browser):
-    n_divs = site["html"].count('class="plotly-graph-div"')
+    n_divs = site["html"].count("class='plotly-graph-div lazy-plot'")
     plots = browser["plots"]
     assert browser["plotly"], "Plotly not defined in the page"
     assert len(plots) == n_divs
     bad = [p for p in plots if not (p["rendered"] and p["traces"] > 0 and p["points"] > 0)]
     assert not bad, bad
+
+
+#: The issue's target: the full report ready in at most 5 s in Chromium (today's eager drawing: 22 s).
+READY_SECONDS = 5.0
+
+
+def test_page_is_ready_within_5_s_and_draws_only_what_is_in_view(site, opened):
+    """Time from navigation to the page's ``data-ready`` mark (set once the first screen's figures
+    are drawn), for a report of every shipped scene at full size."""
+    size = sum(f.stat().st_size for f in site["index"].parent.iterdir() if f.is_file())
+    assert size > 5 * MB  # a report as large as the real one
+    assert opened["wall_seconds"] <= READY_SECONDS, opened
+    assert opened["page_ms"] <= 1000 * READY_SECONDS, opened
+    assert opened["figures"] == site["html"].count("class='plotly-graph-div lazy-plot'")
+    assert opened["drawn"] < opened["figures"] / 4, opened  # figures below the fold wait
+
+
+def test_no_table_is_wider_than_its_section_at_1280_px(opened):
+    layout = opened["layout"]
+    assert layout["viewport"] == 1280
+    assert layout["tables"] > 20
+    assert layout["bad"] == [], layout["bad"]
+    assert layout["wide_sections"] == [], layout["wide_sections"]
+    assert layout["page"] <= layout["viewport"]
 
 
 def test_no_javascript_errors(browser):
@@ -152,8 +230,12 @@ def test_animation_has_frames_and_controls(site, browser):
     anims = [p for p in browser["plots"] if p["frames"] > 0]
     # One animation per grid scene with an optimum (every grid scene here has a reduction;
     # optima and study scenes have none).
+    from reports._paper import load_figures
+
     grid = [n for n in SHIPPED if 'kind = "' not in (REPO / "workflows" / f"{n}.toml").read_text()]
-    assert len(anims) == len(rh.ANIMATED) + len(grid)
+    # a scene drawing several figures has one view, and so one animation, per figure
+    views = [v.scene for f in load_figures() for v in f.views]
+    assert len(anims) == len(rh.ANIMATED) + sum(max(1, views.count(n)) for n in grid)
     for p in anims:
         assert p["frames"] >= 48 and p["sliders"] == 1 and p["buttons"] == 1
 

@@ -1,0 +1,270 @@
+"""The reproduction audit: every quantitative claim of the paper's results, our value from the
+stores and a verdict computed at build time.
+
+The claims live in ``reports/claims.toml`` (claim in words, the paper's value, the tolerance,
+and which store and reduction of :mod:`reports._claim_values` computes our value); nothing
+here holds a result. Verdicts:
+
+* **agrees** — our value is within the claim's tolerance;
+* **differs** — it is not, and the reason says what the data show (an optimum on the edge of
+  the scanned domain, a grid coarser than the claim's precision, failed points, or a
+  difference beyond our error estimate);
+* **not run** — the store the claim needs is missing, or lacks the cells it needs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from ._claim_values import COMPUTE, Measurement, NotComputed
+from ._site import esc
+
+__all__ = ["CLAIMS_FILE", "Claim", "AuditRow", "RegistryError", "load_claims", "evaluate_claims", "verdict", "audit_html", "audit_counts", "audit_summary",
+           "write_audit_json", "VERDICTS"]
+
+CLAIMS_FILE = Path(__file__).resolve().with_name("claims.toml")
+VERDICTS = ("agrees", "differs", "not run")
+_EXPECT_KEYS = ({"value", "tolerance"}, {"value", "factor"}, {"range", "tolerance"}, {"min"}, {"max"}, {"min", "max"})
+
+
+class RegistryError(ValueError):
+    """claims.toml is malformed (the message names the claim)."""
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One row of the registry."""
+
+    id: str
+    figure: str
+    claim: str
+    paper_value: str
+    expect: dict
+    compute: str
+    args: dict
+
+    @property
+    def scenes(self) -> list[str]:
+        """Every scene the claim reads (from ``args``, including gain's two sides)."""
+        out = [self.args["scene"]] if "scene" in self.args else []
+        for side in ("numerator", "denominator"):
+            if isinstance(self.args.get(side), dict) and "scene" in self.args[side]:
+                out.append(self.args[side]["scene"])
+        return list(dict.fromkeys(out))
+
+    def tolerance_text(self) -> str:
+        e = self.expect
+        if "tolerance" in e and "range" in e:
+            return f"each end ± {e['tolerance']:g}"
+        if "tolerance" in e:
+            return f"± {e['tolerance']:g}"
+        if "factor" in e:
+            return f"within a factor {e['factor']:g}"
+        lo, hi = e.get("min"), e.get("max")
+        if lo is not None and hi is not None:
+            return f"in [{lo:g}, {hi:g}]"
+        return f"≥ {lo:g}" if lo is not None else f"≤ {hi:g}"
+
+
+@dataclass
+class AuditRow:
+    claim: Claim
+    verdict: str
+    reason: str
+    measurement: Measurement | None
+
+    def to_json(self) -> dict:
+        m = self.measurement
+        value = None
+        if m is not None:
+            value = list(m.value) if isinstance(m.value, tuple) else m.value
+            value = _json_number(value)
+        return {"id": self.claim.id, "figure": self.claim.figure, "claim": self.claim.claim,
+                "paper_value": self.claim.paper_value, "expect": self.claim.expect,
+                "tolerance": self.claim.tolerance_text(), "our_value": value,
+                "where": m.where if m else None, "resolution": m.resolution if m else None,
+                "error_estimate": m.error if m else None, "verdict": self.verdict, "reason": self.reason,
+                "scenes": self.claim.scenes, "compute": self.claim.compute}
+
+
+def _json_number(v):
+    if isinstance(v, list):
+        return [_json_number(x) for x in v]
+    return None if v is None or not math.isfinite(v) else float(v)
+
+
+def load_claims(path: Path | str = CLAIMS_FILE) -> list[Claim]:
+    """Parse and check the registry: unique ids, a known reduction, a well-formed expectation."""
+    doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    out, seen = [], set()
+    for k, c in enumerate(doc.get("claims", [])):
+        cid = c.get("id", f"#{k}")
+        missing = [f for f in ("id", "figure", "claim", "paper_value", "expect", "compute", "args") if f not in c]
+        if missing:
+            raise RegistryError(f"claim {cid}: missing {', '.join(missing)}")
+        if cid in seen:
+            raise RegistryError(f"claim {cid}: duplicate id")
+        seen.add(cid)
+        if c["compute"] not in COMPUTE:
+            raise RegistryError(f"claim {cid}: unknown compute {c['compute']!r} (known: {', '.join(COMPUTE)})")
+        if set(c["expect"]) not in _EXPECT_KEYS:
+            raise RegistryError(f"claim {cid}: expect must be one of {[sorted(s) for s in _EXPECT_KEYS]}")
+        out.append(Claim(id=cid, figure=c["figure"], claim=c["claim"], paper_value=str(c["paper_value"]),
+                         expect=dict(c["expect"]), compute=c["compute"], args=dict(c["args"])))
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Verdicts
+# ---------------------------------------------------------------------------
+
+
+def _miss(expect: dict, value) -> float:
+    """How far ``value`` lies outside the accepted set (0 inside; NaN for no value)."""
+    vals = list(value) if isinstance(value, tuple) else [value]
+    if any(v is None or not math.isfinite(v) for v in vals):
+        return math.nan
+    if "range" in expect:
+        if len(vals) != 2:
+            return math.nan
+        return max(max(abs(v - p) - expect["tolerance"], 0.0) for v, p in zip(vals, expect["range"]))
+    if "factor" in expect:
+        p = expect["value"]
+        worst = max((max(v / p, p / v) if v * p > 0 else math.inf) for v in vals)
+        return max(worst - expect["factor"], 0.0)
+    if "tolerance" in expect:
+        return max(max(abs(v - expect["value"]) - expect["tolerance"], 0.0) for v in vals)
+    lo, hi = expect.get("min", -math.inf), expect.get("max", math.inf)
+    return max(max(lo - v, v - hi, 0.0) for v in vals)
+
+
+def _num(v) -> str:
+    if isinstance(v, tuple):
+        return "–".join(_num(x) for x in v)
+    return "n/a" if v is None or not math.isfinite(v) else f"{v:.3g}"
+
+
+def _side(expect: dict, value) -> str:
+    vals = list(value) if isinstance(value, tuple) else [value]
+    ref = expect.get("value", expect.get("range", [expect.get("min", expect.get("max", 0))])[0])
+    above = sum(v > ref for v in vals)
+    return "above" if above == len(vals) else "below" if above == 0 else "across"
+
+
+def verdict(claim: Claim, m: Measurement) -> tuple[str, str]:
+    """(verdict, reason) of ``claim`` given our measurement ``m``, reasons drawn from the data."""
+    e = claim.expect
+    miss = _miss(e, m.value)
+    notes = []
+    if m.edges:
+        notes.append("at the domain edge: " + "; ".join(m.edges))
+    if m.failed[0] and m.failed[1]:
+        notes.append(f"{m.failed[0]} of {m.failed[1]} selected cells have no valid value")
+    if math.isnan(miss):
+        return "differs", "; ".join([f"no valid value ({m.where})"] + notes)
+    if miss == 0:
+        return "agrees", "; ".join([f"ours {_num(m.value)} is within the tolerance ({claim.tolerance_text()})"] + notes)
+    reasons = []
+    if m.edges:
+        reasons.append(f"at the domain edge ({'; '.join(m.edges)}): the optimum lies beyond the scanned range, "
+                       f"and ours is {_side(e, m.value)} the paper's value")
+    resolution = ""
+    agreeing = [nb for nb in m.neighbours if _miss(e, nb) == 0]
+    if agreeing:
+        resolution = (f"grid resolution coarser than the claim's precision: {m.coarse}, and the neighbouring grid "
+                      f"value {_num(agreeing[0])} would agree")
+    elif m.coarse and m.coarse_value >= miss and m.coarse_side in ("", _side(e, m.value)):
+        resolution = f"grid resolution coarser than the claim's precision: {m.coarse}" + (
+            f", more than the miss {miss:.2g}" if math.isfinite(m.coarse_value) else "")
+    elif math.isfinite(m.error_value) and m.error_value >= miss:
+        resolution = (f"grid resolution coarser than the claim's precision: our error estimate ({m.error}) is "
+                      f"larger than the miss {miss:.2g}")
+    if resolution and not m.edges:
+        reasons.append(resolution)
+    if m.failed[0] and m.failed[1]:
+        reasons.append(f"{m.failed[0]} of {m.failed[1]} selected cells have no valid value")
+    if not reasons:
+        est = (f", {miss / m.error_value:.3g} times our error estimate ({m.error})"
+               if math.isfinite(m.error_value) and m.error_value > 0 else "")
+        reasons.append(f"ours is {_side(e, m.value)} the paper's value, {miss:.2g} beyond the tolerance "
+                       f"({claim.tolerance_text()}){est}: a difference in the data, not in its resolution")
+    return "differs", "; ".join(reasons)
+
+
+def evaluate_claims(claims, stores) -> list[AuditRow]:
+    """One row per claim against ``stores`` (SceneStore objects; the first store of a scene name
+    is used)."""
+    by_name = {}
+    for sd in stores:
+        by_name.setdefault(sd.name, sd)
+    rows = []
+    for c in claims:
+        missing = [s for s in c.scenes if s not in by_name]
+        if missing:
+            rows.append(AuditRow(c, "not run", f"no store of scene {', '.join(missing)} (python -m pipeline run "
+                                                f"{' '.join(f'workflows/{s}.toml' for s in missing)})", None))
+            continue
+        try:
+            m = COMPUTE[c.compute](by_name, **c.args)
+        except NotComputed as exc:
+            rows.append(AuditRow(c, "not run", str(exc), None))
+            continue
+        v, reason = verdict(c, m)
+        rows.append(AuditRow(c, v, reason, m))
+    return rows
+
+
+# ---------------------------------------------------------------------------
+# Output
+# ---------------------------------------------------------------------------
+
+_CLASS = {"agrees": "v-agrees", "differs": "v-differs", "not run": "v-notrun"}
+
+
+def audit_counts(rows) -> dict:
+    return {v: sum(r.verdict == v for r in rows) for v in VERDICTS}
+
+
+def audit_html(rows, figure_anchor=lambda label: f"fig-{label}") -> str:
+    """The audit section (front page): a summary line and one table row per claim."""
+    n = audit_counts(rows)
+    body = []
+    for r in rows:
+        c, m = r.claim, r.measurement
+        ours = "—"
+        if m is not None:
+            ours = (f"<b>{esc(_num(m.value))}</b><div class='small'>{esc(m.where)}</div>"
+                    f"<div class='small'>{esc(m.resolution)}</div>"
+                    + (f"<div class='small'>error: {esc(m.error)}</div>" if m.error else ""))
+        body.append(f"<tr id='claim-{esc(c.id)}'><td><a href='#{figure_anchor(c.figure)}'>{esc(c.figure)}</a>: "
+                    f"{esc(c.claim)}<div class='small'><code>{esc(c.id)}</code></div></td>"
+                    f"<td>{esc(c.paper_value)}<div class='small'>{esc(c.tolerance_text())}</div></td><td>{ours}</td>"
+                    f"<td class='{_CLASS[r.verdict]}'>{esc(r.verdict)}</td><td>{esc(r.reason)}</td></tr>")
+    return (f"<section class='audit' id='audit'><h2>Reproduction audit</h2>"
+            f"<p><b>{len(rows)} quantitative claims</b> of the paper's results, each checked against the stores "
+            f"when this report was built: <span class='v-agrees'>{n['agrees']} agree</span>, "
+            f"<span class='v-differs'>{n['differs']} differ</span>, "
+            f"<span class='v-notrun'>{n['not run']} not run</span>. The claims, their tolerances and the "
+            "reductions computing our values are in <code>reports/claims.toml</code>; the table is also "
+            "written as <code>audit.json</code> beside this page.</p>"
+            "<table class='audit'><colgroup><col class='c-claim'><col class='c-paper'><col class='c-ours'>"
+            "<col class='c-verdict'><col class='c-reason'></colgroup>"
+            "<tr><th>claim</th><th>paper</th><th>ours (from the stores)</th><th>verdict</th><th>reason</th></tr>"
+            + "".join(body) + "</table></section>")
+
+
+def audit_summary(path: Path) -> str:
+    """'N claims: a agree, d differ, r not run (path)' from an audit.json."""
+    doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    n = {v: sum(o["verdict"] == v for o in doc) for v in VERDICTS}
+    return f"{len(doc)} claims: {n['agrees']} agree, {n['differs']} differ, {n['not run']} not run ({path})"
+
+
+def write_audit_json(rows, path: Path) -> Path:
+    path = Path(path)
+    path.write_text(json.dumps([r.to_json() for r in rows], indent=1, ensure_ascii=False), encoding="utf-8")
+    return path

@@ -1,0 +1,583 @@
+"""Our value of a claim of the paper, read from the stores: the reductions named in
+``claims.toml`` (``compute = "<name>"``).
+
+Every reduction is a named function ``f(stores, **args) -> Measurement`` in :data:`COMPUTE`.
+They are built from a few small steps over labelled arrays (``xarray.DataArray``):
+
+``source``
+    the array of one role of a reduction of a grid store (the polished optimum where the scene
+    polishes, else the grid one: ``value``, ``signed``, an arg-max axis, a reported quantity),
+    a stored quantity (``quantity = "scaled_power"``), or a role of the optima of an optima
+    store (``relative_efficiency``, ``scaled_period``, ``phi_max``, ``phi_min``, ``distinct``);
+``select``
+    ``at`` (one value per dimension; "min"/"max" for the axis' ends), ``cells`` (a list of such
+    points, stacked along ``cell``), ``ranges`` (inclusive [lo, hi] per dimension), ``exclude``;
+``peak_over``
+    the maximum over dimensions (the paper's "peak" over periods);
+``location_along``
+    the coordinate of the maximum along one dimension, per remaining cell;
+``statistic``
+    ``only`` (one cell), ``max``, ``min``, ``median``, ``range`` ((min, max)), ``fraction``
+    (share of cells passing ``test``), optionally ``location`` (the coordinate of the max/min
+    instead of the value).
+
+A selection the store does not hold raises :class:`NotComputed` (the claim is "not run").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Measurement", "NotComputed", "COMPUTE", "grid_role_array", "optima_role_array"]
+
+
+class NotComputed(LookupError):
+    """The stores do not hold what a claim needs (a missing scene, cell or array)."""
+
+
+@dataclass
+class Measurement:
+    """Our value of a claim and what the data say about its accuracy.
+
+    value : float, or (lo, hi) for a range
+    where : the cell(s) the value comes from, in words
+    resolution : the grid (or ensemble) the value was found on
+    error : our error estimate, in words
+    error_value : the error estimate in the value's units (NaN when not known)
+    edges : arg-max axes at an end of their scanned range, e.g. ("A1/A0 at its lower end 0.059",)
+    coarse, coarse_value : for an extremum over a sampled axis, the sampling in words and how
+        much the value changes to the neighbouring samples (what the grid can hide)
+    coarse_side : "below" (a maximum: finer sampling can only raise it) or "above" (a minimum);
+        the sampling explains a miss only on that side
+    neighbours : for a located coordinate, the coordinates one grid step either side
+    failed : (cells without a valid value, cells selected)
+    """
+
+    value: object
+    where: str = ""
+    resolution: str = ""
+    error: str = ""
+    error_value: float = math.nan
+    edges: tuple = ()
+    coarse: str = ""
+    coarse_value: float = math.nan
+    neighbours: list = field(default_factory=list)
+    coarse_side: str = ""
+    failed: tuple = (0, 0)
+
+
+# ---------------------------------------------------------------------------
+# Sources
+# ---------------------------------------------------------------------------
+
+_AXIS_NAMES = {"anisotropy_ratio": "μn/μs", "scaled_period": "scaled period", "A0": "A0", "A1_ratio": "A1/A0",
+               "duty_cycle": "τ0", "T2_mu_n": "T²μn", "T2_mu_s": "T²μs", "max_wavenumber": "Kmax", "p": "p",
+               "duty_cycle_halfwidth": "Δτ0", "exponent_set": "exponent set", "closing_shape": "closing law",
+               "opening_shape": "opening law"}
+
+
+def axis_name(dim: str) -> str:
+    return _AXIS_NAMES.get(dim, dim)
+
+
+def value_text(dim: str, v: float) -> str:
+    """A coordinate as the paper writes it (powers of two for the friction parameters)."""
+    v = float(v)
+    if dim in ("anisotropy_ratio", "scaled_period", "T2_mu_n", "T2_mu_s") and v > 0:
+        k = math.log2(v)
+        if abs(2 * k - round(2 * k)) < 1e-9:
+            return f"2^{k:g}" if k else "1"
+    return f"{v:.3g}"
+
+
+def _store(stores, scene):
+    if scene not in stores:
+        raise NotComputed(f"no store of scene {scene!r}")
+    return stores[scene]
+
+
+def _reduction(sd, name):
+    for red in sd.reductions:
+        if red["name"] == name:
+            return red
+    raise NotComputed(f"scene {sd.name} has no reduction {name!r}")
+
+
+def grid_role_array(sd, reduction: str, role: str = "value"):
+    """(DataArray of ``role`` of ``reduction``, its grid counterpart or None, polished?).
+
+    The polished array when stored (the grid one beside it for the resolution error), else
+    the grid one. ``role``: value | signed | an axis of ``over`` | a reported quantity |
+    ``linear_shapes`` (1 where both power laws of the optimum are linear)."""
+    _reduction(sd, reduction)
+    if role == "linear_shapes":
+        arrays = [grid_role_array(sd, reduction, r) for r in ("closing_shape", "opening_shape")]
+        both = (abs(arrays[0][0]) == 1) & (abs(arrays[1][0]) == 1)
+        return both.astype(float).where(arrays[0][0].notnull()), None, arrays[0][2]
+    suffix = "" if role == "value" else f"_{role}"
+    polished, grid = f"{reduction}_polished{suffix}", f"{reduction}{suffix}"
+    if polished in sd.ds:
+        return sd.ds[polished], (sd.ds[grid] if grid in sd.ds else None), True
+    if grid in sd.ds:
+        return sd.ds[grid], None, False
+    raise NotComputed(f"store {sd.name} has no array {grid!r}")
+
+
+def optima_role_array(sd, role: str):
+    """A role of the best kept optimum per (anisotropy_ratio, max_wavenumber, p): |λ|/λub
+    (``relative_efficiency``), ``scaled_period``, ``phi_max``, ``phi_min`` [rad], or the number
+    of distinct optima kept (``distinct``)."""
+    ds = sd.ds
+    if "optimum_relative_efficiency" not in ds:
+        raise NotComputed(f"store {sd.name} holds no kept optima")
+    if role == "relative_efficiency":
+        return abs(ds["optimum_relative_efficiency"].isel(rank=0))
+    if role == "scaled_period":
+        return ds["optimum_scaled_period"].isel(rank=0)
+    if role in ("phi_max", "phi_min"):
+        phi = ds["optimum_phi"].isel(rank=0)
+        return phi.max("tau", skipna=False) if role == "phi_max" else phi.min("tau", skipna=False)
+    if role == "distinct":
+        kept = (ds["optimum_start"] >= 0).sum("rank")
+        return kept.where(kept > 0).astype(float)
+    raise NotComputed(f"no optima role {role!r}")
+
+
+# ---------------------------------------------------------------------------
+# Selection
+# ---------------------------------------------------------------------------
+
+
+def _index(da, dim, want):
+    if dim not in da.dims:
+        raise NotComputed(f"no dimension {dim!r}")
+    coord = np.asarray(da[dim].values, dtype=np.float64)
+    if want in ("min", "max"):
+        return int(np.argmin(coord) if want == "min" else np.argmax(coord))
+    hit = np.flatnonzero(np.isclose(coord, float(want), rtol=1e-6, atol=1e-12))
+    if not hit.size:
+        have = ", ".join(value_text(dim, c) for c in coord[:8]) + (" …" if coord.size > 8 else "")
+        raise NotComputed(f"the store has no cell at {axis_name(dim)} = {value_text(dim, float(want))} "
+                          f"(it has {have})")
+    return int(hit[0])
+
+
+def _at(da, at: dict):
+    return da.isel({d: _index(da, d, v) for d, v in (at or {}).items()})
+
+
+def select(da, *, at=None, cells=None, ranges=None, exclude=None):
+    """(``da`` at ``at``, stacked over ``cells``, restricted to ``ranges``, with the cells of
+    ``exclude`` masked as NaN; the number of masked cells)."""
+    import xarray as xr
+
+    excluded = 0
+    da = _at(da, at)
+    if cells:
+        da = xr.concat([_at(da, c) for c in cells], dim="cell", coords="all")
+    for d, (lo, hi) in (ranges or {}).items():
+        if d not in da.dims:
+            raise NotComputed(f"no dimension {d!r}")
+        keep = np.flatnonzero((da[d].values >= lo) & (da[d].values <= hi))
+        if not keep.size:
+            raise NotComputed(f"the store has no cell with {axis_name(d)} in [{lo:g}, {hi:g}]")
+        da = da.isel({d: keep})
+    for c in exclude or []:  # masked (NaN), and not counted as failures (see _failures)
+        try:
+            hit = _at(da, c)
+        except NotComputed:
+            continue
+        mask = np.ones(da.shape, dtype=bool)
+        for d in c:
+            shape = [1] * da.ndim
+            shape[da.dims.index(d)] = -1
+            mask &= (da[d].values == hit[d].values).reshape(shape)
+        da = da.where(~mask)
+        excluded += int(mask.sum())
+    return da, excluded
+
+
+def _where(da, index=None) -> str:
+    """The coordinates of a cell (``index`` into ``da``'s flattened values) in words."""
+    cell = da if index is None else da.isel(dict(zip(da.dims, np.unravel_index(index, da.shape))))
+    parts = []
+    for name, c in cell.coords.items():
+        if c.ndim == 0 and name in _AXIS_NAMES:
+            parts.append(f"{axis_name(name)} = {value_text(name, float(c.values))}")
+    return ", ".join(parts)
+
+
+def _collapse(da, statistic: str, test=None, location=None):
+    """(value, where, index of the cell or None) of ``statistic`` over every cell of ``da``."""
+    v = np.asarray(da.values, dtype=np.float64).ravel()
+    ok = np.isfinite(v)
+    n = v.size
+    if statistic == "only":
+        if n != 1:
+            raise NotComputed(f"{n} cells selected where the claim needs one")
+        return float(v[0]), _where(da, 0), 0
+    if not ok.any():
+        return math.nan, f"{n} cells, none valid", None
+    if statistic in ("max", "min"):
+        i = int(np.nanargmax(v) if statistic == "max" else np.nanargmin(v))
+        if location:
+            cell = da.isel(dict(zip(da.dims, np.unravel_index(i, da.shape))))
+            return float(cell[location].values), _where(da, i), i
+        return float(v[i]), _where(da, i), i
+    if statistic == "median":
+        return float(np.median(v[ok])), f"median over {ok.sum()} cells", None
+    if statistic == "range":
+        return (float(v[ok].min()), float(v[ok].max())), f"over {ok.sum()} cells", None
+    if statistic == "fraction":
+        passed = _test(v[ok], test or {})
+        return float(np.mean(passed)), f"{int(passed.sum())} of {ok.sum()} cells", None
+    raise NotComputed(f"unknown statistic {statistic!r}")
+
+
+def _test(v, test: dict) -> np.ndarray:
+    """Cells passing every bound of ``test``: min, max, between [a, b], outside [a, b]."""
+    passed = np.ones(v.shape, dtype=bool)
+    if "min" in test:
+        passed &= v >= test["min"]
+    if "max" in test:
+        passed &= v <= test["max"]
+    if "between" in test:
+        a, b = test["between"]
+        passed &= (v >= a) & (v <= b)
+    if "outside" in test:
+        a, b = test["outside"]
+        passed &= (v < a) | (v > b)
+    return passed
+
+
+def _location_along(da, dim):
+    """The coordinate of the maximum along ``dim``, per remaining cell."""
+    filled = da.fillna(-np.inf)
+    idx = filled.argmax(dim)
+    loc = da[dim].isel({dim: idx}).drop_vars(dim, errors="ignore")
+    return loc.where(np.isfinite(filled.max(dim)))
+
+
+# ---------------------------------------------------------------------------
+# Resolution, error and edges
+# ---------------------------------------------------------------------------
+
+
+def _grid_text(sd, dims) -> str:
+    return " × ".join(f"{axis_name(d)} {sd.ds.sizes[d]}" for d in dims if d in sd.ds.sizes)
+
+
+def _edges(sd, reduction, cell_sel) -> tuple:
+    """Continuous arg-max axes of ``reduction`` at an end of their scanned range in the cell."""
+    red = _reduction(sd, reduction)
+    out = []
+    for ax in red.get("over", []):
+        if ax not in sd.ds.coords or ax in ("closing_shape", "opening_shape"):
+            continue
+        try:
+            arg_da, _, _ = grid_role_array(sd, reduction, ax)
+            arg = float(np.asarray(cell_sel(arg_da).values).ravel()[0])
+        except (NotComputed, IndexError, ValueError):
+            continue
+        coord = np.asarray(sd.ds[ax].values, dtype=np.float64)
+        span = float(coord.max() - coord.min()) or 1.0
+        for end, bound in (("lower", coord.min()), ("upper", coord.max())):
+            if abs(arg - bound) <= 1e-6 * span:
+                out.append(f"{axis_name(ax)} at the {end} end of its scanned range ({arg:.3g})")
+    return tuple(out)
+
+
+def _cell(arr, index):
+    """Cell ``index`` (into the flattened values) of ``arr``; ``arr`` itself when it is one cell."""
+    if index is None or arr.size <= 1:
+        return arr
+    return arr.isel(dict(zip(arr.dims, np.unravel_index(index, arr.shape))))
+
+
+def _polish_change(m: Measurement, selected, grid_selected, index):
+    """Our error estimate of a polished optimum: how far polishing moved it from the grid's."""
+    p, g = np.asarray(selected.values, float), np.asarray(grid_selected.values, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        change = np.abs(p - g)
+        rel = change / np.abs(p)
+    if index is not None:
+        change, rel = change.ravel()[index], rel.ravel()[index]
+    elif np.isfinite(change).any():
+        change, rel = np.nanmax(change), np.nanmax(rel)
+    else:
+        return
+    if np.isfinite(change):
+        m.error_value = float(change)
+        m.error = f"grid→polished change {change:.2g}" + (f" ({100 * rel:.2g} %)" if np.isfinite(rel) else "")
+
+
+def _neighbour_spread(da, index, dims) -> tuple[float, str]:
+    """Largest change of ``da`` from cell ``index`` to its neighbours along the sampled ``dims``
+    (how much an extremum can hide between samples), and the sampling in words."""
+    ix = np.unravel_index(index, da.shape)
+    v0 = float(da.values[ix])
+    spread, words = 0.0, []
+    for d in dims:
+        if d not in da.dims or da.sizes[d] < 2:
+            continue
+        k = da.dims.index(d)
+        for step in (-1, 1):
+            j = list(ix)
+            j[k] += step
+            if 0 <= j[k] < da.shape[k] and np.isfinite(da.values[tuple(j)]):
+                spread = max(spread, abs(float(da.values[tuple(j)]) - v0))
+        coord = np.asarray(da[d].values, dtype=np.float64)
+        log = bool(np.all(coord > 0)) and d in ("anisotropy_ratio", "scaled_period", "T2_mu_n", "T2_mu_s")
+        step_v = float(np.min(np.diff(np.log2(coord) if log else coord)))
+        words.append(f"{axis_name(d)} sampled in steps of " + (f"2^{step_v:g}" if log else f"{step_v:.3g}"))
+    return spread, ", ".join(words)
+
+
+def _neighbour_coords(da, index, dim) -> list[float]:
+    """The coordinates one grid step either side of the located one."""
+    if dim not in da.dims:
+        return []
+    k = da.dims.index(dim)
+    i = np.unravel_index(index, da.shape)[k]
+    coord = np.asarray(da[dim].values, dtype=np.float64)
+    return [float(coord[j]) for j in (i - 1, i + 1) if 0 <= j < coord.size]
+
+
+def _failures(da, excluded: int = 0) -> tuple:
+    """(cells without a valid value, cells selected), the ``excluded`` (masked) cells left out."""
+    v = np.asarray(da.values, dtype=np.float64)
+    return int(np.count_nonzero(~np.isfinite(v))) - excluded, int(v.size) - excluded
+
+
+# ---------------------------------------------------------------------------
+# The reductions named in claims.toml
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class _Source:
+    sd: object
+    da: object            # the selected array
+    sel: object           # the selection, for other arrays of the same store
+    grid: object = None   # the selected grid counterpart of a polished array
+    polished: bool = False
+    excluded: int = 0
+
+
+def _selected(stores, scene, *, reduction=None, role="value", quantity=None, absolute=False, at=None, cells=None,
+              ranges=None, exclude=None, peak_over=(), location_along=None) -> _Source:
+    """The selected array of one claim source (see the module docstring)."""
+    sd = _store(stores, scene)
+    grid_da, polished = None, False
+    if reduction is not None:
+        da, grid_da, polished = grid_role_array(sd, reduction, role)
+    elif quantity is not None:
+        if quantity not in sd.ds:
+            raise NotComputed(f"store {sd.name} has no quantity {quantity!r}")
+        da = sd.ds[quantity]
+        if "status" in sd.ds:
+            da = da.where(sd.ds["status"] == 0)
+    else:
+        da = optima_role_array(sd, role)
+    if absolute:
+        da = abs(da)
+        grid_da = abs(grid_da) if grid_da is not None else None
+
+    def sel(arr):
+        a, _ = select(arr, at=at, cells=cells, ranges=ranges, exclude=exclude)
+        for d in peak_over:
+            a = a.max(d)
+        if location_along:
+            a = _location_along(a, location_along)
+        return a
+
+    excluded = select(da, at=at, cells=cells, ranges=ranges, exclude=exclude)[1] if exclude else 0
+    # a peak or a located coordinate has no grid counterpart of the same meaning
+    grid = sel(grid_da) if grid_da is not None and not peak_over and not location_along else None
+    return _Source(sd, sel(da), sel, grid, polished, excluded)
+
+
+_SAMPLED = ("anisotropy_ratio", "scaled_period")
+
+
+def stat(stores, *, scene, statistic="only", test=None, location=None, **source) -> Measurement:
+    """One value of a store (see the module docstring for the selection)."""
+    src = _selected(stores, scene, **source)
+    sd, da = src.sd, src.da
+    value, where, index = _collapse(da, statistic, test, location)
+    m = Measurement(value=value, where=where, failed=_failures(da, src.excluded))
+    counted = statistic == "fraction" or source.get("location_along") or location
+    reduction = source.get("reduction")
+    if reduction:
+        red = _reduction(sd, reduction)
+        over = [a for a in red.get("over", []) if a in sd.ds.sizes]
+        m.resolution = (_grid_text(sd, over) + (", polished optimum" if src.polished else ", grid optimum")
+                        + f"; solver rtol {sd.rtol:g}")
+        if src.grid is not None and not counted:
+            _polish_change(m, da, src.grid, index)
+        role = source.get("role", "value")
+        if not src.polished and role in over and not counted:
+            coord = np.asarray(sd.ds[role].values, dtype=np.float64)
+            step = float(np.min(np.diff(coord)))
+            m.error, m.error_value = f"grid optimum: {axis_name(role)} within one grid step ({step:.3g})", step
+        if index is not None or statistic == "only":
+            m.edges = _edges(sd, reduction, lambda arr: _cell(src.sel(arr), index))
+    elif source.get("quantity"):
+        m.resolution = _grid_text(sd, sd.dims) + f"; solver rtol {sd.rtol:g}"
+        m.error = f"solver rtol {sd.rtol:g}"
+    else:
+        m.resolution, m.error = _optima_resolution(sd)
+        if not counted and isinstance(value, float) and math.isfinite(value):
+            m.error_value = abs(value) * float(sd.science.get("optimizer", {}).get("grid_rtol", math.nan))
+    is_axis = reduction and source.get("role", "value") in _reduction(sd, reduction).get("over", [])
+    if statistic in ("max", "min") and index is not None and not is_axis and not source.get("location_along"):
+        if location:
+            m.neighbours = _neighbour_coords(da, index, location)
+            m.coarse = f"{axis_name(location)} located on its grid"
+        else:
+            spread, words = _neighbour_spread(da, index, _SAMPLED)
+            if words:
+                m.coarse, m.coarse_value = f"the {statistic} over {words}; its neighbours differ by {spread:.2g}", spread
+            gap = _unsampled_end(da, index, source.get("ranges") or {})
+            if gap:
+                m.coarse, m.coarse_value = gap, math.inf
+            # a finer sampling can only raise a maximum (lower a minimum)
+            m.coarse_side = "below" if statistic == "max" else "above"
+    return m
+
+
+def _unsampled_end(da, index, ranges) -> str:
+    """When the extremum sits at the last sample of a claim's range that the grid does not reach
+    (e.g. μn/μs in [2^-7, 1) sampled from 2^-6 on), the unsampled stretch in words."""
+    ix = np.unravel_index(index, da.shape)
+    for d, (lo, hi) in ranges.items():
+        if d not in da.dims or d not in _SAMPLED:
+            continue
+        k = da.dims.index(d)
+        coord = np.asarray(da[d].values, dtype=np.float64)
+        c = coord[ix[k]]
+        for end, bound, at_end in (("lower", lo, ix[k] == 0), ("upper", hi, ix[k] == coord.size - 1)):
+            if at_end and bound > 0 and math.isfinite(bound) and abs(math.log2(c / bound)) > 0.05:
+                return (f"the extremum is at our {end}most sample {value_text(d, c)} of the claim's range, which "
+                        f"extends to {value_text(d, bound)}: the grid does not sample that end")
+    return ""
+
+
+def _optima_resolution(sd):
+    sc = sd.science
+    ratios = np.asarray(sd.ds["anisotropy_ratio"].values, dtype=np.float64)
+    step = float(np.min(np.diff(np.log2(ratios)))) if ratios.size > 1 else math.nan
+    opt = sc.get("optimizer", {})
+    return (f"{sc.get('starts', {}).get('num', '?')} random starts per cell; μn/μs in steps of 2^{step:g}; "
+            f"best of the kept distinct optima",
+            f"gradient norm ≤ {opt.get('gtol', '?')}, τ grid rtol {opt.get('grid_rtol', '?')}")
+
+
+def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=None) -> Measurement:
+    """The ratio numerator / denominator of two selections (of one or two stores), cell by cell
+    over their shared coordinates (a collapsed side broadcasts), then ``statistic``."""
+    import xarray as xr
+
+    parts, excluded, unpolished = [], 0, []
+    for side in (numerator, denominator):
+        side = dict(side)
+        scene = side.pop("scene")
+        side_stat = side.pop("statistic", None)
+        src = _selected(stores, scene, **side)
+        sd, da, polished = src.sd, src.da, src.polished
+        excluded = max(excluded, src.excluded)
+        if side.get("reduction") and not polished:
+            over = [a for a in _reduction(sd, side["reduction"]).get("over", []) if a in sd.ds.sizes]
+            unpolished.append(f"{sd.name}: grid optima over {_grid_text(sd, over)}, not polished")
+        if side_stat:
+            v, _, _ = _collapse(da, side_stat)
+            da = xr.DataArray(v)
+        parts.append((sd, da, polished))
+    (sa, a, pa), (sb, b, pb) = parts
+    shared = [d for d in a.dims if d in b.dims]
+    for d in shared:  # align on the coordinates both stores hold
+        common = np.intersect1d(np.round(a[d].values, 9), np.round(b[d].values, 9))
+        if not common.size:
+            raise NotComputed(f"the two selections share no {axis_name(d)}")
+        a = a.isel({d: np.flatnonzero(np.isin(np.round(a[d].values, 9), common))})
+        b = b.isel({d: np.flatnonzero(np.isin(np.round(b[d].values, 9), common))})
+        b = b.assign_coords({d: a[d].values})
+    extra_a = [c for c in a.coords if c not in a.dims and c in b.coords and c not in b.dims]
+    a = a.drop_vars(extra_a, errors="ignore")
+    b = b.drop_vars([c for c in b.coords if c not in b.dims], errors="ignore")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = a / b
+    value, where, index = _collapse(r, statistic, test)
+    m = Measurement(value=value, where=where, failed=_failures(r, excluded))
+    res = []
+    for sd, pol in ((sa, pa), (sb, pb)):
+        if sd.meta.get("kind", "grid") == "optima":
+            res.append(f"{sd.name}: " + _optima_resolution(sd)[0])
+        else:
+            res.append(f"{sd.name}: rtol {sd.rtol:g}, " + ("polished optima" if pol else "grid optima"))
+    m.resolution = "; ".join(dict.fromkeys(res))
+    m.error = "ratio of two optima, each within its own resolution"
+    if unpolished:  # a ratio of grid optima: the grid's error is not bounded by anything stored
+        m.coarse, m.coarse_value = "; ".join(dict.fromkeys(unpolished)) + ", an error we cannot bound", math.inf
+    return m
+
+
+def monotone(stores, *, scene, along: str, direction="increasing", slack=0.0, dims=None, **source) -> Measurement:
+    """Share of adjacent pairs along ``along`` (or each of ``dims``) that do not decrease
+    (``increasing``) or increase (``decreasing``) by more than ``slack`` (relative)."""
+    src = _selected(stores, scene, **source)
+    sd, da, excluded = src.sd, src.da, src.excluded
+    shares, pairs = [], 0
+    for d in dims or [along]:
+        v = np.moveaxis(np.asarray(da.values, dtype=np.float64), da.dims.index(d), -1)
+        step = np.diff(v, axis=-1)
+        if direction == "decreasing":
+            step = -step
+        scale = np.maximum(np.abs(v[..., 1:]), np.abs(v[..., :-1]))
+        ok = np.isfinite(step)
+        shares.append(np.mean(step[ok] >= -slack * scale[ok]) if ok.any() else math.nan)
+        pairs += int(ok.sum())
+    m = Measurement(value=float(min(shares)), where=f"{pairs} adjacent pairs along "
+                    + ", ".join(axis_name(d) for d in dims or [along]), failed=_failures(da, excluded))
+    if source.get("quantity"):
+        m.resolution = _grid_text(sd, sd.dims) + f"; solver rtol {sd.rtol:g}"
+        m.error = f"solver rtol {sd.rtol:g}"
+    elif source.get("reduction"):
+        red = _reduction(sd, source["reduction"])
+        m.resolution = _grid_text(sd, [a for a in red.get("over", []) if a in sd.ds.sizes])
+    else:
+        m.resolution, m.error = _optima_resolution(sd)
+    return m
+
+
+def harmonic_phi_span(stores, *, scene, reduction, statistic="max", **select_args) -> Measurement:
+    """(min, max) of φ = A0 + A1 cos 2πτ over a period, A0 ± A1, at the optimum of the cell
+    where ``reduction`` is ``statistic`` (its polished arg-max where stored)."""
+    sd = _store(stores, scene)
+    value, _, _ = grid_role_array(sd, reduction, "value")
+    a0, _, polished = grid_role_array(sd, reduction, "A0")
+    ratio, _, _ = grid_role_array(sd, reduction, "A1_ratio")
+    v, _ = select(value, **select_args)
+    _, where, index = _collapse(v, statistic)
+    pick = (lambda arr: float(np.asarray(select(arr, **select_args)[0].values).ravel()[index]))
+    A0, r = pick(a0), pick(ratio)
+    m = Measurement(value=(A0 * (1 - r), A0 * (1 + r)), where=where + f" (A0 = {A0:.3g}, A1/A0 = {r:.3g})")
+    red = _reduction(sd, reduction)
+    m.resolution = _grid_text(sd, red.get("over", [])) + (", polished optimum" if polished else ", grid optimum")
+    step = float(np.min(np.diff(sd.ds["A0"].values)))
+    # the compass polish stops at 1/64 of a grid spacing (pipeline._reduce)
+    m.error = f"grid spacing of A0 {step:.2g} rad" + (" (polished to 1/64 of it)" if polished else "")
+    m.error_value = step / 64 if polished else step
+
+    def cell_sel(arr):
+        a, _ = select(arr, **select_args)
+        return a.isel(dict(zip(a.dims, np.unravel_index(index, a.shape)))) if a.size > 1 else a
+    m.edges = _edges(sd, reduction, cell_sel)
+    return m
+
+
+#: The reductions a claim may name (``compute = "<key>"``).
+COMPUTE = {"stat": stat, "gain": gain, "monotone": monotone, "harmonic_phi_span": harmonic_phi_span}
