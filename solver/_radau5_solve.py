@@ -35,8 +35,8 @@ from ._radau5 import ERROR_ORDER, PointPhysics
 from ._status import CONVERGED, NON_FINITE, NOT_PERIODIC, TOLERANCE_NOT_REACHED
 from ._sweep import (CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
                      SENS, STAGE, T, U, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
-                     event_split_errors, new_workspace, snap_events)
-from ._switching import MAX_STOPS, kinematic_stops
+                     event_split_errors, new_workspace, snap_events, stage_kinematics_into)
+from ._switching import MAX_STOPS, kinematic_stops, turning_stops
 
 #: the stage tolerance is at most this share of delta_tau (p = 0; ``_stage_atol``)
 BAND_SHARE = 0.01
@@ -163,6 +163,7 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
         for c in corners:
             if stops[j] == c:
                 stop_is_corner[j] = True
+    stop_is_turning = turning_stops(code, params, stops, n_stops)
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
     loose = max(LOOSE_RTOL, rtol)
     u0 = u_guess
@@ -179,7 +180,8 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
     lo, hi = -bound, bound
     scale_u = scale_p = 1.0
     for _ in range(MAX_LOOSE_SWEEPS):
-        W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops,
+        W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner,
+                                            stop_is_turning, n_stops,
                                             u0, h_first, TARGET_SHARE * loose, vscale, math.inf,
                                             model, _stage_atol(loose, vscale, phys), W, max_steps,
                                             True)
@@ -208,7 +210,8 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
     estimate = math.inf
     ceilings = np.full(N, math.inf)
     for _ in range(MAX_ROUNDS):
-        W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops,
+        W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner,
+                                            stop_is_turning, n_stops,
                                             u0, h_first, TARGET_SHARE * rtol, scale_u, scale_p,
                                             model, atol, W, max_steps, True)
         sweeps += 1
@@ -279,6 +282,56 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
         model = _model(W, N, ceilings)
         h_first = min(h_first, W[T, 1] - W[T, 0])
     return W, nan, nan, u0, TOLERANCE_NOT_REACHED, N, sweeps, estimate, evals
+
+
+@njit(cache=True)
+def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
+    """The periodic solution of the Radau IIA discretisation on the given ``grid`` (N + 1,
+    nodes from 0 to 1, with the corners of phi among them), without error control: Newton on
+    u(0) by frozen sweeps.  For order tests.  Returns (int_u, int_pi, status)."""
+    N = grid.size - 1
+    W = new_workspace(N)
+    phys_atol = _stage_atol(rtol, vscale, phys)
+    for n in range(N):
+        W[T, n] = grid[n]
+        W[T, n + 1] = grid[n + 1]
+        stage_kinematics_into(code, params, W, n)
+        W[U, n] = u_guess
+        for i in range(3):
+            W[STAGE + i, n] = u_guess
+            W[SENS + i, n] = 0.0
+    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
+    bound = 1e3 * vscale + 10.0 * abs(u_guess)
+    lo, hi = -bound, bound
+    u0 = u_guess
+    status, _ = frozen_sweep(code, params, phys, u0, phys_atol, W, N)
+    for _ in range(MAX_FROZEN_SWEEPS):
+        if status != CONVERGED:
+            return math.nan, math.nan, status
+        g, one_minus_M = _period_map(W, N, u0)
+        if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
+            return math.nan, math.nan, NON_FINITE
+        if abs(g) <= tol_fix * abs(one_minus_M):
+            _shift(W, N, g / one_minus_M)
+            int_u, int_p = _integrals(W, N)
+            return int_u, int_p, CONVERGED
+        u0, lo, hi = _newton_update(u0, g, one_minus_M, lo, hi)
+        status, _ = frozen_sweep(code, params, phys, u0, phys_atol, W, N)
+    return math.nan, math.nan, NOT_PERIODIC
+
+
+@njit(cache=True, parallel=True)
+def fixed_grid_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, rtol, vscale, u_guess):
+    """``fixed_grid_point`` over points (rows of ``grids``): (int_u, int_pi, status)."""
+    n = grids.shape[0]
+    int_u = np.empty(n)
+    int_pi = np.empty(n)
+    status = np.empty(n, dtype=np.int8)
+    for i in prange(n):
+        phys = PointPhysics(kappa[i], mu_n[i], mu_s[i], p[i], dtau[i])
+        int_u[i], int_pi[i], status[i] = fixed_grid_point(code, params[i], grids[i], phys, rtol,
+                                                          vscale[i], u_guess[i])
+    return int_u, int_pi, status
 
 
 @njit(cache=True)

@@ -560,6 +560,11 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
     vscale = kinematic_speed(kinematics)
     u0 = fast_limit_velocity(kinematics, physics) if method == "periodic" else np.zeros(n)
     grids = period_grid(kinematics, n_steps)
+    if method == "radau5":
+        u0 = fast_limit_velocity(kinematics, physics)
+        return _radau5_solve.fixed_grid_points(
+            code, params, grids, physics.inertia_factor, physics.mu_n, physics.mu_s, physics.p,
+            physics.delta_tau, float(rtol), np.maximum(vscale, 1e-300), u0)
     steps = np.full(n, n_steps, dtype=np.int64)
     iu, ip, _, st, *_ = _run_level(method, code, params, grids, steps, physics, u0, vscale, rtol,
                                    np.arange(n))

@@ -78,6 +78,9 @@ MIN_STEP = 2.0 ** -40
 #: per unit length does not fall as steps shrink, so no step size meets it: the steps
 #: approached the corner geometrically down to MIN_STEP and the sweep failed
 ACCEPT_STEP = 2.0 ** -36
+#: next to a turning point of phi a step may change u by friction at most this share of u
+#: (``trap_ceiling``)
+TRAP_SHARE = 0.1
 #: a step is stretched to a stop within this factor of it, and split evenly up to twice it
 STRETCH = 1.25
 #: a state event closer than this share of its step to the step's end is taken to be on it
@@ -296,6 +299,20 @@ def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol, dtau):
 
 
 @njit(cache=True)
+def trap_ceiling(code, params, phys, t_z, side, u):
+    """The longest step next to a turning point t_z of phi: TRAP_SHARE |u| / (kappa |F(u, t_z)|).
+    Where the links stop rotating the whole body slides one way and feels the full friction;
+    a longer step's implicit stage at t_z can stop the body there although the solution
+    passes with u != 0 (the trap of ``_turning``: measured at scaled period 0.023, steps of
+    0.18 next to tau = 0.5 returned U = 1.7e-4 for -3.6e-5, 6 rtol off at rtol 1e-3, the
+    defect estimate blind to it)."""
+    kF = start_values(code, params, t_z, side, u, phys)[0]
+    if kF == 0.0:
+        return math.inf
+    return TRAP_SHARE * abs(u) / abs(kF)
+
+
+@njit(cache=True)
 def _stop_reach(code, params, phys, t, u, f0, band):
     """How far from (t, u) the line of g = u + omega S / 4, with the slipping body's slope
     kappa F + (omega S / 4)', reaches the friction's band (p = 0), or -1 where g does not
@@ -373,14 +390,15 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
 
 
 @njit(cache=True)
-def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_first, target,
-                   scale_u, scale_p, model, atol, W, max_steps, events):
+def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n_stops, u0,
+                   h_first, target, scale_u, scale_p, model, atol, W, max_steps, events):
     """Integrate one period from u(0) = u0 with step-size control; see the module docstring.
 
     Parameters
     ----------
     stops : (n_stops,) sorted step ends in [0, 1), stops[0] = 0; stop_is_corner : whether
-        phi has a corner there (the next step's start values are re-evaluated on its side).
+        phi has a corner there (the next step's start values are re-evaluated on its side);
+        stop_is_turning : whether the links (nearly) stop rotating there (``trap_ceiling``).
     h_first : float
         The first step's size (the controller's proposal carried from an earlier sweep).
     target : float
@@ -437,6 +455,18 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, n_stops, u0, h_fir
                 end_kind = CORNER_STOP
         elif 2.0 * h > room:
             h = 0.5 * room
+        # a step next to a turning point of phi must not let the friction there stop the body
+        turning = -1.0
+        if at_stop and stop_is_turning[next_stop if next_stop < n_stops else 0]:
+            turning = t_stop
+        elif next_stop >= 1 and t == stops[next_stop - 1] and stop_is_turning[next_stop - 1]:
+            turning = t
+        if turning >= 0.0:
+            cap = trap_ceiling(code, params, phys, turning, t + 0.5 * h, u)
+            if h > cap:
+                h = max(cap, MIN_STEP)
+                at_stop = False
+                end_kind = ORDINARY
         if 64.0 * MIN_STEP < stop_reach < h and not event_cut:
             # the slipping body reaches the band within the step: end the step there before
             # solving it (the stage Newton across a stop took up to 356 evaluations of the
@@ -594,7 +624,7 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
 
 
 @njit(cache=True)
-def _stage_kinematics_into(code, params, W, n):
+def stage_kinematics_into(code, params, W, n):
     kin = stage_kinematics(code, params, W[T, n], W[T, n + 1] - W[T, n])
     W[SIN, n], W[SIN + 1, n], W[SIN + 2, n] = kin.S1, kin.S2, kin.S3
     W[COS, n], W[COS + 1, n], W[COS + 2, n] = kin.C1, kin.C2, kin.C3
@@ -630,12 +660,12 @@ def snap_events(code, params, phys, atol, W, N, wanted):
         elif left_free:
             W[T, n] = t0 + theta * h
             W[END_KIND, n - 1] = STATE_EVENT
-            _stage_kinematics_into(code, params, W, n - 1)
+            stage_kinematics_into(code, params, W, n - 1)
         else:
             continue
-        _stage_kinematics_into(code, params, W, n)
+        stage_kinematics_into(code, params, W, n)
         if n + 1 < N:
-            _stage_kinematics_into(code, params, W, n + 1)
+            stage_kinematics_into(code, params, W, n + 1)
         moved += 1
     return moved
 

@@ -254,3 +254,21 @@ def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b, 
                 f_b *= 0.5
             a, f_a, last = c, fc, 1
     return c
+
+
+@njit(cache=True)
+def turning_stops(code, params, stops, n_stops):
+    """Which of the stops are turning points of phi: |omega| on one side of the stop is below
+    TANGENCY_SHARE of max |omega| (its zeros, the near-tangencies, and the power law's
+    corners where a phase starts or ends with omega = 0)."""
+    omax = 0.0
+    for i in range(1025):
+        t = i / 1024.0
+        omax = max(omax, abs(angle_and_rate(code, params, t, t)[1]))
+    out = np.zeros(n_stops, dtype=np.bool_)
+    for j in range(n_stops):
+        t = stops[j]
+        left = angle_and_rate(code, params, t, t - 1e-9 if t > 0.0 else 1.0 - 1e-9)[1]
+        right = angle_and_rate(code, params, t, t + 1e-9)[1]
+        out[j] = min(abs(left), abs(right)) < TANGENCY_SHARE * omax
+    return out

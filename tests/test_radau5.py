@@ -1,0 +1,203 @@
+"""The ``radau5`` engine: order, the defect estimate, events, agreement and honesty.
+
+Every reference here is independent of the engine: a fine grid of its own discretisation
+(order), scipy's Radau at rtol 1e-12 (local errors, events), the march and the ``periodic``
+engine at rtol 1e-9 (agreement, honesty).
+"""
+import math
+
+import numpy as np
+import pytest
+
+import solver
+from cases import AGREEMENT_CASES, radau_reference
+from solver import _radau5, _sweep, _switching
+from solver._kinematics import angle_and_rate
+from solver._radau5 import PointPhysics, StageKinematics
+from test_solver_methods import ORDER_CASES
+
+
+def _point_physics(physics, i=0):
+    return PointPhysics(physics.inertia_factor[i], physics.mu_n[i], physics.mu_s[i],
+                        physics.p[i], physics.delta_tau[i])
+
+
+@pytest.mark.parametrize("case", ORDER_CASES, ids=lambda c: c.name)
+def test_order_of_accuracy_is_five(case):
+    """Slope of log(error) against log(N) on fixed grids (nodes at the power law's corners):
+    about 5, across the corners too."""
+    grids = [8, 16, 32, 64]
+    ref_u, ref_p, st = solver.solve_fixed_grid(case.kinematics, case.physics, 1024,
+                                               method="radau5")
+    assert st[0] == 0
+    errors = []
+    for n in grids:
+        mean_u, mean_pi, st = solver.solve_fixed_grid(case.kinematics, case.physics, n,
+                                                      method="radau5")
+        assert st[0] == 0
+        errors.append(abs(mean_u[0] - ref_u[0]) + abs(mean_pi[0] - ref_p[0]))
+    slope = -np.polyfit(np.log(grids), np.log(errors), 1)[0]
+    assert abs(slope - 5.0) < 0.5, (slope, errors)
+
+
+def _step_against_scipy(kin, physics, t0, u_n, h):
+    """One Radau IIA step and its defect estimate, with the true local errors of u(t0 + h)
+    and int u from scipy's Radau at rtol 1e-12."""
+    code, params = kin.kernel_encoding()
+    params = params[0]
+    phys = _point_physics(physics)
+    f0, J0, P0, Pu0 = _sweep.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)
+    kin3 = _sweep.stage_kinematics(code, params, t0, h)
+    step = _radau5.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
+    err, used = _radau5.defect_error(u_n, f0, J0, P0, Pu0, step, h,
+                                     _sweep.sample_kinematics(code, params, t0, h), phys)
+    int_ref, u_ref = radau_reference(code, params, tuple(phys), t0, t0 + h, u_n)
+    int_u, _ = _radau5.step_integrals(h, step)
+    return step, err, used, u_ref - step.U3, int_ref - int_u
+
+
+@pytest.mark.parametrize("delta", [1e-2, 1e-5])
+def test_defect_estimate_matches_the_local_error(delta):
+    """On a smooth stretch the defect estimate is the local error itself (not a bound of a
+    lower order, as RADAU5's embedded estimate is): within 5 % for u, 25 % for int u, and
+    both fall like h^6."""
+    kin = solver.Harmonic(1.2, 0.3)
+    physics = solver.Physics.from_scaled(2.0 ** -4, 1.5, delta=delta)
+    true_u = []
+    for h in (0.1, 0.05, 0.025):
+        step, err, used, du, dv = _step_against_scipy(kin, physics, 0.2, 0.05, h)
+        assert used
+        assert abs(err.u - du) <= 0.05 * abs(du), (h, err.u, du)
+        assert abs(err.int_u - dv) <= 0.25 * abs(dv), (h, err.int_u, dv)
+        true_u.append(abs(du))
+    slope = np.log2(true_u[0] / true_u[-1]) / 2
+    assert 5.5 < slope < 6.7, slope
+
+
+def test_embedded_estimate_is_the_fallback_and_larger():
+    """RADAU5's embedded estimate (of order 4) is far larger than the true error on smooth
+    steps, so the defect estimate's fallback to it is conservative."""
+    kin = solver.Harmonic(1.2, 0.3)
+    physics = solver.Physics.from_scaled(2.0 ** -4, 1.5, delta=1e-2)
+    code, params = kin.kernel_encoding()
+    phys = _point_physics(physics)
+    h, t0, u_n = 0.05, 0.2, 0.05
+    f0, J0, P0, Pu0 = _sweep.start_values(code, params[0], t0, t0 + 0.5 * h, u_n, phys)
+    step, err, used, du, dv = _step_against_scipy(kin, physics, t0, u_n, h)
+    embedded = _radau5.embedded_error(u_n, f0, J0, P0, Pu0, step, h)
+    assert abs(embedded.u) > 10 * abs(du) and abs(embedded.int_u) > 10 * abs(dv)
+
+
+def test_an_event_in_the_first_sixth_of_a_step_is_found():
+    """A sign change of g = u + omega S / 4 at theta = 0.1 of a step, before its first stage
+    (c1 = 0.155): found, and located on the collocation polynomial to 1e-2 of the step (the
+    step straddles the corner of F there); the step cut at it (as the sweep does) puts it
+    within 1e-6 of the cut step's end, against the crossing of scipy's solution."""
+    # bench point 532 (mu_n/mu_s 39.1, scaled period 0.871), whose periodic solution crosses
+    # g = 0 near tau = 0.0192 (u(0.018645) = 0.031723)
+    kin = solver.Harmonic(0.518361861120928, 0.23260527836688316)
+    physics = solver.Physics.from_scaled(39.127283882563475, 0.8712422747353079)
+    code, params = kin.kernel_encoding()
+    params = params[0]
+    phys = _point_physics(physics)
+    from scipy.integrate import solve_ivp
+    from solver._force import force_and_slope
+
+    def rhs(t, y):
+        phi, om = angle_and_rate(code, params, t, t)
+        return [phys.kappa * force_and_slope(y[0], phi, om, *tuple(phys)[1:])[0]]
+
+    def g(t, y):
+        phi, om = angle_and_rate(code, params, t, t)
+        return _switching.state_function(_switching.TANGENTIAL, y[0], math.sin(phi), om)
+
+    sol = solve_ivp(rhs, (0.018645, 0.03), [0.031723], method="Radau", rtol=1e-12,
+                    atol=1e-15, events=g, dense_output=True)
+    assert sol.t_events[0].size, "the test trajectory must cross g = 0"
+    t_c = sol.t_events[0][0]
+    h = 0.02
+    t0 = t_c - 0.1 * h
+    u_n = sol.sol(t0)[0]
+    kin3 = _sweep.stage_kinematics(code, params, t0, h)
+    step = _radau5.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
+    phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
+    f0 = _sweep.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)[0]
+    theta = _sweep.find_event(code, params, phys, t0, h, u_n, step, kin3, math.sin(phi0), om0,
+                              f0, 1e-14, True)
+    assert abs(theta - 0.1) < 1e-2, theta
+    h = theta * h
+    kin3 = _sweep.stage_kinematics(code, params, t0, h)
+    step = _radau5.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
+    cut = _sweep.find_event(code, params, phys, t0, h, u_n, step, kin3, math.sin(phi0), om0,
+                            f0, 1e-14, False)
+    true = (t_c - t0) / h
+    assert abs(true - 1.0) < 0.05  # the cut step ends near the true crossing ...
+    if cut > 0:                    # ... and any crossing left in it is located to 1e-6
+        assert abs(cut - true) < 1e-6, (cut, true)
+    else:
+        assert true >= 1.0 - 1e-6, true
+
+
+def test_kinematic_stops_are_the_zeros_of_the_kinematic_functions():
+    """Brute force on a clapping Fourier motion: every sign change of sin phi, cos phi and
+    omega on a fine sampling has a stop within the sampling's width."""
+    kin = solver.Fourier([[0.3, 1.1, 0.0, 0.2]], [[0.0, -0.1, 0.05]])
+    code, params = kin.kernel_encoding()
+    out = np.empty(_switching.MAX_STOPS)
+    count = _switching.kinematic_stops(code, params[0], kin.corners()[0], out)
+    stops = out[:count]
+    tau = np.linspace(0.0, 1.0, 200001)
+    phi = kin.angle(tau)[0]
+    omega = kin.angle_rate(tau)[0]
+    for values in (np.sin(phi), np.cos(phi), omega):
+        changes = np.flatnonzero(np.sign(values[1:]) * np.sign(values[:-1]) < 0)
+        for j in changes:
+            assert np.min(np.abs(stops - tau[j])) <= 2e-5, tau[j]
+    assert np.all(np.diff(stops) > 0) and stops[0] == 0.0
+
+
+@pytest.mark.parametrize("case", AGREEMENT_CASES, ids=lambda c: c.name)
+def test_agrees_with_the_march_and_is_honest(case):
+    """radau5 at rtol 1e-5 against the periodic engine at rtol 1e-9 (two discretisations):
+    its error is within its estimate (and the estimate within rtol); and within 2 rtol of
+    the march where the march converges (the independent method of the paper)."""
+    rtol = 1e-5
+    res = solver.solve_periodic(case.kinematics, case.physics, method="radau5", rtol=rtol)
+    ref = solver.solve_periodic(case.kinematics, case.physics, rtol=1e-9)
+    assert res.converged[0], solver.STATUS_REASONS[int(res.status[0])]
+    T = case.physics.period[0]
+    V = solver.kinematic_speed(case.kinematics)[0]
+    scale_u = max(abs(ref.U[0]) * T, 1e-3 * V)
+    error = max(abs(res.U[0] - ref.U[0]) * T / scale_u, abs(res.P[0] - ref.P[0]) / ref.P[0])
+    assert res.error_estimate[0] <= rtol
+    assert error <= res.error_estimate[0] + 2e-9, (error, res.error_estimate[0])
+    march = solver.solve_periodic(case.kinematics, case.physics, method="march", rtol=rtol)
+    if march.converged[0]:
+        assert abs(march.U[0] - res.U[0]) * T <= 2 * rtol * scale_u
+        assert abs(march.P[0] - res.P[0]) <= 2 * rtol * ref.P[0]
+
+
+def test_agrees_with_lsoda():
+    """The bench's scipy baseline (LSODA marching period by period, tol 1e-10) on a
+    burst-and-coast power law and a clapping Fourier motion."""
+    from solver.bench import baseline_point, family_angle
+    cases = [c for c in AGREEMENT_CASES if c.name in ("linear_two_phase", "clapping_fourier")]
+    for case in cases:
+        res = solver.solve_periodic(case.kinematics, case.physics, method="radau5", rtol=1e-8)
+        ph = case.physics
+        V = solver.kinematic_speed(case.kinematics)[0]
+        U, P, _, _ = baseline_point(family_angle(case.kinematics), ph.mu_n[0], ph.mu_s[0],
+                                    ph.p[0], ph.period[0], ph.delta_tau[0], V, 1e-10, 600.0)
+        scale_u = max(abs(U) * ph.period[0], 1e-3 * V)
+        assert abs(res.U[0] - U) * ph.period[0] <= 1e-6 * scale_u, (case.name, res.U[0], U)
+        assert abs(res.P[0] - P) <= 1e-6 * P, (case.name, res.P[0], P)
+
+
+def test_failure_is_nan_with_a_status():
+    """A step budget too small for the motion: NaN and STEP_BUDGET_EXCEEDED, never a number."""
+    kin = solver.Harmonic(1.0, 0.5)
+    res = solver.solve_periodic(kin, solver.Physics.from_scaled(2.0 ** -4, -0.0 + 1.5),
+                                method="radau5", rtol=1e-7, max_steps_per_period=8)
+    assert not res.converged[0]
+    assert res.status[0] == 5
+    assert math.isnan(res.U[0]) and math.isnan(res.P[0])
