@@ -632,45 +632,6 @@ def stage_kinematics_into(code, params, W, n):
 
 
 @njit(cache=True)
-def snap_events(code, params, phys, atol, W, N, wanted):
-    """Move nodes onto the state events that lie inside the recorded steps of ``W`` (the
-    events an adaptive sweep put on nodes move when the shooting then moves u(0)): the event
-    in step n is located on its collocation polynomial (``_switching.locate_state_event``)
-    and the nearer of the step's two nodes moves onto it, unless that node is a kinematic
-    stop (or tau = 0, 1), in which case the other one does, unless it is one too.  The
-    moved steps' stage kinematics are recomputed; their stages are left for the next
-    ``frozen_sweep`` to correct.  Only the steps ``wanted`` (N,) are looked at.  Returns how
-    many nodes moved."""
-    moved = 0
-    for n in range(N):
-        if not wanted[n]:
-            continue
-        t0 = W[T, n]
-        h = W[T, n + 1] - t0
-        theta = _interior_event(code, params, phys, atol, W, N, n)
-        if theta <= EVENT_END_SHARE or theta >= 1.0 - EVENT_END_SHARE:
-            continue
-        right_free = n + 1 < N and W[END_KIND, n] != KINEMATIC_STOP \
-            and W[END_KIND, n] != CORNER_STOP
-        left_free = n > 0 and W[END_KIND, n - 1] != KINEMATIC_STOP \
-            and W[END_KIND, n - 1] != CORNER_STOP
-        if right_free and (theta >= 0.5 or not left_free):
-            W[T, n + 1] = t0 + theta * h
-            W[END_KIND, n] = STATE_EVENT
-        elif left_free:
-            W[T, n] = t0 + theta * h
-            W[END_KIND, n - 1] = STATE_EVENT
-            stage_kinematics_into(code, params, W, n - 1)
-        else:
-            continue
-        stage_kinematics_into(code, params, W, n)
-        if n + 1 < N:
-            stage_kinematics_into(code, params, W, n + 1)
-        moved += 1
-    return moved
-
-
-@njit(cache=True)
 def _interior_event(code, params, phys, atol, W, N, n):
     """theta of the first event (``find_event``) strictly inside recorded step n, or -1."""
     t0 = W[T, n]
