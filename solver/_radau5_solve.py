@@ -186,7 +186,7 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
                                             stop_is_turning, n_stops,
                                             u0, h_first, TARGET_SHARE * loose, vscale, math.inf,
                                             model, _stage_atol(loose, vscale, phys), W, max_steps,
-                                            True)
+                                            True, False)
         sweeps += 1
         evals[COST_LOOSE] += e
         if status != CONVERGED:

@@ -34,7 +34,7 @@ from numba import njit
 from ._force import force_slope_power_sc
 from ._kinematics import angle_and_rate
 from ._radau5 import (C1, C2, StepError, THETA_LATE, THETA_MID, SampleKinematics, StageKinematics,
-                      StepSolution, defect_error, dense_value, estimate_floor, radau5_step, step_integrals,
+                      StepSolution, defect_error, dense_value, embedded_error, estimate_floor, radau5_step, step_integrals,
                       step_weights)
 from ._status import CONVERGED, NON_FINITE, STAGE_SOLVE_FAILED, STEP_BUDGET_EXCEEDED, \
     TOLERANCE_NOT_REACHED
@@ -391,7 +391,8 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
 
 @njit(cache=True)
 def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n_stops, u0,
-                   h_first, target, scale_u, scale_p, model, atol, W, max_steps, events):
+                   h_first, target, scale_u, scale_p, model, atol, W, max_steps, events,
+                   sharp=True):
     """Integrate one period from u(0) = u0 with step-size control; see the module docstring.
 
     Parameters
@@ -464,7 +465,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
         if turning >= 0.0:
             cap = trap_ceiling(code, params, phys, turning, t + 0.5 * h, u)
             if h > cap:
-                h = max(cap, MIN_STEP)
+                h = max(cap, ACCEPT_STEP)
                 at_stop = False
                 end_kind = ORDINARY
         if 64.0 * MIN_STEP < stop_reach < h and not event_cut:
@@ -508,9 +509,12 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
                     continue
                 if not at_start and not at_stop:
                     end_kind = STATE_EVENT
-        err, _ = defect_error(u, f0, J0, P0, Pu0, sol, h,
-                              sample_kinematics(code, params, t, h), phys)
-        evaluations += 2
+        if sharp:
+            err, _ = defect_error(u, f0, J0, P0, Pu0, sol, h,
+                                  sample_kinematics(code, params, t, h), phys)
+            evaluations += 2
+        else:
+            err = embedded_error(u, f0, J0, P0, Pu0, sol, h)
         lam_end, mu_end, _, k_model = _model_at(model, t + h, k_model)
         ratio = weighted_error(err, lam_end, mu_end, scale_u, scale_p,
                                estimate_floor(u, sol, atol), h) / (target * h)
