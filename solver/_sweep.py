@@ -538,7 +538,8 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
         _record(W, n, t, h, u, sol, err, kin, end_kind)
         cuts = 0
         stretch = True
-        h_next = h * predict_factor(h, h_old, ratio, ratio_old)
+        # (never below ACCEPT_STEP: a step accepted there whatever its error would shrink on)
+        h_next = max(h * predict_factor(h, h_old, ratio, ratio_old), ACCEPT_STEP)
         h_old = h
         ratio_old = ratio
         t_new = t + h
