@@ -18,8 +18,9 @@ lambda_{n+1} e, to first order.
 
 Estimators here:
 
-- ``local_error_estimate``: each step's embedded error (``_radau5.embedded_error``) weighted
-  by the node weights, plus its own quadrature errors.
+- ``local_error_estimate``: each step's local error from its defect (``_radau5.defect_error``,
+  or the split re-solve of ``_sweep.event_split_errors``) weighted by the node weights, plus
+  its own quadrature errors.
 """
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ import numpy as np
 from numba import njit
 
 from ._radau5 import ERROR_ORDER
-from ._sweep import ERR, FLOOR, LAMBDA, M_MINUS_1, MU, Q_P, Q_U, T
+from ._radau5 import StepError
+from ._sweep import ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q_P, Q_U, T, floored_errors
 
 
 @njit(cache=True)
@@ -54,19 +56,16 @@ def local_error_estimate(W, N, shares, scale_u, scale_p):
     """The steps' local errors (``_sweep.estimate_sweep``) carried to the period integrals:
     returns (error of int u, error of int Pi) and adds each step's weighted error (in the
     norm: the larger of U's and P's relative shares) to ``shares``.  Each step's errors are
-    counted above its estimate's floor (``_sweep.weighted_error``): the stage values' own
-    error is bounded by the stage tolerance, set so that it stays a small share of rtol."""
+    counted above their rounding floor (``_sweep.floored_errors``, rows FLOOR)."""
     e_u = 0.0
     e_p = 0.0
     for n in range(N):
         h = W[T, n + 1] - W[T, n]
-        floor = W[FLOOR, n]
         lam = abs(W[LAMBDA, n + 1])
         mu = abs(W[MU, n + 1])
-        eu = max(abs(W[ERR, n]) - floor, 0.0)
-        ev = max(abs(W[ERR + 1, n]) - h * floor, 0.0)
-        ew = max(abs(W[ERR + 2, n]) - h * floor * abs(W[ERR + 2, n])
-                 / max(abs(W[ERR + 1, n]), 1e-300), 0.0)
+        pi_u = max(abs(W[PU_STAGE, n]), abs(W[PU_STAGE + 1, n]), abs(W[PU_STAGE + 2, n]))
+        eu, ev, ew = floored_errors(StepError(W[ERR, n], W[ERR + 1, n], W[ERR + 2, n]),
+                                    W[FLOOR, n], h, pi_u)
         du = lam * eu + ev
         dp = mu * eu + ew
         e_u += du

@@ -492,9 +492,12 @@ def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
 
     Where the line of delta / w through the start and THETA_MID misses the late sample by
     more than DEFECT_FIT of it (p is not in its asymptotic regime: a feature the samples
-    resolve differently), the embedded estimate is returned instead (``embedded_error``,
-    O(h^4), conservative).  Returns (StepError, whether the defect estimate was used).
+    resolve differently), each error is the larger of this one and the embedded estimate's
+    (``embedded_error``, O(h^4)); the sweep then halves the step rather than accept it.
+    Returns (StepError, whether the defect estimate's model fits).
     """
+    if not h > 0.0:
+        return StepError(0.0, 0.0, 0.0), True
     kappa, mu_n, mu_s, p, dtau = phys
     U1, U2, U3 = step.U1, step.U2, step.U3
     d_0 = dense_slope(0.0, u_n, U1, U2, U3) / h - f0
@@ -513,8 +516,7 @@ def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
     curve = ((phil - phim) / (THETA_LATE - THETA_MID) - slope1) / THETA_LATE
     linear_late = phi0 + slope1 * THETA_LATE
     misfit = abs(phil - linear_late)
-    if not misfit <= DEFECT_FIT * max(abs(phil), abs(linear_late)):
-        return embedded_error(u_n, f0, J0, Pi0, Pi_u0, step, h), False
+    fits = misfit <= DEFECT_FIT * max(abs(phil), abs(linear_late))
     # phi(s) = a + b s + c s^2 and q(1 - x) = w(1 - x) phi(1 - x) = sum_k q_k x^k
     a = phi0
     b = slope1 - curve * THETA_MID
@@ -546,4 +548,11 @@ def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
     quadrature = h * (W6_0 * Pi0 + W6_1 * step.P1 + W6_MID * P_m + W6_2 * step.P2
                       + W6_LATE * P_l + W6_3 * step.P3
                       - (A31 * step.P1 + A32 * step.P2 + A33 * step.P3))
-    return StepError(err_u, err_v, pi_u * abs(err_v) + abs(quadrature)), True
+    err_w = pi_u * abs(err_v) + abs(quadrature)
+    if fits:
+        return StepError(err_u, err_v, err_w), True
+    # neither estimate alone is safe off the asymptotic regime (the embedded one missed a
+    # true error 8x its size next to a turning point at scaled period 0.01): the larger
+    embedded = embedded_error(u_n, f0, J0, Pi0, Pi_u0, step, h)
+    return StepError(max(abs(err_u), abs(embedded.u)), max(abs(err_v), abs(embedded.int_u)),
+                     max(err_w, abs(embedded.int_pi))), False

@@ -37,7 +37,7 @@ from ._global_error import combine, local_error_estimate, node_weights, refineme
 from ._periodic import monodromy_factor, one_minus_monodromy, stage_tolerance
 from ._radau5 import ERROR_ORDER, PointPhysics
 from ._status import CONVERGED, NON_FINITE, NOT_PERIODIC, TOLERANCE_NOT_REACHED
-from ._sweep import (CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
+from ._sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
                      SENS, STAGE, T, U, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
                      event_split_errors, new_workspace, stage_kinematics_into)
 from ._switching import MAX_STOPS, kinematic_stops, turning_stops
@@ -76,6 +76,18 @@ def _stage_atol(rtol, scale, phys):
     if phys.p == 0.0:
         atol = min(atol, BAND_SHARE * phys.dtau)
     return atol
+
+
+@njit(cache=True)
+def _largest_weight(model, scale_u, scale_p):
+    """max(1, |lambda|, |mu| scale_u / scale_p) over the model's nodes: a stage error e moves
+    U by lambda e (relative to scale_u) and P by mu e (relative to scale_p), so the stage
+    tolerance is divided by it (at short periods lambda reaches 4e3, and stages solved to the
+    plain tolerance left errors of 5 rtol)."""
+    largest = 1.0
+    for n in range(model.N + 1):
+        largest = max(largest, abs(model.lam[n]), abs(model.mu[n]) * scale_u / scale_p)
+    return largest
 
 
 @njit(cache=True)
@@ -207,8 +219,8 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
         if moved <= loose * vscale:
             break
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
-    atol = _stage_atol(rtol, scale_u, phys)
-    h_first = (W[T, 1] - W[T, 0]) * (rtol / loose) ** (1.0 / ERROR_ORDER)
+    atol = _stage_atol(rtol, scale_u, phys) / _largest_weight(model, scale_u, scale_p)
+    h_first = max((W[T, 1] - W[T, 0]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
     estimate = math.inf
     ceilings = np.full(N, math.inf)
     for _ in range(MAX_ROUNDS):
@@ -348,7 +360,8 @@ def solve_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale
     int_u = np.full(n, np.nan)
     int_pi = np.full(n, np.nan)
     u0 = np.full(n, np.nan)
-    status = np.zeros(n, dtype=np.int8)
+    # (a point no thread reached reports a failure, not status 0 with NaN)
+    status = np.full(n, NON_FINITE, dtype=np.int8)
     n_steps = np.zeros(n, dtype=np.int64)
     sweeps = np.zeros(n, dtype=np.int64)
     estimate = np.full(n, np.inf)

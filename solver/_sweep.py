@@ -81,6 +81,10 @@ ACCEPT_STEP = 2.0 ** -36
 #: next to a turning point of phi a step may change u by friction at most this share of u
 #: (``trap_ceiling``)
 TRAP_SHARE = 0.1
+#: a step whose defect model does not fit (``_radau5.defect_error``) is judged by this many
+#: times its error estimate (measured: the fallback estimates were up to 12x too small next
+#: to turning points at scaled period 0.01)
+FIT_DISTRUST = 16.0
 #: a step is stretched to a stop within this factor of it, and split evenly up to twice it
 STRETCH = 1.25
 #: a state event closer than this share of its step to the step's end is taken to be on it
@@ -178,17 +182,38 @@ def solve_step(u_n, U1, U2, U3, h, kin, phys, atol):
 
 
 @njit(cache=True)
-def weighted_error(err, lam, mu, scale_u, scale_p, floor=0.0, h=0.0):
+def weighted_error(err, lam, mu, scale_u, scale_p, floor=0.0, h=0.0, pi_u=0.0):
     """A step's error in the norm of U and P: its local error in u carried to the period
     integrals by the node weights lam, mu, plus its own quadrature errors (absolute values:
     no cancellation is counted on).  ``floor`` (``_radau5.estimate_floor``) is taken off u's
-    error and h floor off the quadratures': the step-size control must not chase the stage
-    values' own error, which no smaller step reduces."""
-    e_u = max(abs(err.u) - floor, 0.0)
-    e_v = max(abs(err.int_u) - h * floor, 0.0)
-    e_w = max(abs(err.int_pi) - h * floor * abs(err.int_pi) / max(abs(err.int_u), 1e-300),
-              0.0)
+    error, h floor off int u's and h floor ``pi_u`` (max |dPi/du|) off int Pi's: the stage
+    values' own error, which no smaller step reduces.  This is the one rule of a step's
+    error, for the step-size control (floor: the stage tolerance's) and the global estimate
+    (floor: rounding only, ``_global_error.local_error_estimate``)."""
+    e_u, e_v, e_w = floored_errors(err, floor, h, pi_u)
     return max((abs(lam) * e_u + e_v) / scale_u, (abs(mu) * e_u + e_w) / scale_p)
+
+
+@njit(cache=True)
+def floored_errors(err, floor, h, pi_u):
+    """(|err u|, |err int u|, |err int Pi|) above their floors (``weighted_error``)."""
+    return (max(abs(err.u) - floor, 0.0), max(abs(err.int_u) - h * floor, 0.0),
+            max(abs(err.int_pi) - h * floor * pi_u, 0.0))
+
+
+@njit(cache=True)
+def _ceiling_over(model, t, h, k):
+    """The smallest ceiling of the model steps that [t, t + h] overlaps (k: the one holding
+    t): a step may not cross a flagged step whole (one across a flagged step of 1e-3 with a
+    ceiling of 1e-5 was taken in one piece)."""
+    if model.N == 0:
+        return math.inf
+    ceiling = model.max_step[k]
+    j = k + 1
+    while j < model.N and model.t[j] < t + min(h, ceiling):
+        ceiling = min(ceiling, model.max_step[j])
+        j += 1
+    return ceiling
 
 
 @njit(cache=True)
@@ -275,20 +300,27 @@ def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol, dtau):
     noise = EVENT_NOISE * atol
     sharp = CROSSING_BAND * dtau
     for k in range(N_STATE_FUNCTIONS):
-        f_prev = state_function(k, u_n, S0, om0)
+        f0 = state_function(k, u_n, S0, om0)
+        f1 = state_function(k, sol.U1, kin.S1, kin.om1)
+        f2 = state_function(k, sol.U2, kin.S2, kin.om2)
+        f3 = state_function(k, sol.U3, kin.S3, kin.om3)
+        # the span over the step's samples, not of the pair around the sign change: a slow
+        # crossing of -3.5 to +4.1 delta_tau in steps of 2 delta_tau was missed (2.5 rtol)
+        if max(f0, f1, f2, f3) - min(f0, f1, f2, f3) <= sharp:
+            continue
+        f_prev = f0
         th_prev = 0.0
         signed = abs(f_prev) > max(noise, SIGN_ROUNDING * (abs(u_n) + abs(om0)))
         for i in range(3):
             if i == 0:
-                th, u, S, om = C1, sol.U1, kin.S1, kin.om1
+                th, u, om, f = C1, sol.U1, kin.om1, f1
             elif i == 1:
-                th, u, S, om = C2, sol.U2, kin.S2, kin.om2
+                th, u, om, f = C2, sol.U2, kin.om2, f2
             else:
-                th, u, S, om = 1.0, sol.U3, kin.S3, kin.om3
-            f = state_function(k, u, S, om)
+                th, u, om, f = 1.0, sol.U3, kin.om3, f3
             if abs(f) <= max(noise, SIGN_ROUNDING * (abs(u) + abs(om))):
                 continue
-            if signed and f_prev * f < 0.0 and abs(f_prev - f) > sharp:
+            if signed and f_prev * f < 0.0:
                 if th_prev < best_a:
                     best_k, best_a, best_b, best_fa, best_fb = k, th_prev, th, f_prev, f
                 break
@@ -309,6 +341,9 @@ def trap_ceiling(code, params, phys, t_z, side, u):
     kF = start_values(code, params, t_z, side, u, phys)[0]
     if kF == 0.0:
         return math.inf
+    # (|u| itself, not the friction's band when smaller: at scaled period 0.0085 a body at
+    # |u| ~ 1e-6 ~ the band was trapped, 3.3 rtol off; a body at rest, u ~ 1e-18, gets
+    # steps of ACCEPT_STEP from the sweep)
     return TRAP_SHARE * abs(u) / abs(kF)
 
 
@@ -442,7 +477,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
             return W, n, STEP_BUDGET_EXCEEDED, h, evaluations
         t_stop = stops[next_stop] if next_stop < n_stops else 1.0
         lam, mu, ceiling, k_model = _model_at(model, t, k_model)
-        h = min(h, ceiling)
+        h = min(h, _ceiling_over(model, t, h, k_model))
         room = t_stop - t
         end_kind = ORDINARY
         at_stop = False
@@ -510,14 +545,18 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
                 if not at_start and not at_stop:
                     end_kind = STATE_EVENT
         if sharp:
-            err, _ = defect_error(u, f0, J0, P0, Pu0, sol, h,
-                                  sample_kinematics(code, params, t, h), phys)
+            err, fits = defect_error(u, f0, J0, P0, Pu0, sol, h,
+                                     sample_kinematics(code, params, t, h), phys)
             evaluations += 2
         else:
             err = embedded_error(u, f0, J0, P0, Pu0, sol, h)
+            fits = True
         lam_end, mu_end, _, k_model = _model_at(model, t + h, k_model)
         ratio = weighted_error(err, lam_end, mu_end, scale_u, scale_p,
-                               estimate_floor(u, sol, atol), h) / (target * h)
+                               estimate_floor(u, sol, atol), h,
+                               max(abs(sol.Pu1), abs(sol.Pu2), abs(sol.Pu3))) / (target * h)
+        if not fits:  # the defect's model does not fit: its error is not trusted as it is
+            ratio *= FIT_DISTRUST
         if DEBUG:
             print("step", t, h, ratio, sol.iterations, end_kind, u, sol.U1, sol.U2, sol.U3,
                   err.u, err.int_u, err.int_pi, lam_end, mu_end, f0)
@@ -599,7 +638,9 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
     """The defect estimate (``_radau5.defect_error``) of every recorded step of ``W``, in
     place (rows ERR), from its stored stages: two evaluations of F per step, and the start
     values where phi has a corner (``corner_nodes``, (N,)) or at tau = 0; and the estimate's
-    floor (rows FLOOR) for the stage tolerance ``atol``.  Returns how many steps fell back to
+    floor (rows FLOOR) for rounding alone (the stage tolerance ``atol`` is set so that the
+    stages' Newton error stays a small share of rtol; subtracting a floor of the tolerance
+    here hid true errors of 5 rtol where the node weights reach 4e3).  Returns how many steps fell back to
     the embedded estimate."""
     kappa = phys.kappa
     fallbacks = 0
@@ -623,7 +664,7 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
         W[ERR, n] = err.u
         W[ERR + 1, n] = err.int_u
         W[ERR + 2, n] = err.int_pi
-        W[FLOOR, n] = estimate_floor(u, step, atol)
+        W[FLOOR, n] = estimate_floor(u, step, 0.0)
         f0, J0, P0, Pu0 = kappa * step.F3, kappa * step.d3, step.P3, step.Pu3
     return fallbacks, evaluations
 
@@ -641,7 +682,7 @@ def _interior_event(code, params, phys, atol, W, N, n):
     """theta of the first event (``find_event``) strictly inside recorded step n, or -1."""
     t0 = W[T, n]
     h = W[T, n + 1] - t0
-    if n == 0:
+    if n == 0 or W[END_KIND, n - 1] == CORNER_STOP:  # (the step's side of a corner)
         phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
         S0 = math.sin(phi0)
     else:
