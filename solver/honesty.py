@@ -10,6 +10,18 @@ parameter points with each engine at each rtol, on the same points in one run, a
 the true error against references.  Everything is batched: one ``solve_periodic`` call per
 (set, method, rtol).
 
+Sets
+----
+``SETS``: the stress sweeps earlier sessions ran by hand, rebuilt as seeded generators (the
+points those sessions named are not reproduced by index); each ``PointSet`` carries its
+generator's parameters, printed above its table.  400 points each, seeded:
+``harmonic_extreme`` (mu_n/mu_s 2^+-12, scaled period 2^-4 .. 2^6, delta to 1e-10),
+``stress_powerlaw_21`` / ``_22`` / ``_23`` (power laws, exponents 1 .. 12, same ranges),
+``long_period_powerlaw`` (scaled period 2^4 .. 2^8, delta 10^U(-10, -5)),
+``fourier_clapping`` (K = 4; phi leaves (0, pi) on 60 % of the points), ``p0.5_harmonic``
+and ``p1.5_fourier`` (half of them at delta = 0), ``short_period_harmonic`` (scaled period
+2^-7 .. 2^-1); and ``bench``, the 2,000 points of ``python -m solver.bench``.
+
 Error norm
 ----------
 The solver's own (``solver.bench.solution_error``): e = max(e_U, e_P) with
@@ -22,16 +34,17 @@ References
 Every point is solved by a reference engine (default ``periodic`` at rtol 1e-9) and
 cross-checked by a second, independent method (default ``radau5`` at 1e-9 where
 ``solver.METHODS`` has it, else the explicit ``march`` at 1e-7; ``--check-method none``
-skips it).  The march reaches 1e-7 on about two thirds of the points of these sets and 1e-8
-on about a quarter (measured on 20 points of each set: 102 vs 41 of 160, none of the long
-periods), agreeing with the reference to 0.4 and 0.3 of its rtol at worst; where the stiff
-friction makes it unstable it says so (status UNSTABLE), and the point keeps one reference.
-The disagreement d of the two, in the norm above, decides at each judged rtol r:
+skips it).  Where the stiff friction makes the march unstable it says so (status UNSTABLE),
+and the point keeps one reference: on the first 24 points of each set it converged at 1e-7
+on 112 of 240 and at 1e-8 on 54 (none of the long periods, 3-8 of 24 of the stress power
+laws), disagreeing with the reference by at most 6.3e-8 and 5.6e-9 (medians 1.3e-8 and
+1.1e-9); 1e-7 is the default for twice the points confirmed, at the same cost.  The
+disagreement d of the two, in the norm above, decides at each judged rtol r:
 
 - reference failed: the reference engine's status != 0 or its U or P non-finite;
 - reference uncertain at r: both converged and d > ``agreement`` r (default 0.1 r: 1e-8 at
-  rtol 1e-7; a check at 1e-7 confirms a reference only to ~1e-8 .. 4e-8, so at rtol 1e-7
-  part of the points are uncertain with the march as the check);
+  rtol 1e-7, so with the march at 1e-7 as the check about half of the cross-checked points
+  are uncertain at rtol 1e-7, and none at 1e-3 .. 1e-6);
 - single reference: the check failed (or was skipped); judged on the reference alone;
 - otherwise judged.
 
@@ -84,8 +97,9 @@ from solver.bench import (DEFAULT_POINTS as BENCH_POINTS, DEFAULT_SEED as BENCH_
 RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 REFERENCE_METHOD = "periodic"
 REFERENCE_RTOL = 1e-9
-#: the cross-check when there is no second implicit engine: the explicit march reaches
-#: 1e-7 on 102 of 160 probe points (1e-8 on 41), at about 2 s per point (8x the reference)
+#: the cross-check when there is no second implicit engine: the explicit march converges at
+#: 1e-7 on 112 of 240 probe points (24 per set), at 1e-8 on 54 (module docstring); on the
+#: full sets it cost 4-26x the reference (2 cores, shared machine)
 MARCH_CHECK_RTOL = 1e-7
 #: references must agree within this share of the judged rtol
 AGREEMENT = 0.1
@@ -423,11 +437,13 @@ def set_references(point_set, kinematics, physics, settings):
     vscale = solver.kinematic_speed(kinematics)
     references = References.from_solves(ref, check, physics, vscale, settings.agreement)
     d = references.disagreement[references.kind == JUDGED]
+    failed = np.flatnonzero(references.kind == FAILED)
     info = dict(
         reference=f"{settings.reference_method} rtol {settings.reference_rtol:.0e}",
         reference_seconds=ref.seconds, reference_cached=ref_cached,
         reference_failed=int(np.count_nonzero(references.kind == FAILED)),
         reference_failure_codes=status_counts(ref),
+        reference_failed_points=[dict(index=int(i), status=int(ref.status[i])) for i in failed],
         check=(f"{settings.check_method} rtol {settings.check_rtol:.0e}"
                if check is not None else None),
         check_seconds=check.seconds if check is not None else 0.0, check_cached=check_cached,
@@ -439,13 +455,20 @@ def set_references(point_set, kinematics, physics, settings):
     return references, info
 
 
-def _outliers(outcome, result, rtol):
-    """Points outside rtol, silent or failed: (index, e / rtol, estimate / rtol, status)."""
+REFERENCE_KINDS = {JUDGED: "cross-checked", SINGLE: "single reference",
+                   FAILED: "reference failed"}
+
+
+def _outliers(outcome, result, references, rtol):
+    """Points outside rtol, silent or failed: index, e / rtol, estimate / rtol, status, and
+    their reference's kind and disagreement."""
     flagged = np.flatnonzero(outcome["outside"] | outcome["silent"]
                              | (np.asarray(result.status) != 0))
     return [dict(index=int(i), error_over_rtol=float(outcome["error"][i]),
                  estimate_over_rtol=float(result.error_estimate[i] / rtol),
-                 status=int(result.status[i])) for i in flagged]
+                 status=int(result.status[i]),
+                 reference=REFERENCE_KINDS[int(references.kind[i])],
+                 disagreement=float(references.disagreement[i])) for i in flagged]
 
 
 def _share(count, total):
@@ -473,6 +496,9 @@ def run_set(point_set, settings):
           f"{' (cached)' if info['reference_cached'] else ''}, failed on "
           f"{info['reference_failed']} {info['reference_failure_codes']} (not judged)",
           flush=True)
+    for point in info["reference_failed_points"]:
+        print(f"     point {point['index']}, status {point['status']}: "
+              + describe_point(kinematics, physics, point["index"]), flush=True)
     if info["check"] is not None:
         print(f"   check {info['check']}: {info['check_seconds']:.1f} s"
               f"{' (cached)' if info['check_cached'] else ''}, converged on "
@@ -488,7 +514,7 @@ def run_set(point_set, settings):
         for method in settings.methods:
             result = Solves.run(kinematics, physics, method, rtol)
             outcome = judge(result, references, physics, rtol)
-            outliers = _outliers(outcome, result, rtol)
+            outliers = _outliers(outcome, result, references, rtol)
             row = {k: v for k, v in outcome.items() if not isinstance(v, np.ndarray)}
             row.update(within_rtol=_share(outcome["within_rtol"], outcome["solves"]),
                        within_10_rtol=_share(outcome["within_10_rtol"], outcome["solves"]),
@@ -505,7 +531,8 @@ def run_set(point_set, settings):
             for o in outliers[:MAX_PRINTED_OUTLIERS]:
                 lines.append(f"   {method} rtol {rtol:.0e} point {o['index']}: error "
                              f"{o['error_over_rtol']:.3g} rtol, estimate "
-                             f"{o['estimate_over_rtol']:.3g} rtol, status {o['status']}: "
+                             f"{o['estimate_over_rtol']:.3g} rtol, status {o['status']} "
+                             f"({o['reference']}, d {o['disagreement']:.1e}): "
                              + describe_point(kinematics, physics, o["index"]))
             if len(outliers) > MAX_PRINTED_OUTLIERS:
                 lines.append(f"   {method} rtol {rtol:.0e}: ... and "
