@@ -1,8 +1,8 @@
-"""Throughput benchmark of the ``periodic`` solver against a scipy baseline.
+"""Throughput benchmark of the periodic engines against a scipy baseline.
 
 Run as ``python -m solver.bench [--points 2000] [--baseline-points 20] [--seed 0]
-[--baseline-cap 20] [--repeats 3]``.  Everything is measured in one run, on one machine, so
-the ratios printed are like for like.
+[--baseline-cap 20] [--repeats 3] [--methods M ...]``.  Everything is measured in one run, on
+one machine, so the ratios printed are like for like.
 
 What is measured
 ----------------
@@ -10,13 +10,17 @@ What is measured
    drawn with ``--seed``: anisotropy ratio mu_n / mu_s = 2^U(-8, 8), scaled
    period 2^U(-3, 3), A0 ~ U(0, pi/2], A1 / A0 ~ U(0, 1], p = 0,
    delta = 1e-5 (``Physics.from_scaled``, so sqrt(mu_n mu_s) = 1).
-2. Solver throughput.  After a JIT warm-up on 4 points (not timed), ``--repeats``
-   calls of ``solve_periodic(method="periodic")`` on all points at rtol = 1e-4 and
-   as many at rtol = 1e-7.  Reported: solves/s = points / median wall time (failed
-   points included in the count and the time; the median because a shared VM's wall
-   times varied by +-25 % from run to run), failures (status != 0), median and
-   maximum final grid size n_tau, every call's wall time.  The solver runs on all
-   cores (numba ``prange`` over points).
+2. Engine throughput.  Every engine of ``--methods`` (default: every method of
+   ``solver.METHODS`` but the march; the default engine of ``solve_periodic``, whose
+   figures the top-level keys hold, is always included) on the same points.  After a
+   JIT warm-up of each engine on 4 points (not timed), ``--repeats`` calls of
+   ``solve_periodic(method=...)`` on all points at rtol = 1e-4 and as many at
+   rtol = 1e-7, the engines one after the other at each rtol.  Reported per engine:
+   solves/s = points / median wall time (failed points included in the count and the
+   time; the median because a shared VM's wall times varied by +-25 % from run to run),
+   failures (status != 0, by code), median and maximum final grid size n_tau, every
+   call's wall time, and its ratio of solves/s to the default engine's.  The engines run
+   on all cores (numba ``prange`` over points).
 3. Baseline.  What a user would write with scipy: for a random subsample of
    ``--baseline-points`` points, ``solve_ivp(method="LSODA")`` integrates the
    augmented state y = [u, int u dtau, int Pi dtau] of u' = T^(2-p) F(u, tau)
@@ -35,12 +39,14 @@ What is measured
    reference at rtol = 1e-8 on the subsample, in the solver's own norm:
    |U - U_ref| T / max(|U_ref| T, 1e-3 V) (see ``solver._solve``).  The
    baseline tolerance tol is lowered 1e-5, 1e-6, ... until the baseline's
-   median error is no larger than that of the ``periodic`` solver at
-   rtol = 1e-4; that tolerance's run is the timed baseline.  Points where
-   the reference, the solver or the baseline failed are left out of the
-   medians (the counts are printed).
-5. Speed-up = (periodic solves/s at rtol 1e-4) / (baseline solves/s).  And the
-   force kernel alone: ``force_and_slope`` in a numba-compiled loop over 1e5
+   median error is no larger than that of each engine at rtol = 1e-4; for each
+   engine the first such tolerance's run (or the tightest's) is its timed baseline.
+   Points where the reference, the engine or the baseline failed are left out of
+   the medians (the counts are printed).  Each engine's accuracy on the subsample
+   (median and maximum U error, and the largest error in the honesty harness's norm
+   max(U error, P error) over rtol) is printed at both rtols.
+5. Speed-up = (engine solves/s at rtol 1e-4) / (its matched baseline's solves/s).  And
+   the force kernel alone: ``force_and_slope`` in a numba-compiled loop over 1e5
    random inputs against a pure-Python loop over ~2e3 inputs calling
    ``force_and_slope.py_func`` (whose inner helpers are still compiled
    dispatchers), and against the same Python loop in a subprocess with
@@ -56,11 +62,16 @@ Human-readable lines, then as the last line one JSON object with the keys
 ``baseline_points``, ``median_rel_error_periodic``,
 ``median_rel_error_baseline``, ``numba_speedup_force_kernel`` and a few more
 (baseline tolerance and failures, reference failures, the fully interpreted
-kernel ratio, wall time).
+kernel ratio, wall time), all of them for the default engine (the default ``method`` of
+``solve_periodic``, named by the key ``default_engine``); and ``engines``: per engine
+timed, the same figures
+(``solves_per_s_rtol_1e-4``, ..., ``speedup``, ``baseline_tolerance``) plus its failure
+codes, n_tau, accuracy on the subsample and ``ratio_to_default_rtol_1e-4`` / ``_1e-7``.
 """
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import math
 import os
@@ -74,6 +85,8 @@ import solver
 from solver._solve import U_FLOOR_FRACTION
 
 RTOLS = (1e-4, 1e-7)
+DEFAULT_POINTS = 2000
+DEFAULT_SEED = 0
 REFERENCE_RTOL = 1e-8
 BASELINE_TOLERANCES = (1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 WARMUP_POINTS = 4
@@ -101,7 +114,23 @@ def subset(kinematics, physics, index):
     return kinematics.take(index), physics.take(index)
 
 
-# ----------------------------------------------------------------------------- periodic solver
+# ----------------------------------------------------------------------------- engines
+
+def default_engine():
+    """The default ``method`` of ``solve_periodic`` (the engine the top-level keys describe)."""
+    return inspect.signature(solver.solve_periodic).parameters["method"].default
+
+
+def bench_engines(methods=None):
+    """The engines to time: ``methods`` (default: ``solver.METHODS`` but the march), with the
+    default engine first, always."""
+    methods = [m for m in solver.METHODS if m != "march"] if methods is None else list(methods)
+    for m in methods:
+        if m not in solver.METHODS:
+            raise ValueError(f"method: expected one of {solver.METHODS}, got {m!r}")
+    default = default_engine()
+    return [default] + [m for m in dict.fromkeys(methods) if m != default]
+
 
 def repeat_timed(run, repeats):
     """(result of the last of ``repeats`` calls of the deterministic ``run``, median seconds,
@@ -114,16 +143,18 @@ def repeat_timed(run, repeats):
     return result, float(np.median(runs)), runs
 
 
-def time_periodic(kinematics, physics, rtol, repeats=1):
-    """``repeats`` batched ``solve_periodic`` calls (the solver is deterministic: every call
-    returns the same result); returns (SolveResult, median wall seconds, every call's)."""
-    return repeat_timed(lambda: solver.solve_periodic(kinematics, physics, method="periodic",
+def time_engine(kinematics, physics, rtol, repeats=1, method="periodic"):
+    """``repeats`` batched ``solve_periodic(method=method)`` calls (the engines are
+    deterministic: every call returns the same result); returns (SolveResult, median wall
+    seconds, every call's)."""
+    return repeat_timed(lambda: solver.solve_periodic(kinematics, physics, method=method,
                                                       rtol=rtol), repeats)
 
 
-def periodic_summary(result, seconds, runs):
+def engine_summary(result, seconds, runs):
     n = result.status.shape[0]
     return dict(solves_per_s=n / seconds, failures=int(np.count_nonzero(result.status != 0)),
+                failure_codes=status_counts(result),
                 median_n_tau=float(np.median(result.n_tau)), max_n_tau=int(result.n_tau.max()),
                 seconds=seconds, runs=runs)
 
@@ -232,6 +263,15 @@ def relative_u_error(U, U_ref, period, vscale):
     return np.abs(U - U_ref) * period / scale
 
 
+def solution_error(U, P, U_ref, P_ref, period, vscale):
+    """max(U error, P error) in the solver's norm, the quantity ``error_estimate`` bounds:
+    U's error is ``relative_u_error``, P's |P - P_ref| / |P_ref|.  NaN where either is NaN."""
+    e_u = relative_u_error(U, U_ref, period, vscale)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        e_p = np.abs(P - P_ref) / np.abs(P_ref)
+    return np.where(np.isnan(e_u) | np.isnan(e_p), np.nan, np.maximum(e_u, e_p))
+
+
 def median_of_common(*errors):
     """Medians of several error arrays over the points where all of them are finite."""
     ok = np.logical_and.reduce([np.isfinite(e) for e in errors])
@@ -240,46 +280,75 @@ def median_of_common(*errors):
     return [float(np.median(e[ok])) for e in errors], int(ok.sum())
 
 
-def calibrated_baseline(kinematics, physics, U_ref, periodic_error, cap):
-    """Tighten the LSODA tolerance until its median U error is <= the solver's.
+def calibrated_baseline(kinematics, physics, U_ref, engine_errors, cap):
+    """Tighten the LSODA tolerance until its median U error is <= each engine's.
 
-    Every rung is a complete timed baseline run; the first rung that matches
-    (or the tightest) is returned with its errors and ``matched``.
+    ``engine_errors``: {engine: its U errors at rtol 1e-4 on the subsample}.  Every rung is
+    a complete timed baseline run; the ladder stops when every engine is matched.  Returns
+    {engine: the first rung that matches it (or the tightest), with its errors,
+    ``median_engine``, ``median_baseline`` (over the ``compared`` points where the
+    reference, the engine and the baseline all gave a number) and ``matched``}.
     """
     vscale = solver.kinematic_speed(kinematics)
+    chosen = {}
     for tol in BASELINE_TOLERANCES:
         run = run_baseline(kinematics, physics, tol, cap)
         run["error"] = relative_u_error(run["U"], U_ref, physics.period, vscale)
-        (med_periodic, med_base), count = median_of_common(periodic_error, run["error"])
-        run.update(median_periodic=med_periodic, median_baseline=med_base, compared=count)
         print(f"  LSODA tol {tol:.0e}: {len(kinematics) / run['seconds']:8.2f} solves/s, "
-              f"{run['failures']} failures, median U error {med_base:.2e} "
-              f"(periodic rtol 1e-4: {med_periodic:.2e}, over {count} points)", flush=True)
-        run["matched"] = bool(med_base <= med_periodic)
-        if run["matched"]:
+              f"{run['failures']} failures", flush=True)
+        for engine, error in engine_errors.items():
+            (med_engine, med_base), count = median_of_common(error, run["error"])
+            matched = bool(med_base <= med_engine)
+            print(f"    median U error {med_base:.2e}, {engine} rtol 1e-4: {med_engine:.2e} "
+                  f"(over {count} points){' matched' if matched else ''}", flush=True)
+            if engine not in chosen and (matched or tol == BASELINE_TOLERANCES[-1]):
+                chosen[engine] = dict(run, median_engine=med_engine, median_baseline=med_base,
+                                      compared=count, matched=matched)
+        if len(chosen) == len(engine_errors):
             break
-    return run
+    return chosen
 
 
-def print_point_table(table, index, physics, U_ref, U_periodic, baseline, periodic_error):
-    """Per-point comparison on the subsample; flags errors beyond tolerance."""
-    print("  point   ratio  Ts      A0     A1     U_ref          U_periodic     U_baseline"
-          "     err_per   err_base  periods")
+def print_point_table(table, index, U_ref, engine_U, baseline, engine_error):
+    """Per-point comparison on the subsample (``engine_U``, ``engine_error``: {engine: values
+    at rtol 1e-4 on the subsample}); flags errors beyond tolerance.  Returns the flagged
+    points."""
+    print("  point   ratio  Ts      A0     A1     U_ref          U_baseline     err_base"
+          + "".join(f"  err_{engine:<9s}" for engine in engine_U) + " periods")
     flagged = []
     for j, i in enumerate(index):
-        e_p, e_b = periodic_error[j], baseline["error"][j]
+        e_b = baseline["error"][j]
         flag = ""
-        if np.isfinite(U_ref[j]) and not (e_p <= FLAG_PERIODIC):
-            flag += " <periodic beyond rtol"
+        for engine, error in engine_error.items():
+            if np.isfinite(U_ref[j]) and not (error[j] <= FLAG_PERIODIC):
+                flag += f" <{engine} beyond rtol"
         if np.isfinite(U_ref[j]) and np.isfinite(e_b) and e_b > FLAG_BASELINE:
             flag += " <baseline disagrees"
         if flag:
             flagged.append(int(i))
         print(f"  {i:5d} {table['ratio'][i]:8.3g} {table['scaled_period'][i]:6.3g} "
               f"{table['A0'][i]:6.3f} {table['A1'][i]:6.3f} {U_ref[j]:14.7e} "
-              f"{U_periodic[j]:14.7e} {baseline['U'][j]:14.7e} {e_p:9.2e} {e_b:9.2e} "
-              f"{baseline['periods'][j]:6d}{flag}")
+              f"{baseline['U'][j]:14.7e} {e_b:9.2e}"
+              + "".join(f"  {error[j]:13.2e}" for error in engine_error.values())
+              + f" {baseline['periods'][j]:6d}{flag}")
     return flagged
+
+
+def engine_accuracy(results, reference, index, physics, vscale):
+    """An engine's accuracy on the reference subsample at each rtol: median and maximum U
+    error, and the largest ``solution_error`` in units of rtol (NaN-free: over the points
+    where the reference and the engine converged)."""
+    out = {}
+    for rtol, (result, _) in results.items():
+        e_u = relative_u_error(result.U[index], reference.U, physics.period, vscale)
+        e = solution_error(result.U[index], result.P[index], reference.U, reference.P,
+                           physics.period, vscale) / rtol
+        ok = np.isfinite(e_u)
+        out[rtol] = dict(median_rel_error=float(np.median(e_u[ok])) if ok.any() else math.nan,
+                         max_rel_error=float(e_u[ok].max()) if ok.any() else math.nan,
+                         max_error_over_rtol=float(np.nanmax(e)) if np.isfinite(e).any()
+                         else math.nan)
+    return out
 
 
 # ----------------------------------------------------------------------------- force kernel
@@ -360,57 +429,80 @@ def force_kernel_rates(seed):
 def build_parser():
     parser = argparse.ArgumentParser(prog="python -m solver.bench",
                                      description=__doc__.split("\n")[0])
-    parser.add_argument("--points", type=int, default=2000)
+    parser.add_argument("--points", type=int, default=DEFAULT_POINTS)
     parser.add_argument("--baseline-points", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=DEFAULT_SEED)
     parser.add_argument("--baseline-cap", type=float, default=20.0,
                         help="wall-time cap per baseline point [s]")
     parser.add_argument("--repeats", type=int, default=3,
-                        help="timed calls of the periodic solver per rtol (median reported)")
+                        help="timed calls of each engine per rtol (median reported)")
+    parser.add_argument("--methods", nargs="+", default=None,
+                        help="engines to time (default: solver.METHODS but the march; the "
+                             "default engine is always timed)")
     parser.add_argument("--interpreted-kernel-rate", type=int, default=None,
                         help=argparse.SUPPRESS)  # internal: used by no_jit_rate
     return parser
 
 
-def benchmark(n_points, n_baseline, seed, cap, repeats=3):
+def _rtol_key(name, rtol):
+    return f"{name}_rtol_{rtol:.0e}".replace("e-0", "e-")
+
+
+def benchmark(n_points, n_baseline, seed, cap, repeats=3, methods=None):
     wall_start = time.perf_counter()
+    engines = bench_engines(methods)
+    default = engines[0]
     rng = np.random.default_rng(seed)
     kinematics, physics, table = draw_points(n_points, rng)
-    print(f"{n_points} harmonic points, seed {seed}, {os.cpu_count()} cores", flush=True)
+    print(f"{n_points} harmonic points, seed {seed}, {os.cpu_count()} cores; engines "
+          f"{', '.join(engines)} (default: {default})", flush=True)
 
     warm = np.arange(min(WARMUP_POINTS, n_points))
-    solver.solve_periodic(*subset(kinematics, physics, warm), method="periodic", rtol=RTOLS[0])
+    for engine in engines:
+        solver.solve_periodic(*subset(kinematics, physics, warm), method=engine, rtol=RTOLS[0])
 
-    periodic = {}
+    timed = {engine: {} for engine in engines}
     for rtol in RTOLS:
-        result, seconds, runs = time_periodic(kinematics, physics, rtol, repeats)
-        periodic[rtol] = (result, periodic_summary(result, seconds, runs))
-        s = periodic[rtol][1]
-        print(f"periodic rtol {rtol:.0e}: {s['solves_per_s']:.2f} solves/s, "
-              f"{s['failures']} failures {status_counts(result)}, n_tau median "
-              f"{s['median_n_tau']:.0f} max {s['max_n_tau']}, {s['seconds']:.2f} s (median of "
-              f"{repeats}: {', '.join(f'{r:.2f}' for r in runs)} s)", flush=True)
+        for engine in engines:
+            result, seconds, runs = time_engine(kinematics, physics, rtol, repeats, engine)
+            timed[engine][rtol] = (result, engine_summary(result, seconds, runs))
+            s = timed[engine][rtol][1]
+            ratio = s["solves_per_s"] / timed[default][rtol][1]["solves_per_s"]
+            print(f"{engine} rtol {rtol:.0e}: {s['solves_per_s']:.2f} solves/s"
+                  f"{'' if engine == default else f' ({ratio:.2f}x {default})'}, "
+                  f"{s['failures']} failures {s['failure_codes']}, n_tau median "
+                  f"{s['median_n_tau']:.0f} max {s['max_n_tau']}, {s['seconds']:.2f} s (median "
+                  f"of {repeats}: {', '.join(f'{r:.2f}' for r in runs)} s)", flush=True)
 
     index = np.sort(rng.choice(n_points, size=min(n_baseline, n_points), replace=False))
     kin_sub, phys_sub = subset(kinematics, physics, index)
-    reference, ref_seconds, _ = time_periodic(kin_sub, phys_sub, REFERENCE_RTOL)
+    reference, ref_seconds, _ = time_engine(kin_sub, phys_sub, REFERENCE_RTOL)
     ref_failures = int(np.count_nonzero(reference.status != 0))
     print(f"reference: periodic rtol {REFERENCE_RTOL:.0e} on {len(index)} points, "
           f"{ref_failures} failures {status_counts(reference)}, {ref_seconds:.2f} s", flush=True)
     vscale = solver.kinematic_speed(kin_sub)
-    U_periodic = periodic[RTOLS[0]][0].U[index]
-    periodic_error = relative_u_error(U_periodic, reference.U, phys_sub.period, vscale)
+    engine_U = {engine: timed[engine][RTOLS[0]][0].U[index] for engine in engines}
+    engine_error = {engine: relative_u_error(U, reference.U, phys_sub.period, vscale)
+                    for engine, U in engine_U.items()}
+    accuracy = {engine: engine_accuracy(timed[engine], reference, index, phys_sub, vscale)
+                for engine in engines}
+    for engine in engines:
+        print(f"accuracy of {engine} on the subsample: " + "; ".join(
+            f"rtol {rtol:.0e}: U error median {a['median_rel_error']:.2e} max "
+            f"{a['max_rel_error']:.2e}, worst max(U, P error) {a['max_error_over_rtol']:.3g} "
+            f"rtol" for rtol, a in accuracy[engine].items()), flush=True)
 
     baseline_point(harmonic_angle(1.0, 0.3), 1.0, 1.0, 0.0, 1.0, 1e-5, 0.3, 1e-4, cap)  # warm up scipy/dispatch
     print(f"baseline: LSODA period by period from rest, cap {cap:g} s per point", flush=True)
-    base = calibrated_baseline(kin_sub, phys_sub, reference.U, periodic_error, cap)
+    matched = calibrated_baseline(kin_sub, phys_sub, reference.U, engine_error, cap)
+    base = matched[default]
     base_rate = len(index) / base["seconds"]
-    if not base["matched"]:
-        print("  WARNING: no LSODA tolerance matched the periodic solver's accuracy", flush=True)
-    flagged = print_point_table(table, index, phys_sub, reference.U, U_periodic, base,
-                                periodic_error)
+    for engine in engines:
+        if not matched[engine]["matched"]:
+            print(f"  WARNING: no LSODA tolerance matched the accuracy of {engine}", flush=True)
+    flagged = print_point_table(table, index, reference.U, engine_U, base, engine_error)
     if flagged:
-        print(f"  flagged points (periodic error > {FLAG_PERIODIC:g} or baseline error > "
+        print(f"  flagged points (an engine's error > {FLAG_PERIODIC:g} or baseline error > "
               f"{FLAG_BASELINE:g} against the reference): {flagged}", flush=True)
 
     kernel = force_kernel_rates(seed)
@@ -419,17 +511,49 @@ def benchmark(n_points, n_baseline, seed, cap, repeats=3):
           f"fully interpreted {kernel['no_jit']:.3e} evals/s "
           f"(ratio {kernel['compiled'] / kernel['no_jit']:.1f})", flush=True)
 
-    fast, slow = periodic[RTOLS[0]][1], periodic[RTOLS[1]][1]
-    speedup = fast["solves_per_s"] / base_rate
-    print(f"speed-up periodic (rtol 1e-4, {os.cpu_count()} cores) / LSODA baseline "
-          f"(tol {base['tol']:.0e}, 1 core): {speedup:.2f}", flush=True)
+    per_engine = {}
+    for engine in engines:
+        fast, slow = (timed[engine][rtol][1] for rtol in RTOLS)
+        rate = len(index) / matched[engine]["seconds"]
+        per_engine[engine] = {
+            "solves_per_s_rtol_1e-4": fast["solves_per_s"],
+            "solves_per_s_rtol_1e-7": slow["solves_per_s"],
+            "ratio_to_default_rtol_1e-4":
+                fast["solves_per_s"] / timed[default][RTOLS[0]][1]["solves_per_s"],
+            "ratio_to_default_rtol_1e-7":
+                slow["solves_per_s"] / timed[default][RTOLS[1]][1]["solves_per_s"],
+            "failures": fast["failures"] + slow["failures"],
+            "failures_rtol_1e-4": fast["failures"],
+            "failures_rtol_1e-7": slow["failures"],
+            "failure_codes_rtol_1e-4": fast["failure_codes"],
+            "failure_codes_rtol_1e-7": slow["failure_codes"],
+            "seconds_rtol_1e-4_runs": fast["runs"],
+            "seconds_rtol_1e-7_runs": slow["runs"],
+            **{_rtol_key(k, rtol): timed[engine][rtol][1][k]
+               for rtol in RTOLS for k in ("median_n_tau", "max_n_tau")},
+            **{_rtol_key(k, rtol): accuracy[engine][rtol][k]
+               for rtol in RTOLS for k in ("median_rel_error", "max_rel_error",
+                                           "max_error_over_rtol")},
+            "baseline_tolerance": matched[engine]["tol"],
+            "baseline_accuracy_matched": matched[engine]["matched"],
+            "baseline_solves_per_s": rate,
+            "speedup": fast["solves_per_s"] / rate,
+        }
+        print(f"speed-up {engine} (rtol 1e-4, {os.cpu_count()} cores) / LSODA baseline "
+              f"(tol {matched[engine]['tol']:.0e}, 1 core): "
+              f"{per_engine[engine]['speedup']:.2f}", flush=True)
+    for engine in engines[1:]:
+        print(f"{engine} / {default}: {per_engine[engine]['ratio_to_default_rtol_1e-4']:.2f}x "
+              f"at rtol 1e-4, {per_engine[engine]['ratio_to_default_rtol_1e-7']:.2f}x at rtol "
+              f"1e-7", flush=True)
     wall = time.perf_counter() - wall_start
     print(f"wall time {wall:.1f} s", flush=True)
+    fast, slow = (timed[default][rtol][1] for rtol in RTOLS)
     return {
         "solves_per_s_rtol_1e-4": fast["solves_per_s"],
         "solves_per_s_rtol_1e-7": slow["solves_per_s"],
         "baseline_solves_per_s": base_rate,
-        "speedup": speedup,
+        "speedup": fast["solves_per_s"] / base_rate,
         "failures": fast["failures"] + slow["failures"],
         "failures_rtol_1e-4": fast["failures"],
         "failures_rtol_1e-7": slow["failures"],
@@ -439,7 +563,7 @@ def benchmark(n_points, n_baseline, seed, cap, repeats=3):
         "seconds_rtol_1e-4_runs": fast["runs"],
         "seconds_rtol_1e-7_runs": slow["runs"],
         "baseline_points": int(len(index)),
-        "median_rel_error_periodic": base["median_periodic"],
+        "median_rel_error_periodic": base["median_engine"],
         "median_rel_error_baseline": base["median_baseline"],
         "numba_speedup_force_kernel": kernel["compiled"] / kernel["py_func"],
         "numba_speedup_force_kernel_no_jit": kernel["compiled"] / kernel["no_jit"],
@@ -450,11 +574,19 @@ def benchmark(n_points, n_baseline, seed, cap, repeats=3):
         "error_compared_points": base["compared"],
         "flagged_points": flagged,
         "wall_seconds": wall,
+        "default_engine": default,
+        "engines": per_engine,
     }
 
 
-def _json_value(value):
-    """NaN and inf are not JSON: write them as null."""
+def json_value(value):
+    """NaN and inf are not JSON: null, in nested dicts and lists too."""
+    if isinstance(value, dict):
+        return {str(k): json_value(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_value(v) for v in value]
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        value = value.item()
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
@@ -468,9 +600,14 @@ def main(argv=None):
     if args.points < WARMUP_POINTS or args.baseline_points < 1 or args.repeats < 1:
         print("--points must be >= 4, --baseline-points and --repeats >= 1", file=sys.stderr)
         return 2
+    try:
+        bench_engines(args.methods)
+    except ValueError as exc:
+        print(exc, file=sys.stderr)
+        return 2
     report = benchmark(args.points, args.baseline_points, args.seed, args.baseline_cap,
-                       args.repeats)
-    print(json.dumps({k: _json_value(v) for k, v in report.items()}))
+                       args.repeats, args.methods)
+    print(json.dumps(json_value(report)))
     return 0
 
 
