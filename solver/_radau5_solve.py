@@ -55,7 +55,6 @@ TARGET_SHARE = 0.8
 MAX_ROUNDS = 4
 #: frozen-grid Newton sweeps per round
 MAX_FROZEN_SWEEPS = 30
-DEBUG = False
 #: the force evaluations of a solve, by phase (``solve_point``'s last output)
 COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE = 0, 1, 2, 3
 N_COSTS = 4
@@ -214,8 +213,6 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
         u_new, lo, hi = _newton_update(u0, g, one_minus_M, lo, hi)
         moved = abs(u_new - u0)
         u0 = u_new
-        if DEBUG:
-            print("loose N", N, "moved/V", moved / vscale, "1-M", one_minus_M)
         if moved <= loose * vscale:
             break
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
@@ -267,11 +264,6 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
         shares = np.zeros(N)
         e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
         estimate = combine(e_u, e_p, scale_u, scale_p)
-        if DEBUG:
-            worst = np.argmax(shares)
-            print("round N", N, "estimate", estimate / rtol, "worst share",
-                  shares[worst] / rtol, "at", W[T, worst], "h",
-                  W[T, worst + 1] - W[T, worst], "sweeps", sweeps, "split", split.sum())
         if estimate <= rtol:
             return W, int_u, int_p, u0, CONVERGED, N, sweeps, estimate, evals
         ceilings = np.empty(N)

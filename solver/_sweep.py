@@ -99,7 +99,6 @@ CROSSING_BAND = 4.0
 EVENT_BAND = 10.0
 #: a sweep gives up after this many attempted steps per accepted one (plus 16)
 MAX_ATTEMPTS_PER_STEP = 32
-DEBUG = False
 #: a state event within this share of a recorded step's end counts as on it (rounding)
 SPLIT_SHARE = 1e-9
 #: an event is cut at most this many times in a row (the located root moves as the step
@@ -535,8 +534,6 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
                                cuts == 0)
             if theta > 0.0:
                 at_start = have_previous and theta * h <= EVENT_END_SHARE * prev_h
-                if DEBUG:
-                    print("event", t, h, theta, at_start)
                 if theta < 1.0 - EVENT_END_SHARE and theta * h >= MIN_STEP and not at_start:
                     h *= theta
                     cuts += 1
@@ -557,9 +554,6 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
                                max(abs(sol.Pu1), abs(sol.Pu2), abs(sol.Pu3))) / (target * h)
         if not fits:  # the defect's model does not fit: its error is not trusted as it is
             ratio *= FIT_DISTRUST
-        if DEBUG:
-            print("step", t, h, ratio, sol.iterations, end_kind, u, sol.U1, sol.U2, sol.U3,
-                  err.u, err.int_u, err.int_pi, lam_end, mu_end, f0)
         if not ratio <= 1.0 and not (h <= ACCEPT_STEP and math.isfinite(ratio)):
             h *= max(MIN_FACTOR, predict_factor(h, h_old, ratio, ratio_old)) \
                 if math.isfinite(ratio) else MIN_FACTOR

@@ -30,6 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ._events import illinois_update
 from ._force import force_slope_power_sc
 from ._kinematics import FOURIER, angle_and_rate
 from ._radau5 import dense_value
@@ -108,14 +109,7 @@ def locate_exit(which, code, params, a, b, fa, fb, side, phys, band):
         fc = exit_functions(code, params, c, side, phys, band)[which]
         if fc == 0.0:
             break
-        if fc * fa < 0.0:
-            if last == -1:
-                fa *= 0.5
-            b, fb, last = c, fc, -1
-        else:
-            if last == 1:
-                fb *= 0.5
-            a, fa, last = c, fc, 1
+        a, b, fa, fb, last = illinois_update(a, b, fa, fb, c, fc, last)
     return c
 
 
@@ -147,14 +141,7 @@ def _refine_root(k, code, params, a, b, fa, fb, side):
         fc = _kinematic_function(k, code, params, c, side)
         if fc == 0.0:
             break
-        if fc * fa < 0.0:
-            if last == -1:
-                fa *= 0.5
-            b, fb, last = c, fc, -1
-        else:
-            if last == 1:
-                fb *= 0.5
-            a, fa, last = c, fc, 1
+        a, b, fa, fb, last = illinois_update(a, b, fa, fb, c, fc, last)
     return c
 
 
@@ -245,14 +232,7 @@ def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b, 
         fc = state_function(k, dense_value(c, u_n, U1, U2, U3), math.sin(phi), om, band)
         if fc == 0.0:
             break
-        if fc * f_a < 0.0:
-            if last == -1:
-                f_a *= 0.5
-            b, f_b, last = c, fc, -1
-        else:
-            if last == 1:
-                f_b *= 0.5
-            a, f_a, last = c, fc, 1
+        a, b, f_a, f_b, last = illinois_update(a, b, f_a, f_b, c, fc, last)
     return c
 
 
