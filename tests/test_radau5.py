@@ -201,3 +201,30 @@ def test_failure_is_nan_with_a_status():
     assert not res.converged[0]
     assert res.status[0] == 5
     assert math.isnan(res.U[0]) and math.isnan(res.P[0])
+
+
+def test_node_weights_of_short_periods_do_not_hide_the_error():
+    """A short-period Fourier motion whose node weights reach ~4e3 (a reviewer's find): a
+    floor of the stage tolerance subtracted from every step's error had hidden 5.4 rtol
+    (estimate 0.010 rtol) at rtol 1e-3.  Against the periodic engine at rtol 1e-8."""
+    kin = solver.Fourier([[0.10969011, -0.44745027, 0.15570632, -0.09624738, -0.09579693]],
+                         [[-0.33443973, -0.1719513, -0.72521199, 0.16735269]])
+    physics = solver.Physics.from_scaled(0.7147975132556633, 0.01235850613052716, delta=1e-5)
+    rtol = 1e-3
+    res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
+    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-8)
+    assert res.converged[0] and ref.converged[0]
+    T = physics.period[0]
+    scale_u = max(abs(ref.U[0]) * T, 1e-3 * solver.kinematic_speed(kin)[0])
+    error = max(abs(res.U[0] - ref.U[0]) * T / scale_u, abs(res.P[0] - ref.P[0]) / ref.P[0])
+    assert error <= max(res.error_estimate[0], 1e-8) * 1.5 and error <= rtol, \
+        (error, res.error_estimate[0])
+
+
+def test_power_floor_does_not_erase_the_power_error():
+    """The floor taken off int Pi's error scales with dPi/du, not with int u's error (a
+    reviewer's find: with int u's error below its floor, P's own quadrature error of 1e-6
+    counted as 0)."""
+    err = _radau5.StepError(0.0, 1e-20, 1e-6)
+    assert _sweep.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1.0) >= 0.99e-6
+    assert _sweep.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1e12) == 0.0
