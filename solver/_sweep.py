@@ -81,6 +81,13 @@ ACCEPT_STEP = 2.0 ** -36
 #: next to a turning point of phi a step may change u by friction at most this share of u
 #: (``trap_ceiling``)
 TRAP_SHARE = 0.1
+#: ... but where phi turns smoothly (not at a corner) never below this step: where the body
+#: comes to rest at the turning point with the links (u -> 0 there) the cap shrinks with u
+#: and the steps approached the turning point geometrically (45 % of the bench's steps at
+#: rtol 1e-4).  Within 1e-3 of a smooth turning point omega is too small to carry a body
+#: through the friction: the trap needs caps of 0.01 and more (measured 0.08 on
+#: short_period_harmonic point 93); with 1e-2 the harness stayed honest (worst 2.3 rtol)
+TRAP_FLOOR = 1e-3
 #: a step whose defect model does not fit (``_radau5.defect_error``) is judged by this many
 #: times its error estimate (measured: the fallback estimates were up to 12x too small next
 #: to turning points at scaled period 0.01)
@@ -497,12 +504,17 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
             h = 0.5 * room
         # a step next to a turning point of phi must not let the friction there stop the body
         turning = -1.0
+        smooth = True  # (phi has no corner at the turning point)
         if at_stop and stop_is_turning[next_stop if next_stop < n_stops else 0]:
             turning = t_stop
+            smooth = not stop_is_corner[next_stop if next_stop < n_stops else 0]
         elif next_stop >= 1 and t == stops[next_stop - 1] and stop_is_turning[next_stop - 1]:
             turning = t
+            smooth = not stop_is_corner[next_stop - 1]
         if turning >= 0.0:
             cap = trap_ceiling(code, params, phys, turning, t + 0.5 * h, u)
+            if smooth:
+                cap = max(cap, TRAP_FLOOR)
             if h > cap:
                 h = max(cap, ACCEPT_STEP)
                 at_stop = False
