@@ -1,7 +1,7 @@
 """Honesty harness: is each periodic engine's error estimate true?
 
 Run as ``python -m solver.honesty [--method M ...] [--set S ...] [--rtol R ...] [--points N]
-[--refresh] [--reference-method periodic] [--reference-rtol 1e-9] [--check-method M]
+[--refresh] [--reuse-references] [--reference-method periodic] [--reference-rtol 1e-9] [--check-method M]
 [--check-rtol R] [--agreement 0.1] [--cache-dir out/honesty]``.
 
 A solve that returns status 0 claims an error of at most ``rtol`` in the solver's norm
@@ -52,7 +52,11 @@ Points not judged are counted and printed per set (and per rtol), never dropped 
 References are cached under ``--cache-dir`` (default ``out/honesty``), one file per
 (set, points, seed, method, rtol, hash of the solver's engine sources: every
 ``solver/*.py`` but the harness and benchmarks), holding the points' parameters, which must
-match on reading; ``--refresh`` recomputes.
+match on reading; ``--refresh`` recomputes.  Any edit in solver/ changes the digest;
+``--reuse-references`` then takes the newest cached references of the same points made by
+an earlier version (each set's header line says which), instead of two hours of
+recomputing them: for iterating on one engine, not for judging a change to the reference
+or check method itself.
 
 Outcomes of one solve of a judged point at rtol r
 -------------------------------------------------
@@ -304,21 +308,42 @@ class Solves:
         return (self.status == 0) & np.isfinite(self.U) & np.isfinite(self.P)
 
 
-def cached_solves(kinematics, physics, method, rtol, key, cache_dir, refresh=False):
+def _read_solves(path, fingerprint):
+    """The Solves stored at ``path`` if they are of the points ``fingerprint``, else None."""
+    with np.load(path) as data:
+        if not np.array_equal(data["fingerprint"], fingerprint):
+            return None
+        return Solves(**{f.name: (data[f.name] if f.name != "seconds" else
+                                  float(data["seconds"])) for f in fields(Solves)})
+
+
+def cached_solves(kinematics, physics, method, rtol, key, cache_dir, refresh=False,
+                  reuse=False):
     """``Solves.run`` through a cache file named by ``key``, the method, rtol and
-    ``engine_digest``; returns (Solves, whether it was read from the cache)."""
+    ``engine_digest``; returns (Solves, source): source "" where they were computed now,
+    "cached" where read from this engine's cache file, and, with ``reuse`` where this
+    engine has none, "reused from engine <digest>" for the newest file of the same points
+    made by another version of the engines (an edit anywhere in solver/ changes the digest,
+    and recomputing the references at rtol 1e-9 takes about two hours)."""
     path = Path(cache_dir) / f"{key}-{method}-{rtol:.0e}-{engine_digest()}.npz"
     fingerprint = _fingerprint(kinematics, physics)
-    if path.exists() and not refresh:
-        with np.load(path) as data:
-            if np.array_equal(data["fingerprint"], fingerprint):
-                return Solves(**{f.name: (data[f.name] if f.name != "seconds" else
-                                          float(data["seconds"])) for f in fields(Solves)}), True
+    if not refresh:
+        if path.exists():
+            cached = _read_solves(path, fingerprint)
+            if cached is not None:
+                return cached, "cached"
+        if reuse:
+            others = sorted(Path(cache_dir).glob(f"{key}-{method}-{rtol:.0e}-*.npz"),
+                            key=lambda other: other.stat().st_mtime, reverse=True)
+            for other in others:
+                cached = _read_solves(other, fingerprint)
+                if cached is not None:
+                    return cached, f"reused from engine {other.stem.rsplit('-', 1)[-1]}"
     result = Solves.run(kinematics, physics, method, rtol)
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, fingerprint=fingerprint,
              **{f.name: getattr(result, f.name) for f in fields(Solves)})
-    return result, False
+    return result, ""
 
 
 @dataclass(frozen=True)
@@ -421,32 +446,35 @@ class Settings:
     agreement: float = AGREEMENT
     cache_dir: Path = DEFAULT_CACHE
     refresh: bool = False
+    reuse: bool = False
 
 
 def set_references(point_set, kinematics, physics, settings):
     """The set's ``References`` (cached) and a dict describing them and their cost."""
     key = f"{point_set.name}-n{len(kinematics)}-seed{point_set.seed}"
-    ref, ref_cached = cached_solves(kinematics, physics, settings.reference_method,
+    ref, ref_source = cached_solves(kinematics, physics, settings.reference_method,
                                     settings.reference_rtol, key, settings.cache_dir,
-                                    settings.refresh)
-    check, check_cached = None, False
+                                    settings.refresh, settings.reuse)
+    check, check_source = None, ""
     if settings.check_method is not None:
-        check, check_cached = cached_solves(kinematics, physics, settings.check_method,
+        check, check_source = cached_solves(kinematics, physics, settings.check_method,
                                             settings.check_rtol, key, settings.cache_dir,
-                                            settings.refresh)
+                                            settings.refresh, settings.reuse)
     vscale = solver.kinematic_speed(kinematics)
     references = References.from_solves(ref, check, physics, vscale, settings.agreement)
     d = references.disagreement[references.kind == JUDGED]
     failed = np.flatnonzero(references.kind == FAILED)
     info = dict(
         reference=f"{settings.reference_method} rtol {settings.reference_rtol:.0e}",
-        reference_seconds=ref.seconds, reference_cached=ref_cached,
+        reference_seconds=ref.seconds, reference_cached=bool(ref_source),
+        reference_source=ref_source or "computed",
         reference_failed=int(np.count_nonzero(references.kind == FAILED)),
         reference_failure_codes=status_counts(ref),
         reference_failed_points=[dict(index=int(i), status=int(ref.status[i])) for i in failed],
         check=(f"{settings.check_method} rtol {settings.check_rtol:.0e}"
                if check is not None else None),
-        check_seconds=check.seconds if check is not None else 0.0, check_cached=check_cached,
+        check_seconds=check.seconds if check is not None else 0.0,
+        check_cached=bool(check_source), check_source=check_source or "computed",
         check_failure_codes=status_counts(check) if check is not None else {},
         cross_checked=int(d.size),
         single_reference=int(np.count_nonzero(references.kind == SINGLE)),
@@ -493,7 +521,7 @@ def run_set(point_set, settings):
     references, info = set_references(point_set, kinematics, physics, settings)
     detail["references"] = info
     print(f"   reference {info['reference']}: {info['reference_seconds']:.1f} s"
-          f"{' (cached)' if info['reference_cached'] else ''}, failed on "
+          f" ({info['reference_source']}), failed on "
           f"{info['reference_failed']} {info['reference_failure_codes']} (not judged)",
           flush=True)
     for point in info["reference_failed_points"]:
@@ -501,7 +529,7 @@ def run_set(point_set, settings):
               + describe_point(kinematics, physics, point["index"]), flush=True)
     if info["check"] is not None:
         print(f"   check {info['check']}: {info['check_seconds']:.1f} s"
-              f"{' (cached)' if info['check_cached'] else ''}, converged on "
+              f" ({info['check_source']}), converged on "
               f"{info['cross_checked']} of the reference's points, disagreement median "
               f"{info['disagreement_median']:.1e} max {info['disagreement_max']:.1e}; "
               f"{info['single_reference']} single reference (check failed: "
@@ -580,6 +608,10 @@ def build_parser():
                         help=f"points per set (default {SET_POINTS}, bench {BENCH_POINTS}; "
                              "fewer: the first ones)")
     parser.add_argument("--refresh", action="store_true", help="recompute cached references")
+    parser.add_argument("--reuse-references", action="store_true",
+                        help="where this engine version has no cached reference, use the "
+                             "newest cached one of the same points made by an earlier "
+                             "version (printed per set; for iterating on an engine)")
     parser.add_argument("--reference-method", default=REFERENCE_METHOD)
     parser.add_argument("--reference-rtol", type=float, default=REFERENCE_RTOL)
     parser.add_argument("--check-method", default=None,
@@ -610,7 +642,8 @@ def settings_from(args):
     return Settings(methods=methods, rtols=tuple(args.rtol), points=args.points,
                     reference_method=args.reference_method, reference_rtol=args.reference_rtol,
                     check_method=check_method, check_rtol=check_rtol,
-                    agreement=args.agreement, cache_dir=args.cache_dir, refresh=args.refresh)
+                    agreement=args.agreement, cache_dir=args.cache_dir, refresh=args.refresh,
+                    reuse=args.reuse_references)
 
 
 def main(argv=None):

@@ -191,3 +191,28 @@ def test_honesty_subset(method, subset):
                        for i in np.flatnonzero(outcome["outside"])]
     assert judged >= MIN_JUDGED * len(SUBSET_RTOLS), (judged, failed_refs)
     assert not misses, misses
+
+
+def test_references_of_an_earlier_engine_are_reused_only_when_asked(tmp_path, monkeypatch):
+    """An edit in solver/ changes ``engine_digest``: the cached references are then
+    recomputed, unless ``reuse``, which takes the earlier engine's file of the same points
+    and says so; never another set of points."""
+    calls = []
+
+    def fake_run(kinematics, physics, method, rtol):
+        calls.append(len(kinematics))
+        return _solves(np.arange(len(kinematics), dtype=float), np.ones(len(kinematics)))
+
+    monkeypatch.setattr(honesty.Solves, "run", staticmethod(fake_run))
+    kin, phys = solver.Harmonic([1.0, 1.1], [0.3, 0.3]), _physics(2)
+    monkeypatch.setattr(honesty, "engine_digest", lambda: "aaaa")
+    _, source = honesty.cached_solves(kin, phys, "periodic", 1e-9, "s", tmp_path)
+    assert source == "" and calls == [2]
+    monkeypatch.setattr(honesty, "engine_digest", lambda: "bbbb")
+    _, source = honesty.cached_solves(kin, phys, "periodic", 1e-9, "s", tmp_path, reuse=True)
+    assert source == "reused from engine aaaa" and calls == [2]
+    other = solver.Harmonic([1.0, 1.2], [0.3, 0.3])
+    _, source = honesty.cached_solves(other, phys, "periodic", 1e-9, "s", tmp_path, reuse=True)
+    assert source == "" and calls == [2, 2]
+    _, source = honesty.cached_solves(kin, phys, "periodic", 1e-9, "s", tmp_path)
+    assert source == "" and calls == [2, 2, 2]
