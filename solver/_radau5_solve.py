@@ -170,13 +170,13 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
     evaluations of F by phase (COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE).
     """
     stops = np.empty(MAX_STOPS)
-    n_stops = kinematic_stops(code, params, corners, stops)
+    n_stops, omax = kinematic_stops(code, params, corners, stops)
     stop_is_corner = np.zeros(n_stops, dtype=np.bool_)
     for j in range(n_stops):
         for c in corners:
             if stops[j] == c:
                 stop_is_corner[j] = True
-    stop_is_turning = turning_stops(code, params, stops, n_stops)
+    stop_is_turning = turning_stops(code, params, stops, n_stops, omax)
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
     loose = max(LOOSE_RTOL, rtol)
     u0 = u_guess

@@ -144,7 +144,7 @@ def test_kinematic_stops_are_the_zeros_of_the_kinematic_functions():
     kin = solver.Fourier([[0.3, 1.1, 0.0, 0.2]], [[0.0, -0.1, 0.05]])
     code, params = kin.kernel_encoding()
     out = np.empty(_switching.MAX_STOPS)
-    count = _switching.kinematic_stops(code, params[0], kin.corners()[0], out)
+    count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], out)
     stops = out[:count]
     tau = np.linspace(0.0, 1.0, 200001)
     phi = kin.angle(tau)[0]
