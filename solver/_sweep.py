@@ -39,8 +39,8 @@ from ._radau5 import (C1, C2, StepError, THETA_LATE, THETA_MID, SampleKinematics
 from ._status import CONVERGED, NON_FINITE, STAGE_SOLVE_FAILED, STEP_BUDGET_EXCEEDED, \
     TOLERANCE_NOT_REACHED
 from ._step_control import MIN_FACTOR, predict_factor
-from ._switching import (N_STATE_FUNCTIONS, STOP, TANGENTIAL, exit_functions, locate_exit,
-                         locate_state_event, rate_slope, state_function)
+from ._switching import (N_STATE_FUNCTIONS, SIMPLE_TURNING, STOP, TANGENTIAL, exit_functions,
+                         locate_exit, locate_state_event, rate_slope, state_function)
 
 # ---------------------------------------------------------------- workspace fields
 T = 0            # node times tau_n, n = 0 .. N (tau_N = 1)
@@ -81,12 +81,14 @@ ACCEPT_STEP = 2.0 ** -36
 #: next to a turning point of phi a step may change u by friction at most this share of u
 #: (``trap_ceiling``)
 TRAP_SHARE = 0.1
-#: ... but where phi turns smoothly (not at a corner) never below this step: where the body
-#: comes to rest at the turning point with the links (u -> 0 there) the cap shrinks with u
-#: and the steps approached the turning point geometrically (45 % of the bench's steps at
-#: rtol 1e-4).  Within 1e-3 of a smooth turning point omega is too small to carry a body
-#: through the friction: the trap needs caps of 0.01 and more (measured 0.08 on
-#: short_period_harmonic point 93); with 1e-2 the harness stayed honest (worst 2.3 rtol)
+#: ... but at a simple turning point (``_switching.SIMPLE_TURNING``: a simple zero of omega,
+#: no corner) never below this step: where the body comes to rest at the turning point with
+#: the links (u -> 0 there) the cap shrinks with u and the steps approached the turning point
+#: geometrically (45 % of the bench's steps at rtol 1e-4).  An empirical floor, not a bound:
+#: measured honest on the harness's sets (also at 1e-2: worst 2.3 rtol) and a reviewer's
+#: short- and long-period harmonic sets; at every turning point it was 6.4 rtol off (estimate
+#: 0.6) on a sin^3 Fourier motion whose flat inflections are near-tangencies
+#: (``test_a_flat_inflection_keeps_the_trap_cap``), which keep the cap
 TRAP_FLOOR = 1e-3
 #: a step whose defect model does not fit (``_radau5.defect_error``) is judged by this many
 #: times its error estimate (measured: the fallback estimates were up to 12x too small next
@@ -441,7 +443,8 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     ----------
     stops : (n_stops,) sorted step ends in [0, 1), stops[0] = 0; stop_is_corner : whether
         phi has a corner there (the next step's start values are re-evaluated on its side);
-        stop_is_turning : whether the links (nearly) stop rotating there (``trap_ceiling``).
+        stop_is_turning : whether the links (nearly) stop rotating there (``trap_ceiling``;
+        ``_switching.turning_stops``' codes).
     h_first : float
         The first step's size (the controller's proposal carried from an earlier sweep).
     target : float
@@ -479,9 +482,14 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     evaluations = 1
     band = EVENT_BAND * phys.dtau
     stop_reach = _stop_reach(code, params, phys, t, u, f0, band)
-    # Newton's quadratic constant, carried from step to step (``radau5_step``; not in
-    # ``frozen_sweep``, whose shooting needs the stages converged as far as Newton goes:
-    # measured with it there, frozen Newton failed on 1-4 % of the bench)
+    # Newton's quadratic constant, carried from step to step (``radau5_step``), in the loose
+    # sweeps only (``sharp`` False): it does not bound the stage error (a reviewer measured
+    # stages accepted up to 3.7e5 atol off: the constant goes stale over one-correction steps
+    # and grows with h kappa), which the loose sweeps tolerate (they give u(0) and the node
+    # weights; the target sweep and the frozen Newton solve every stage afresh) but the
+    # target sweep does not (its stages become final where the loose u(0) needs no frozen
+    # Newton sweep).  Not in ``frozen_sweep`` either (its shooting failed on 1-4 % of the
+    # bench with it)
     rate = math.inf
     while t < 1.0:
         if n >= max_steps:
@@ -504,16 +512,18 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
             h = 0.5 * room
         # a step next to a turning point of phi must not let the friction there stop the body
         turning = -1.0
-        smooth = True  # (phi has no corner at the turning point)
+        simple = False  # (a simple zero of omega, no corner of phi: ``TRAP_FLOOR``)
         if at_stop and stop_is_turning[next_stop if next_stop < n_stops else 0]:
             turning = t_stop
-            smooth = not stop_is_corner[next_stop if next_stop < n_stops else 0]
+            j = next_stop if next_stop < n_stops else 0
+            simple = stop_is_turning[j] == SIMPLE_TURNING and not stop_is_corner[j]
         elif next_stop >= 1 and t == stops[next_stop - 1] and stop_is_turning[next_stop - 1]:
             turning = t
-            smooth = not stop_is_corner[next_stop - 1]
+            simple = (stop_is_turning[next_stop - 1] == SIMPLE_TURNING
+                      and not stop_is_corner[next_stop - 1])
         if turning >= 0.0:
             cap = trap_ceiling(code, params, phys, turning, t + 0.5 * h, u)
-            if smooth:
+            if simple:
                 cap = max(cap, TRAP_FLOOR)
             if h > cap:
                 h = max(cap, ACCEPT_STEP)
@@ -537,7 +547,8 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
             g3 = dense_value(1.0 + r, prev_u, prev_U1, prev_U2, prev_U3)
         else:
             g1 = g2 = g3 = u
-        sol, its = solve_step(u, g1, g2, g3, h, kin, phys, atol, rate, J0 / phys.kappa)
+        sol, its = solve_step(u, g1, g2, g3, h, kin, phys, atol,
+                              math.inf if sharp else rate, J0 / phys.kappa)
         if sol.rate == sol.rate:
             rate = sol.rate
         evaluations += 3 * its

@@ -40,6 +40,11 @@ from ._radau5 import dense_value
 SAMPLES_PER_WAVENUMBER = 64
 #: a minimum of |omega| below this share of max |omega| is a near-tangency (a stop)
 TANGENCY_SHARE = 0.1
+#: a turning point is simple where |omega'| >= this share of 2 pi max |omega| (``turning_stops``)
+SIMPLE_SHARE = 0.5
+#: ``turning_stops``' codes
+TURNING = 1
+SIMPLE_TURNING = 2
 #: at most this many kinematic stops per period
 MAX_STOPS = 512
 #: two stops closer than this are one
@@ -246,15 +251,21 @@ def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b, 
 
 @njit(cache=True)
 def turning_stops(code, params, stops, n_stops, omax):
-    """Which of the stops are turning points of phi: |omega| on one side of the stop is below
-    TANGENCY_SHARE of ``omax``, max |omega| (``kinematic_stops``' second output: the same
-    threshold that keeps its near-tangencies; sampling it again on 1,025 points here had cost
-    26 us per solve, 6 % of a bench solve at rtol 1e-4): its zeros, the near-tangencies, and
-    the power law's corners where a phase starts or ends with omega = 0."""
-    out = np.zeros(n_stops, dtype=np.bool_)
+    """Which of the stops are turning points of phi, (n_stops,) int8: TURNING where |omega| on
+    one side of the stop is below TANGENCY_SHARE of ``omax``, max |omega|
+    (``kinematic_stops``' second output: the same threshold that keeps its near-tangencies;
+    sampling it again on 1,025 points here had cost 26 us per solve): its zeros, the
+    near-tangencies, flat inflections, and the power law's corners where a phase starts or
+    ends with omega = 0; SIMPLE_TURNING where moreover |omega'| there is at least
+    SIMPLE_SHARE of 2 pi omax (a harmonic motion's turning points: omega' = 2 pi omax),
+    so that omega grows away from it like a simple zero (``_sweep.TRAP_FLOOR``); 0 else."""
+    out = np.zeros(n_stops, dtype=np.int8)
     for j in range(n_stops):
         t = stops[j]
         left = angle_and_rate(code, params, t, t - 1e-9 if t > 0.0 else 1.0 - 1e-9)[1]
         right = angle_and_rate(code, params, t, t + 1e-9)[1]
-        out[j] = min(abs(left), abs(right)) < TANGENCY_SHARE * omax
+        if min(abs(left), abs(right)) < TANGENCY_SHARE * omax:
+            out[j] = TURNING
+            if abs(rate_slope(code, params, t, t + 1e-9)) >= SIMPLE_SHARE * 2.0 * math.pi * omax:
+                out[j] = SIMPLE_TURNING
     return out
