@@ -65,8 +65,9 @@ ERROR_ORDER = 5
 MAX_STAGE_ITERATIONS = 40
 #: Newton's first correction is taken as the last where the quadratic constant carried from
 #: the previous step predicts the next correction below this share of the tolerance
-#: (``radau5_step``'s ``rate``; measured on the bench at rtol 1e-7: 8,572 -> 7,512 force
-#: evaluations per solve, honesty harness unchanged, docs/validation.md)
+#: (``radau5_step``'s ``rate``).  A prediction, not a bound (stages up to 3.7e5 atol off were
+#: measured), so ``_sweep.adaptive_sweep`` uses it in the loose sweeps only (bench: 857 ->
+#: 601 evaluations per solve there; docs/validation.md)
 FIRST_CORRECTION_SHARE = 0.1
 #: ... and only where dF/du at the predicted stages is within this share of ``slope``
 SLOPE_SHARE = 0.25
@@ -223,7 +224,9 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.n
         Newton's quadratic constant K (1/u) observed on the previous step (its
         ``StepSolution.rate``; inf: none).  The first correction x is taken as the last
         when K |x|^2 <= FIRST_CORRECTION_SHARE atol (with the exact Jacobian the next
-        correction is about K |x|^2), which saves the second evaluation of most steps.
+        correction is about K |x|^2), which saves the second evaluation of most steps; the
+        stage error is then predicted, not measured (callers that need ``atol`` to hold pass
+        inf).
     slope : float
         dF/du at the previous step's end (NaN: none).  ``rate`` is used only where dF/du at
         the predicted stages lies within SLOPE_SHARE of it: across the friction's band
