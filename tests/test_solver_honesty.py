@@ -111,9 +111,9 @@ def test_failures_count_outside_rtol_and_non_finite_converged_results_are_silent
     assert outcome["silent_failures"] == 2
 
 
-def test_cached_solves_are_reused_only_for_the_same_points(tmp_path, monkeypatch):
-    """The cache returns the stored solves for the same points and recomputes for others
-    (or with ``refresh``); the engine is not run here."""
+def _counting_engine(monkeypatch):
+    """Replace the engine behind ``cached_solves`` by a stub; returns the list into which it
+    appends the number of points of each run."""
     calls = []
 
     def fake_run(kinematics, physics, method, rtol):
@@ -121,6 +121,13 @@ def test_cached_solves_are_reused_only_for_the_same_points(tmp_path, monkeypatch
         return _solves(np.arange(len(kinematics), dtype=float), np.ones(len(kinematics)))
 
     monkeypatch.setattr(honesty.Solves, "run", staticmethod(fake_run))
+    return calls
+
+
+def test_cached_solves_are_reused_only_for_the_same_points(tmp_path, monkeypatch):
+    """The cache returns the stored solves for the same points and recomputes for others
+    (or with ``refresh``); the engine is not run here."""
+    calls = _counting_engine(monkeypatch)
     kin, phys = solver.Harmonic([1.0, 1.1], [0.3, 0.3]), _physics(2)
     first, cached = honesty.cached_solves(kin, phys, "periodic", 1e-9, "s", tmp_path)
     again, cached_again = honesty.cached_solves(kin, phys, "periodic", 1e-9, "s", tmp_path)
@@ -197,13 +204,7 @@ def test_references_of_an_earlier_engine_are_reused_only_when_asked(tmp_path, mo
     """An edit in solver/ changes ``engine_digest``: the cached references are then
     recomputed, unless ``reuse``, which takes the earlier engine's file of the same points
     and says so; never another set of points."""
-    calls = []
-
-    def fake_run(kinematics, physics, method, rtol):
-        calls.append(len(kinematics))
-        return _solves(np.arange(len(kinematics), dtype=float), np.ones(len(kinematics)))
-
-    monkeypatch.setattr(honesty.Solves, "run", staticmethod(fake_run))
+    calls = _counting_engine(monkeypatch)
     kin, phys = solver.Harmonic([1.0, 1.1], [0.3, 0.3]), _physics(2)
     monkeypatch.setattr(honesty, "engine_digest", lambda: "aaaa")
     _, source = honesty.cached_solves(kin, phys, "periodic", 1e-9, "s", tmp_path)
