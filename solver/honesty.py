@@ -20,7 +20,9 @@ generator's parameters, printed above its table.  400 points each, seeded:
 ``long_period_powerlaw`` (scaled period 2^4 .. 2^8, delta 10^U(-10, -5)),
 ``fourier_clapping`` (K = 4; phi leaves (0, pi) on 60 % of the points), ``p0.5_harmonic``
 and ``p1.5_fourier`` (half of them at delta = 0), ``short_period_harmonic`` (scaled period
-2^-7 .. 2^-1); and ``bench``, the 2,000 points of ``python -m solver.bench``.
+2^-7 .. 2^-1), ``flat_inflection_fourier`` (sin^3 motions: omega vanishes at tau = 0, 1/2
+without changing sign; scaled period 2^-7 .. 1); and ``bench``, the 2,000 points of
+``python -m solver.bench``.
 
 Error norm
 ----------
@@ -190,6 +192,19 @@ def _short_period_harmonic(n, rng):
     return kin, _physics(rng, n, 8, (-7, -1), (1e-5, 1e-8))
 
 
+def _flat_inflection_fourier(n, rng):
+    """phi = A0 + c sin^3(2 pi tau) (B_1 = 3c/4, B_3 = -c/4: flat inflections at tau = 0, 1/2,
+    where omega vanishes without changing sign) plus small terms of wavenumbers 2 and 4."""
+    A0 = rng.uniform(0.5, np.pi - 0.5, n)
+    c = rng.uniform(0.3, 1.2, n) * rng.choice([-1.0, 1.0], n)
+    small = rng.uniform(-0.02, 0.02, (n, 4))
+    zero = np.zeros(n)
+    A = np.column_stack([A0, zero, small[:, 0], zero, small[:, 1]])
+    B = np.column_stack([0.75 * c, small[:, 2], -0.25 * c, small[:, 3]])
+    kin = solver.Fourier(A, B)
+    return kin, _physics(rng, n, 8, (-7, 0), (1e-5, 1e-8))
+
+
 def _bench(n, rng):
     kinematics, physics, _ = draw_points(n, rng)
     return kinematics, physics
@@ -243,6 +258,10 @@ SETS = {s.name: s for s in [
     PointSet("short_period_harmonic", 71, _short_period_harmonic,
              "Harmonic, A0 ~ U(0.3, pi/2), A1/A0 ~ U(0.2, 0.95); mu_n/mu_s 2^U(-8, 8), scaled "
              "period 2^U(-7, -1), delta from {1e-5, 1e-8}, p = 0"),
+    PointSet("flat_inflection_fourier", 81, _flat_inflection_fourier,
+             "Fourier phi = A0 + c sin^3(2 pi tau) + terms of size 0.02 at wavenumbers 2 and 4, "
+             "A0 ~ U(0.5, pi - 0.5), |c| ~ U(0.3, 1.2); mu_n/mu_s 2^U(-8, 8), scaled period "
+             "2^U(-7, 0), delta from {1e-5, 1e-8}, p = 0"),
     PointSet("bench", BENCH_SEED, _bench,
              "the points of python -m solver.bench (its draw_points, seed "
              f"{BENCH_SEED}): Harmonic, mu_n/mu_s 2^U(-8, 8), scaled period 2^U(-3, 3), "
