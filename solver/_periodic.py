@@ -80,6 +80,32 @@ def stage_tolerance(rtol, vscale):
 
 
 @njit(cache=True)
+def flip_cut(flipped, U, x):
+    """The factor (<= 1) a Newton step x of stage value U is cut by: where the previous
+    iterate flipped U's sign (``flipped``) and x flips it again keeping more than half of
+    |U|, the step is cut to land halfway to zero (see ``radau_step``)."""
+    if flipped and U * (U + x) < 0.0 and abs(U + x) > 0.5 * abs(U):
+        return -0.5 * U / x
+    return 1.0
+
+
+@njit(cache=True)
+def bracketed_newton_update(u0, g, one_minus_M, lo, hi):
+    """Newton's step on u(0) for the shooting residual g = u(1) - u(0) with 1 - M its
+    derivative, kept inside the bracket [lo, hi] of the fixed point (g > 0 below it, g < 0
+    above it) and bisecting where Newton leaves the bracket (the map need not be monotone:
+    the anisotropic law can amplify, M > 1 or M < 0).  Returns (new u0, lo, hi)."""
+    if g > 0.0:
+        lo = max(lo, u0)
+    else:
+        hi = min(hi, u0)
+    candidate = u0 + g / one_minus_M
+    if not (lo < candidate < hi):
+        candidate = 0.5 * (lo + hi)
+    return candidate, lo, hi
+
+
+@njit(cache=True)
 def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu_s, p, dtau,
                atol):
     """Solve one Radau IIA step from u_n, starting at the guess (U1, U2); sin_i, cos_i are
@@ -131,11 +157,7 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
         # (measured: 60 iterations oscillating at a rate of 0.93 before; a genuine reversal,
         # even one that overshoots once, shrinks faster and is not cut).  Not at p = 0,
         # where cutting the flips of the regularised sign cost 14 % more step-sweeps
-        cut = 1.0
-        if flipped1 and U1 * (U1 + x1) < 0.0 and abs(U1 + x1) > 0.5 * abs(U1):
-            cut = min(cut, -0.5 * U1 / x1)
-        if flipped2 and U2 * (U2 + x2) < 0.0 and abs(U2 + x2) > 0.5 * abs(U2):
-            cut = min(cut, -0.5 * U2 / x2)
+        cut = min(1.0, flip_cut(flipped1, U1, x1), flip_cut(flipped2, U2, x2))
         if cut < 1.0:
             x1 *= cut
             x2 *= cut
@@ -310,16 +332,7 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
         if abs(g) <= tol_fix * abs(one_minus_M):
             status = CONVERGED
             break
-        # keep the bracket of a fixed point and bisect when Newton leaves it (the map need
-        # not be monotone: the anisotropic law can amplify, M > 1 or M < 0)
-        if g > 0.0:
-            lo = max(lo, u0)
-        else:
-            hi = min(hi, u0)
-        candidate = u0 + g / one_minus_M
-        if not (lo < candidate < hi):
-            candidate = 0.5 * (lo + hi)
-        u0 = candidate
+        u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
     if status == CONVERGED and not (abs(u0) < 0.999 * bound):
         status = NOT_PERIODIC  # converged onto the edge of the bracket: no fixed point inside
     if status != CONVERGED:

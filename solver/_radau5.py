@@ -41,6 +41,7 @@ import numpy as np
 from numba import njit
 
 from ._force import force_slope_power_sc
+from ._periodic import flip_cut
 
 _S6 = math.sqrt(6.0)
 #: Radau IIA, 3 stages (Butcher tableau): nodes, matrix and weights (= last row).
@@ -274,13 +275,8 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.n
             F3 += d3 * x3
             ok = math.isfinite(U1) and math.isfinite(U2) and math.isfinite(U3)
             break
-        cut = 1.0
-        if flipped1 and U1 * (U1 + x1) < 0.0 and abs(U1 + x1) > 0.5 * abs(U1):
-            cut = min(cut, -0.5 * U1 / x1)
-        if flipped2 and U2 * (U2 + x2) < 0.0 and abs(U2 + x2) > 0.5 * abs(U2):
-            cut = min(cut, -0.5 * U2 / x2)
-        if flipped3 and U3 * (U3 + x3) < 0.0 and abs(U3 + x3) > 0.5 * abs(U3):
-            cut = min(cut, -0.5 * U3 / x3)
+        cut = min(1.0, flip_cut(flipped1, U1, x1), flip_cut(flipped2, U2, x2),
+                  flip_cut(flipped3, U3, x3))
         if cut < 1.0:
             x1 *= cut
             x2 *= cut

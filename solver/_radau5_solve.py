@@ -34,7 +34,8 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from ._global_error import combine, local_error_estimate, node_weights, refinement_ceiling
-from ._periodic import monodromy_factor, one_minus_monodromy, stage_tolerance
+from ._periodic import (bracketed_newton_update, monodromy_factor, one_minus_monodromy,
+                        stage_tolerance)
 from ._radau5 import ERROR_ORDER, PointPhysics
 from ._status import CONVERGED, NON_FINITE, NOT_PERIODIC, TOLERANCE_NOT_REACHED
 from ._sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
@@ -98,21 +99,6 @@ def _period_map(W, N, u0):
     for n in range(N):
         log_m, sign_m = monodromy_factor(log_m, sign_m, W[M_MINUS_1, n])
     return W[U, N] - u0, one_minus_monodromy(log_m, sign_m)
-
-
-@njit(cache=True)
-def _newton_update(u0, g, one_minus_M, lo, hi):
-    """Newton's step on u(0) kept inside the bracket [lo, hi] of the fixed point (g > 0 below
-    it, g < 0 above it: friction decelerates a fast body within a period); bisection where
-    Newton leaves the bracket.  Returns (new u0, lo, hi)."""
-    if g > 0.0:
-        lo = max(lo, u0)
-    else:
-        hi = min(hi, u0)
-    candidate = u0 + g / one_minus_M
-    if not (lo < candidate < hi):
-        candidate = 0.5 * (lo + hi)
-    return candidate, lo, hi
 
 
 @njit(cache=True)
@@ -210,7 +196,7 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
             return W, nan, nan, u0, NON_FINITE, N, sweeps, math.inf, evals
         node_weights(W, N, one_minus_M)
         model = _model(W, N, np.full(N, math.inf))
-        u_new, lo, hi = _newton_update(u0, g, one_minus_M, lo, hi)
+        u_new, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
         moved = abs(u_new - u0)
         u0 = u_new
         if moved <= loose * vscale:
@@ -243,7 +229,7 @@ def solve_point(code, params, corners, phys, rtol, vscale, u_guess, max_steps, W
             if abs(g) <= tol_fix * abs(one_minus_M):
                 converged = True
                 break
-            u0, lo, hi = _newton_update(u0, g, one_minus_M, lo, hi)
+            u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
             status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
             sweeps += 1
             evals[COST_FROZEN] += e
@@ -308,7 +294,7 @@ def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
             _shift(W, N, g / one_minus_M)
             int_u, int_p = _integrals(W, N)
             return int_u, int_p, CONVERGED
-        u0, lo, hi = _newton_update(u0, g, one_minus_M, lo, hi)
+        u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
         status, _ = frozen_sweep(code, params, phys, u0, phys_atol, W, N)
     return math.nan, math.nan, NOT_PERIODIC
 
