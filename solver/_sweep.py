@@ -244,46 +244,32 @@ def _model_at(model, t, k):
 
 
 @njit(cache=True)
+def _put3(W, row, n, a, b, c):
+    """Rows row .. row + 2 of column n: the three stages' values a, b, c."""
+    W[row, n] = a
+    W[row + 1, n] = b
+    W[row + 2, n] = c
+
+
+@njit(cache=True)
 def _record(W, n, t0, h, u_n, sol, err, kin, end_kind):
     W[T, n] = t0
     W[T, n + 1] = t0 + h
     W[U, n] = u_n
     W[U, n + 1] = sol.U3
-    W[STAGE, n] = sol.U1
-    W[STAGE + 1, n] = sol.U2
-    W[STAGE + 2, n] = sol.U3
-    W[POWER, n] = sol.P1
-    W[POWER + 1, n] = sol.P2
-    W[POWER + 2, n] = sol.P3
-    W[SENS, n] = sol.s1
-    W[SENS + 1, n] = sol.s2
-    W[SENS + 2, n] = sol.s3
-    W[PU_STAGE, n] = sol.Pu1
-    W[PU_STAGE + 1, n] = sol.Pu2
-    W[PU_STAGE + 2, n] = sol.Pu3
+    _put3(W, STAGE, n, sol.U1, sol.U2, sol.U3)
+    _put3(W, POWER, n, sol.P1, sol.P2, sol.P3)
+    _put3(W, SENS, n, sol.s1, sol.s2, sol.s3)
+    _put3(W, PU_STAGE, n, sol.Pu1, sol.Pu2, sol.Pu3)
+    _put3(W, SLOPE, n, sol.d1, sol.d2, sol.d3)
+    _put3(W, SIN, n, kin.S1, kin.S2, kin.S3)
+    _put3(W, COS, n, kin.C1, kin.C2, kin.C3)
+    _put3(W, OMEGA, n, kin.om1, kin.om2, kin.om3)
+    _put3(W, ERR, n, err.u, err.int_u, err.int_pi)
     W[M_MINUS_1, n] = sol.m_minus_1
-    q_u, q_p = step_weights(h, sol)
-    W[Q_U, n] = q_u
-    W[Q_P, n] = q_p
-    i_u, i_p = step_integrals(h, sol)
-    W[INT_U, n] = i_u
-    W[INT_P, n] = i_p
-    W[ERR, n] = err.u
-    W[ERR + 1, n] = err.int_u
-    W[ERR + 2, n] = err.int_pi
-    W[SIN, n] = kin.S1
-    W[SIN + 1, n] = kin.S2
-    W[SIN + 2, n] = kin.S3
-    W[COS, n] = kin.C1
-    W[COS + 1, n] = kin.C2
-    W[COS + 2, n] = kin.C3
-    W[OMEGA, n] = kin.om1
-    W[OMEGA + 1, n] = kin.om2
-    W[OMEGA + 2, n] = kin.om3
+    W[Q_U, n], W[Q_P, n] = step_weights(h, sol)
+    W[INT_U, n], W[INT_P, n] = step_integrals(h, sol)
     W[END_KIND, n] = end_kind
-    W[SLOPE, n] = sol.d1
-    W[SLOPE + 1, n] = sol.d2
-    W[SLOPE + 2, n] = sol.d3
     W[F_END, n] = sol.F3
 
 
@@ -696,9 +682,9 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
 @njit(cache=True)
 def stage_kinematics_into(code, params, W, n):
     kin = stage_kinematics(code, params, W[T, n], W[T, n + 1] - W[T, n])
-    W[SIN, n], W[SIN + 1, n], W[SIN + 2, n] = kin.S1, kin.S2, kin.S3
-    W[COS, n], W[COS + 1, n], W[COS + 2, n] = kin.C1, kin.C2, kin.C3
-    W[OMEGA, n], W[OMEGA + 1, n], W[OMEGA + 2, n] = kin.om1, kin.om2, kin.om3
+    _put3(W, SIN, n, kin.S1, kin.S2, kin.S3)
+    _put3(W, COS, n, kin.C1, kin.C2, kin.C3)
+    _put3(W, OMEGA, n, kin.om1, kin.om2, kin.om3)
 
 
 @njit(cache=True)
