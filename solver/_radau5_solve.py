@@ -352,14 +352,24 @@ def solve_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale
     return int_u, int_pi, u0, status, n_steps, sweeps, estimate, evaluations
 
 
-@njit(cache=True)
-def point_series(code, params, corners, phys, rtol, vscale, u_guess, max_steps):
-    """``solve_point`` of one point, returning also (tau at the nodes, u at the nodes)
-    without tau = 1."""
-    W = new_workspace(START_CAPACITY)
-    W, int_u, int_pi, u0, status, N, sweeps, estimate, _ = solve_point(
-        code, params, corners, phys, rtol, vscale, u_guess, max_steps, W)
-    return W[T, :N].copy(), W[U, :N].copy(), status
+@njit(cache=True, parallel=True)
+def series_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, vscale, u_guess,
+                  max_steps, offsets, tau_out, u_out):
+    """``solve_point`` of every point again (it is deterministic), writing the final grid's
+    nodes without tau = 1 and u there into ``tau_out`` / ``u_out`` from ``offsets[i]`` on
+    (``solve_points``' n_steps apart).  Returns each point's node count."""
+    n = params.shape[0]
+    counts = np.zeros(n, dtype=np.int64)
+    for i in prange(n):
+        W = new_workspace(START_CAPACITY)
+        phys = PointPhysics(kappa[i], mu_n[i], mu_s[i], p[i], dtau[i])
+        W, _, _, _, _, N, _, _, _ = solve_point(code, params[i], corners[i], phys, rtol,
+                                                vscale[i], u_guess[i], max_steps, W)
+        N = min(N, offsets[i + 1] - offsets[i])
+        tau_out[offsets[i]:offsets[i] + N] = W[T, :N]
+        u_out[offsets[i]:offsets[i] + N] = W[U, :N]
+        counts[i] = N
+    return counts
 
 
 def solve(kinematics, physics, rtol, max_steps, return_series):
@@ -383,12 +393,15 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
     int_u, int_pi, u0, status, n_steps, sweeps, estimate, evaluations = out
     series = None
     if return_series:
-        series = []
-        for i in range(len(kinematics)):
-            phys = PointPhysics(physics.inertia_factor[i], physics.mu_n[i], physics.mu_s[i],
-                                physics.p[i], physics.delta_tau[i])
-            tau, u, _ = point_series(code, params[i], corners[i], phys, float(rtol),
-                                     max(vscale[i], 1e-300), u_guess[i], int(max_steps))
-            series.append((u, tau))
+        offsets = np.concatenate([[0], np.cumsum(n_steps)])
+        tau_out = np.empty(offsets[-1])
+        u_out = np.empty(offsets[-1])
+        counts = series_points(code, params, corners, physics.inertia_factor, physics.mu_n,
+                               physics.mu_s, physics.p, physics.delta_tau, float(rtol),
+                               np.maximum(vscale, 1e-300), u_guess, int(max_steps), offsets,
+                               tau_out, u_out)
+        if not np.array_equal(counts, n_steps):
+            raise RuntimeError("radau5: a point's second solve for its series took another grid")
+        series = [(u_out[a:b], tau_out[a:b]) for a, b in zip(offsets[:-1], offsets[1:])]
     return dict(int_u=int_u, int_pi=int_pi, status=status, estimate=estimate, n_tau=n_steps,
                 iterations=sweeps, still=~moving, series=series, evaluations=evaluations)

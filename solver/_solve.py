@@ -558,10 +558,10 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
         physics = physics.take(np.zeros(n, dtype=int))
     code, params = kinematics.kernel_encoding()
     vscale = kinematic_speed(kinematics)
-    u0 = fast_limit_velocity(kinematics, physics) if method == "periodic" else np.zeros(n)
+    u0 = (fast_limit_velocity(kinematics, physics) if method in ("periodic", "radau5")
+          else np.zeros(n))
     grids = period_grid(kinematics, n_steps)
     if method == "radau5":
-        u0 = fast_limit_velocity(kinematics, physics)
         return _radau5_solve.fixed_grid_points(
             code, params, grids, physics.inertia_factor, physics.mu_n, physics.mu_s, physics.p,
             physics.delta_tau, float(rtol), np.maximum(vscale, 1e-300), u0)
