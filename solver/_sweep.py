@@ -343,20 +343,38 @@ def trap_ceiling(code, params, phys, t_z, side, u):
 
 
 @njit(cache=True)
-def _stop_reach(code, params, phys, t, u, f0, band):
-    """How far from (t, u) the line of g = u + omega S / 4, with the slipping body's slope
-    kappa F + (omega S / 4)', reaches the friction's band (p = 0), or -1 where g does not
-    approach it (or is in it already)."""
+def _stop_reach(phys, u, f0, band, S, C, om, om_slope):
+    """How far from u the line of g = u + omega S / 4, with the slipping body's slope
+    kappa F + (omega S / 4)' = f0 + (om_slope S + om^2 C) / 4 (S, C: sin phi, cos phi;
+    om_slope: d omega / d tau), reaches the friction's band (p = 0), or -1 where g does not
+    approach it (or is in it already).  A prediction where to end the next step (the stop
+    itself is located on the solved step, ``find_event``)."""
     if phys.p != 0.0 or band <= 0.0:
         return -1.0
-    phi, om = angle_and_rate(code, params, t, t + 1e-9)
-    S = math.sin(phi)
     g = u + 0.25 * om * S
     if abs(g) <= band:
         return -1.0
-    slope = f0 + 0.25 * (rate_slope(code, params, t, t + 1e-9) * S + om * om * math.cos(phi))
+    slope = f0 + 0.25 * (om_slope * S + om * om * C)
     reach = (math.copysign(band, g) - g) / slope if slope != 0.0 else -1.0
     return reach if reach > 0.0 else -1.0
+
+
+@njit(cache=True)
+def _stop_reach_at(code, params, phys, t, u, f0, band):
+    """``_stop_reach`` from (t, u) with the kinematics on the right of t evaluated afresh
+    (at tau = 0 and after a corner of phi)."""
+    if phys.p != 0.0 or band <= 0.0:
+        return -1.0
+    phi, om = angle_and_rate(code, params, t, t + 1e-9)
+    return _stop_reach(phys, u, f0, band, math.sin(phi), math.cos(phi), om,
+                       rate_slope(code, params, t, t + 1e-9))
+
+
+#: d/dtheta at theta = 1 of the quadratic through a step's stages (c1, c2, 1): omega's slope
+#: at the step's end from its stage values (``_stop_reach`` after an ordinary step)
+_D1 = (1.0 - C2) / ((C1 - C2) * (C1 - 1.0))
+_D2 = (1.0 - C1) / ((C2 - C1) * (C2 - 1.0))
+_D3 = 1.0 / (1.0 - C1) + 1.0 / (1.0 - C2)
 
 
 @njit(cache=True)
@@ -467,7 +485,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     stretch = True  # the proposal may be stretched to a stop (not after a rejection)
     evaluations = 1
     band = EVENT_BAND * phys.dtau
-    stop_reach = _stop_reach(code, params, phys, t, u, f0, band)
+    stop_reach = _stop_reach_at(code, params, phys, t, u, f0, band)
     # Newton's quadratic constant, carried from step to step (``radau5_step``), in the loose
     # sweeps only (``sharp`` False): it does not bound the stage error (a reviewer measured
     # stages accepted up to 3.7e5 atol off: the constant goes stale over one-correction steps
@@ -606,10 +624,12 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
             f0, J0, P0, Pu0 = start_values(code, params, t, t + 1e-9, u, phys)
             phi0, om0 = angle_and_rate(code, params, t, t + 1e-9)
             S0 = math.sin(phi0)
+            stop_reach = _stop_reach_at(code, params, phys, t, u, f0, band)
         else:
             f0, J0, P0, Pu0 = phys.kappa * sol.F3, phys.kappa * sol.d3, sol.P3, sol.Pu3
             S0, om0 = kin.S3, kin.om3
-        stop_reach = _stop_reach(code, params, phys, t, u, f0, band)
+            stop_reach = _stop_reach(phys, u, f0, band, kin.S3, kin.C3, kin.om3,
+                                     (_D1 * kin.om1 + _D2 * kin.om2 + _D3 * kin.om3) / h)
         h = h_next
     W[T, n] = 1.0
     return W, n, status, h, evaluations
