@@ -151,6 +151,21 @@ def _refine_root(k, code, params, a, b, fa, fb, side):
 
 
 @njit(cache=True)
+def stop_speed(code, params, stops, n_stops):
+    """V = (1/4) int_0^1 |dphi/dtau| dtau (``_limits.kinematic_speed``) from phi at the
+    ``kinematic_stops``: phi is monotone between them (they hold every zero of omega and
+    every corner), so a quarter of the sum of |phi| differences across them is exact."""
+    total = 0.0
+    before = angle_and_rate(code, params, 0.0, 0.0)[0]
+    for j in range(1, n_stops + 1):
+        t = stops[j] if j < n_stops else 1.0
+        phi = angle_and_rate(code, params, t, t)[0]  # (phi is continuous: any side)
+        total += abs(phi - before)
+        before = phi
+    return 0.25 * total
+
+
+@njit(cache=True)
 def kinematic_stops(code, params, corners, out):
     """The step ends every sweep of a point keeps: 0, the corners of phi, the zeros of sin phi,
     cos phi and omega, and the near-tangencies (minima of |omega| below TANGENCY_SHARE of
