@@ -31,7 +31,8 @@ from numba import njit
 
 from ._radau5 import ERROR_ORDER
 from ._radau5 import StepError
-from ._sweep import ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q_P, Q_U, T, floored_errors
+from ._sweep import (ACCEPT_STEP, ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q_P, Q_U, T,
+                     floored_errors)
 
 
 @njit(cache=True)
@@ -84,13 +85,17 @@ def combine(error_u, error_p, scale_u, scale_p):
 def refinement_ceiling(W, N, shares, target, ceilings):
     """Per step, the largest step the next adaptive sweep may take inside it: inf where the
     step's share is within ``target`` times its length, else its length times
-    (target h / share)^(1 / ERROR_ORDER).  Returns how many steps ask for refinement."""
+    (target h / share)^(1 / ERROR_ORDER), at least ``_sweep.ACCEPT_STEP``.  Returns how many
+    steps ask for refinement."""
     asked = 0
     for n in range(N):
         h = W[T, n + 1] - W[T, n]
         ratio = shares[n] / (target * h)
         if ratio > 1.0:
             ceilings[n] = h * ratio ** (-1.0 / ERROR_ORDER) if math.isfinite(ratio) else 0.25 * h
+            # (not below ACCEPT_STEP, which the sweep takes whatever its error: a step of 1e-13
+            # cut to a state event asked for 1.2e-13, below MIN_STEP, and the sweep failed)
+            ceilings[n] = max(ceilings[n], ACCEPT_STEP)
             asked += 1
         else:
             ceilings[n] = math.inf

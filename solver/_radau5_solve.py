@@ -41,7 +41,7 @@ from ._radau5 import ERROR_ORDER, PointPhysics
 from ._status import CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, TOLERANCE_NOT_REACHED
 from ._sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
                      SENS, STAGE, T, U, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
-                     event_split_errors, new_workspace, stage_kinematics_into)
+                     event_split_errors, new_workspace, stage_kinematics_into, trapped_steps)
 from ._switching import MAX_STOPS, kinematic_stops, stop_speed, turning_stops
 
 #: the stage tolerance is at most this share of delta_tau (p = 0; ``_stage_atol``)
@@ -273,14 +273,22 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         shares = np.zeros(N)
         e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
         estimate = combine(e_u, e_p, scale_u, scale_p)
-        if estimate <= rtol:
+        # the steps next to turning points judged again by the converged u (``trapped_steps``)
+        trap_caps = np.full(N, math.inf)
+        trapped, e = trapped_steps(code, params, phys, stops, stop_is_corner, stop_is_turning,
+                                   n_stops, W, N, trap_caps)
+        evals[COST_ESTIMATE] += e
+        if estimate <= rtol and trapped == 0:
             return W, PointSolution(int_u, int_p, u0, CONVERGED, N, sweeps, estimate, evals, vscale)
-        ceilings = np.empty(N)
-        asked = refinement_ceiling(W, N, shares, TARGET_SHARE * rtol, ceilings)
-        if asked == 0:
-            shrink = 0.9 * (rtol / estimate) ** (1.0 / ERROR_ORDER)
-            for n in range(N):
-                ceilings[n] = shrink * (W[T, n + 1] - W[T, n])
+        ceilings = np.full(N, math.inf)
+        if estimate > rtol:
+            asked = refinement_ceiling(W, N, shares, TARGET_SHARE * rtol, ceilings)
+            if asked == 0:
+                shrink = 0.9 * (rtol / estimate) ** (1.0 / ERROR_ORDER)
+                for n in range(N):
+                    ceilings[n] = shrink * (W[T, n + 1] - W[T, n])
+        for n in range(N):
+            ceilings[n] = min(ceilings[n], trap_caps[n])
         model = _model(W, N, ceilings)
         h_first = min(h_first, W[T, 1] - W[T, 0])
     return W, PointSolution(nan, nan, u0, TOLERANCE_NOT_REACHED, N, sweeps, estimate, evals, vscale)
