@@ -293,3 +293,22 @@ def test_flat_inflections_are_honest_at_tight_tolerances():
            _flat_inflection_errors(Ts, np.geomspace(2e-6, 3e-5, 8))
            if not (converged and error <= rtol)]
     assert not bad, bad
+
+
+def test_exponential_moments_match_quadrature():
+    """Both branches of ``_radau5.exponential_moments`` (the power series from tables for
+    |z| <= 1, the recurrence beyond) against adaptive quadrature of their definitions."""
+    from scipy.integrate import quad
+
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        z = rng.choice([-1.0, 1.0]) * 10.0 ** rng.uniform(-6.0, 1.5)
+        q = rng.normal(size=5)
+        s_i, s_g = _radau5.exponential_moments(z, *q)
+        ref_i = sum(q[k - 1] * quad(lambda x, k=k: x ** k * np.exp(z * x), 0.0, 1.0,
+                                    epsabs=0.0, epsrel=1e-13)[0] for k in range(1, 6))
+        ref_g = sum(q[k - 1] * quad(lambda x, k=k: x ** k * np.expm1(z * x) / z, 0.0, 1.0,
+                                    epsabs=0.0, epsrel=1e-13)[0] for k in range(1, 6))
+        scale = sum(abs(q))  # (the moments of x^k are at most e^|z| / (k + 1))
+        assert abs(s_i - ref_i) <= 1e-12 * scale * np.exp(abs(z)), (z, s_i, ref_i)
+        assert abs(s_g - ref_g) <= 1e-12 * scale * np.exp(abs(z)), (z, s_g, ref_g)
