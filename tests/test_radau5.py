@@ -333,3 +333,27 @@ def test_stiff_slipping_steps_estimate_int_u_with_the_slope_along_the_step():
         error = max(abs(res.U[0] - ref.U[0]) * T / scale_u, abs(res.P[0] - ref.P[0]) / ref.P[0])
         assert error <= rtol and error <= 1.5 * res.error_estimate[0], \
             (rtol, error / rtol, res.error_estimate[0] / rtol)
+
+
+@pytest.mark.parametrize("kin, physics, rtol", [
+    # (a reviewer's: the quasi-static int u estimate alone had these 2.30 and 3.60 rtol off,
+    # estimates 0.24 and 0.32: steps of z -5.7e4 and -1.2e5 whose int u error is the layer
+    # at the step's end, 65-72x above it)
+    (solver.Harmonic([0.43465513771918735], [0.23221230863734216]),
+     solver.Physics(period=[38.96459452247917], mu_n=[0.03932523691623537],
+                    mu_s=[25.428963139625775], p=0.0, delta=1e-8), 1e-3),
+    (solver.PowerLaw([0.5064232992979214], [0.09747009950232777], [0.16451247057164184],
+                     [1.849942294102353], [False], [6.474978284969251], [True]),
+     solver.Physics(period=[8.023701219837724], mu_n=[0.06590988437878385],
+                    mu_s=[15.172231136880834], p=0.0, delta=1e-8), 1.5849e-6),
+])
+def test_stiff_steps_keep_the_layer_in_int_u_error(kin, physics, rtol):
+    """On stiff steps int u's error is the larger of the one-slope moment (which holds the
+    end layer) and the quasi-static estimate (which holds the slope's change)."""
+    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-9)
+    assert ref.converged[0]
+    T = physics.period[0]
+    scale_u = max(abs(ref.U[0]) * T, 1e-3 * solver.kinematic_speed(kin)[0])
+    res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
+    error = max(abs(res.U[0] - ref.U[0]) * T / scale_u, abs(res.P[0] - ref.P[0]) / ref.P[0])
+    assert res.converged[0] and error <= rtol, (error / rtol, res.error_estimate[0] / rtol)
