@@ -357,3 +357,15 @@ def test_stiff_steps_keep_the_layer_in_int_u_error(kin, physics, rtol):
     res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
     error = max(abs(res.U[0] - ref.U[0]) * T / scale_u, abs(res.P[0] - ref.P[0]) / ref.P[0])
     assert res.converged[0] and error <= rtol, (error / rtol, res.error_estimate[0] / rtol)
+
+
+def test_a_near_tangency_on_a_sample_is_a_stop():
+    """phi = A0 + B1 sin(2 pi tau) - (B1 / 3) sin(6 pi tau): omega has a double zero at
+    tau = 0.5, where omega' vanishes exactly on the middle sample of the search (a
+    reviewer's point; the stop was missed and a step across it was 30x under-estimated)."""
+    kin = solver.Fourier([[2.112571090023332, 0.0, 0.0, 0.0, 0.0]],
+                         [[0.8814484713883943, 0.0, -0.29377653802312464, 0.0]])
+    code, params = kin.kernel_encoding()
+    stops = np.empty(_switching.MAX_STOPS)
+    count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
+    assert np.any(np.abs(stops[:count] - 0.5) < 1e-12), stops[:count]
