@@ -17,7 +17,9 @@ STATUS_REASONS = {
     NON_FINITE: "NaN or inf in the iterates",
     UNSTABLE: "explicit march unstable: step too large for the stiff friction (use method='periodic')",
     STEP_BUDGET_EXCEEDED: "step budget exhausted before the march became periodic",
-    TOLERANCE_NOT_REACHED: "finest grid reached before the error estimate fell below rtol",
+    TOLERANCE_NOT_REACHED: "finest grid reached before the error estimate fell below rtol "
+                           "(radau5: its refinement rounds ran out, or a step next to a "
+                           "turning point of phi was still over its trap ceiling)",
     NO_MOTION: "phi is constant: the body does not move and the efficiency is undefined",
     OUT_OF_RANGE: "converged, but U or P is outside the floating-point range (extreme period or "
                   "friction scale): rescale (the scaled outputs depend only on mu_n/mu_s, the "
