@@ -350,6 +350,30 @@ def trap_ceiling(code, params, phys, t_z, side, u):
     return TRAP_SHARE * abs(u) / abs(kF)
 
 
+@njit(cache=True)
+def step_turning(stops, stop_is_turning, n_stops, j_end, j_start):
+    """The turning point of phi a step is next to, (tau, its stop's index) or (-1, -1): the
+    stop the step ends on (index ``j_end``; n_stops is tau = 1, stop 0 of the next period),
+    else the one it starts from (``j_start``); -1: the step does not end / start on a stop."""
+    if j_end >= 0:
+        i = j_end if j_end < n_stops else 0
+        if stop_is_turning[i]:
+            return (stops[j_end] if j_end < n_stops else 1.0), i
+    if j_start >= 0 and stop_is_turning[j_start]:
+        return stops[j_start], j_start
+    return -1.0, -1
+
+
+@njit(cache=True)
+def trap_limit(code, params, phys, turning, i, stop_is_corner, stop_is_turning, side, u):
+    """``trap_ceiling`` at the turning point of stop i, floored at TRAP_FLOOR where it is
+    simple (``_switching.SIMPLE_TURNING``: a simple zero of omega, no corner of phi)."""
+    cap = trap_ceiling(code, params, phys, turning, side, u)
+    if stop_is_turning[i] == SIMPLE_TURNING and not stop_is_corner[i]:
+        cap = max(cap, TRAP_FLOOR)
+    return cap
+
+
 #: at the converged solution a step next to a turning point may exceed its ``trap_ceiling``
 #: by this factor before the round is rejected (the shooting's last shift moves u a little)
 TRAP_SLACK = 2.0
@@ -380,26 +404,16 @@ def trapped_steps(code, params, phys, stops, stop_is_corner, stop_is_turning, n_
         h = W[T, n + 1] - t
         while j < n_stops and stops[j] < t:
             j += 1
-        # as in ``adaptive_sweep``: the turning point the step ends on, else the one it
-        # starts from
-        k = j + 1 if j < n_stops and stops[j] == t else j
-        end = stops[k] if k < n_stops else 1.0
-        kk = k if k < n_stops else 0
-        turning = -1.0
-        simple = False
-        if W[T, n + 1] == end and stop_is_turning[kk]:
-            turning = end
-            simple = stop_is_turning[kk] == SIMPLE_TURNING and not stop_is_corner[kk]
-        elif j < n_stops and stops[j] == t and stop_is_turning[j]:
-            turning = t
-            simple = stop_is_turning[j] == SIMPLE_TURNING and not stop_is_corner[j]
-        if turning < 0.0 or stop_is_corner[kk if turning == end else j]:
+        starts = j < n_stops and stops[j] == t
+        k = j + 1 if starts else j  # the next stop after t (n_stops: tau = 1)
+        ends = W[T, n + 1] == (stops[k] if k < n_stops else 1.0)
+        turning, i = step_turning(stops, stop_is_turning, n_stops, k if ends else -1,
+                                  j if starts else -1)
+        if turning < 0.0 or stop_is_corner[i]:
             continue
-        cap = trap_ceiling(code, params, phys, turning, t + 0.5 * h, W[U, n])
+        cap = max(trap_limit(code, params, phys, turning, i, stop_is_corner, stop_is_turning,
+                             t + 0.5 * h, W[U, n]), ACCEPT_STEP)
         evaluations += 1
-        if simple:
-            cap = max(cap, TRAP_FLOOR)
-        cap = max(cap, ACCEPT_STEP)
         if h > TRAP_SLACK * cap:
             ceilings[n] = min(ceilings[n], cap)
             count += 1
@@ -580,20 +594,13 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
         elif 2.0 * h > room:
             h = 0.5 * room
         # a step next to a turning point of phi must not let the friction there stop the body
-        turning = -1.0
-        simple = False  # (a simple zero of omega, no corner of phi: ``TRAP_FLOOR``)
-        if at_stop and stop_is_turning[next_stop if next_stop < n_stops else 0]:
-            turning = t_stop
-            j = next_stop if next_stop < n_stops else 0
-            simple = stop_is_turning[j] == SIMPLE_TURNING and not stop_is_corner[j]
-        elif next_stop >= 1 and t == stops[next_stop - 1] and stop_is_turning[next_stop - 1]:
-            turning = t
-            simple = (stop_is_turning[next_stop - 1] == SIMPLE_TURNING
-                      and not stop_is_corner[next_stop - 1])
+        turning, j = step_turning(stops, stop_is_turning, n_stops,
+                                  next_stop if at_stop else -1,
+                                  next_stop - 1 if next_stop >= 1 and t == stops[next_stop - 1]
+                                  else -1)
         if turning >= 0.0:
-            cap = trap_ceiling(code, params, phys, turning, t + 0.5 * h, u)
-            if simple:
-                cap = max(cap, TRAP_FLOOR)
+            cap = trap_limit(code, params, phys, turning, j, stop_is_corner, stop_is_turning,
+                             t + 0.5 * h, u)
             if h > cap:
                 h = max(cap, ACCEPT_STEP)
                 at_stop = False
