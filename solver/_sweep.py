@@ -496,9 +496,8 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
                                           sol.U3, f_a, f_b, th_a, th_b, band)
                 if first_cut:
                     phi, om = angle_and_rate(code, params, t0, t0 + 0.5 * h)
-                    slope = f0 + 0.25 * (rate_slope(code, params, t0, t0 + 0.5 * h)
-                                         * math.sin(phi) + om * om * math.cos(phi))
-                    reach = (math.copysign(band, g0) - g0) / slope if slope != 0.0 else -1.0
+                    reach = _stop_reach(phys, u_n, f0, band, math.sin(phi), math.cos(phi), om,
+                                        rate_slope(code, params, t0, t0 + 0.5 * h))
                     if reach > 0.0:
                         stop = max(stop, min(reach / h, 1.0))
                 theta = min(theta, stop)
