@@ -161,6 +161,34 @@ def test_link_moments_in_the_closed_form_regime(p):
         assert np.all(np.abs(got - ref) <= 1e-13 * size), (a, b, e2, got, ref)
 
 
+def test_coulomb_moments_with_the_kink_on_the_link_match_the_reference():
+    """p = 0 with w of opposite signs at the link's ends (the kink on the link): m_0^0 =
+    (asinh(w2/e) - asinh(w1/e)) / b as one log of a product (``_moments_closed_coulomb``),
+    against 30 digits, over 12 decades of e / |b|; and a |u| ~ 1e100 iterate, whose product
+    overflows, by the asinh form (finite, not inf)."""
+    from solver._force import SWITCH_RATIO, link_moments
+
+    rng = np.random.default_rng(7)
+    checked = 0
+    while checked < 40:
+        b = rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-6, 1)
+        a = -b * rng.uniform(0.0, 0.5)  # w1 = a and w2 = a + b / 2 of opposite signs
+        e2 = (abs(b) * 10 ** rng.uniform(-12, 0)) ** 2
+        gap = max(abs(a + 0.25 * b) - 0.25 * abs(b), 0.0)
+        if gap * gap + e2 >= (SWITCH_RATIO * 0.25 * abs(b)) ** 2:
+            continue
+        checked += 1
+        ref, size = _moment_reference(a, b, e2, 0.0)
+        got = np.array(link_moments(a, b, e2, 0.0))
+        assert abs(got[0] - ref[0]) <= 4e-15 * abs(ref[0]), (a, b, e2, got[0], ref[0])
+        assert np.all(np.abs(got - ref) <= 1e-13 * size), (a, b, e2, got, ref)
+    a, b, e2 = -1e100, 4e100, 1e-120  # ((|w| + r) / e)^2 ~ 4e320 overflows
+    factor = (abs(a) + math.hypot(a, 1e-60)) / 1e-60
+    assert factor * factor == math.inf
+    expected = 2.0 * math.asinh(1e160) / b
+    assert link_moments(a, b, e2, 0.0)[0] == pytest.approx(expected, rel=1e-14)
+
+
 def test_link_moments_of_a_nan_iterate_at_zero_rate_are_nan_not_an_exception():
     """omega = 0 (b = 0) with a NaN stage iterate (a diverged Newton step, delta 1e-10 at
     power-law corners) took the closed forms and their 1 / b, which raised
