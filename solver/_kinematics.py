@@ -228,6 +228,20 @@ def _fourier(params, tau):
 
 
 @njit(cache=True)
+def _fourier_rate_slope(params, tau):
+    """d^2 phi / d tau^2 of eq. (Fourier): -(2 pi)^2 sum_k k^2 (A_k cos + B_k sin)(2 pi k tau)."""
+    K = int(params[0])
+    c1 = math.cos(2.0 * math.pi * tau)
+    s1 = math.sin(2.0 * math.pi * tau)
+    ca, sa = 1.0, 0.0
+    slope = 0.0
+    for k in range(1, K + 1):
+        ca, sa = ca * c1 - sa * s1, sa * c1 + ca * s1
+        slope -= (2.0 * math.pi * k) ** 2 * (params[1 + k] * ca + params[K + 1 + k] * sa)
+    return slope
+
+
+@njit(cache=True)
 def _power_law(params, tau, tau_phase):
     """phi and dphi/dtau; ``tau_phase`` (a point inside the step) picks the phase at corners."""
     A0, A1, tau0, gc, cup, go, oup = params[0], params[1], params[2], params[3], params[4], params[5], params[6]
@@ -252,6 +266,23 @@ def angle_and_rate(code, params, tau, tau_phase):
     if code == FOURIER:
         return _fourier(params, tau)
     return _power_law(params, tau, tau_phase)
+
+
+#: the step of the central difference of omega that gives a power law's d omega / d tau
+RATE_SLOPE_STEP = 1e-7
+
+
+@njit(cache=True)
+def rate_slope(code, params, tau, tau_phase):
+    """d omega / d tau (phi'') at tau on the side ``tau_phase``: analytic for Fourier motions
+    (and harmonic ones); for a power law a central difference of the analytic omega, which
+    stays finite at a corner where omega ~ z^(gamma - 1) has an infinite slope (the analytic
+    one is +-inf there, or 0 * inf at gamma = 1)."""
+    if code == FOURIER:
+        return _fourier_rate_slope(params, tau)
+    e = RATE_SLOPE_STEP
+    return (_power_law(params, tau + e, tau_phase)[1]
+            - _power_law(params, tau - e, tau_phase)[1]) / (2.0 * e)
 
 
 @njit(cache=True, parallel=True)

@@ -32,7 +32,7 @@ from numba import njit
 
 from ._events import illinois_update
 from ._force import force_slope_power_sc
-from ._kinematics import FOURIER, angle_and_rate
+from ._kinematics import FOURIER, angle_and_rate, rate_slope
 from ._radau5 import dense_value
 
 #: samples per wavenumber (and period) in the search for the zeros of the kinematic
@@ -68,15 +68,6 @@ def state_function(k, u, S, om, band=0.0):
     if k == STOP:
         return abs(g) - band
     return -S * g + 0.5 * om
-
-
-@njit(cache=True)
-def rate_slope(code, params, t, side):
-    """d omega / d tau (phi'') by a central difference of the analytic omega on ``side``:
-    only the exit function's sign uses it."""
-    e = 1e-7
-    return (angle_and_rate(code, params, t + e, side)[1]
-            - angle_and_rate(code, params, t - e, side)[1]) / (2.0 * e)
 
 
 @njit(cache=True)

@@ -164,6 +164,30 @@ def test_kinematic_stops_are_the_zeros_of_the_kinematic_functions():
     assert np.all(np.diff(stops) > 0) and stops[0] == 0.0
 
 
+
+def test_rate_slope_is_the_derivative_of_omega():
+    """``rate_slope`` (phi'', used by the exit functions and the stop reach): analytic for a
+    Fourier motion, a central difference of omega for a power law; both against a
+    Richardson-extrapolated central difference of the analytic omega (error ~h^4)."""
+    from solver._kinematics import rate_slope
+
+    def richardson(code, row, t, side, h=1e-3):
+        def d(step):
+            return (angle_and_rate(code, row, t + step, side)[1]
+                    - angle_and_rate(code, row, t - step, side)[1]) / (2.0 * step)
+        return (4.0 * d(h / 2.0) - d(h)) / 3.0
+
+    fourier = solver.Fourier([[0.3, 1.1, 0.0, 0.2]], [[0.0, -0.1, 0.05]])
+    power = solver.PowerLaw([1.2], [0.35], [0.6], [3.0], [True], [2.5], [False])
+    for kin, tolerance in ((fourier, 1e-8), (power, 1e-6)):
+        code, params = kin.kernel_encoding()
+        for t in np.linspace(0.05, 0.95, 13):
+            if abs(t - 0.6) < 0.02:  # (the power law's corner)
+                continue
+            expected = richardson(code, params[0], t, t)
+            got = rate_slope(code, params[0], t, t)
+            assert abs(got - expected) <= tolerance * max(1.0, abs(expected)), (kin, t)
+
 @pytest.mark.parametrize("case", AGREEMENT_CASES, ids=lambda c: c.name)
 def test_agrees_with_the_march_and_is_honest(case):
     """radau5 at rtol 1e-5 against the periodic engine at rtol 1e-9 (two discretisations):
