@@ -188,7 +188,7 @@ def _locate(code, params, grid, N, u_nodes, n, k, g0, g1, physics, corners):
     return c, origin
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def illinois_update(a, b, fa, fb, c, fc, last):
     """One bracket update of Illinois regula falsi: the new point c (value fc) replaces the
     end of [a, b] on its side, and the other end's value is halved when the same end was kept
@@ -241,7 +241,7 @@ def _point_events(code, params, grid, N, u_nodes, physics, corners, out, origins
     return count
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def event_times(code, params, grids, n_steps, u_nodes, kappa, mu_n, mu_s, p, dtau, corners):
     """Events of every point: (times, origins), row i NaN- (-1-) padded.
 
@@ -260,7 +260,7 @@ def event_times(code, params, grids, n_steps, u_nodes, kappa, mu_n, mu_s, p, dta
     return out, origins
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def place_events(grid, events, protected, min_gap):
     """``grid`` with a node on every event.
 

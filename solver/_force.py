@@ -85,13 +85,13 @@ K_SERIES_START = 2.0
 E_FLOOR = 1e-100
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def k_infinity(p):
     """K(inf) = B(1/2, 1 - p/2) / 2 for 0 <= p < 2."""
     return 0.5 * math.sqrt(math.pi) * math.gamma(1.0 - 0.5 * p) / math.gamma(1.5 - 0.5 * p)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def k_tail(X, p):
     """int_X^inf (1 + x^2)^((p-3)/2) dx for X >= K_SERIES_START (binomial series in 1/X^2)."""
     beta = 0.5 * (p - 3.0)
@@ -109,7 +109,7 @@ def k_tail(X, p):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def k_small(X, p):
     """int_0^X (1 + x^2)^((p-3)/2) dx for 0 <= X <= K_SERIES_START (16-point Gauss-Legendre)."""
     beta = 0.5 * (p - 3.0)
@@ -120,7 +120,7 @@ def k_small(X, p):
     return X * total
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def k_difference(x1, x2, p):
     """K(x2) - K(x1), K odd, without forming K(inf) - tail differences of close tails."""
     if x1 * x2 > 0.0 and abs(x1) > K_SERIES_START and abs(x2) > K_SERIES_START:
@@ -129,7 +129,7 @@ def k_difference(x1, x2, p):
     return k_odd(x2, p) - k_odd(x1, p)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def k_odd(x, p):
     ax = abs(x)
     if ax <= K_SERIES_START:
@@ -141,7 +141,7 @@ def k_odd(x, p):
     return val if x >= 0.0 else -val
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def radial_power(r2, p):
     """r^(p-1) from r^2: by square roots at the paper's p = 0, 0.5, 1, 1.5, where ``pow``
     made the 8-point rule ~4x slower (128 against 33 ns per p = 0 evaluation)."""
@@ -156,7 +156,7 @@ def radial_power(r2, p):
     return r2 ** (0.5 * (p - 1.0))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _moments_quadrature(a, b, e2, p):
     """(m00, m10, m20, m01, m11, m21) by 8-point Gauss-Legendre on s in [0, 1/2]."""
     m00 = m10 = m20 = m01 = m11 = m21 = 0.0
@@ -176,7 +176,7 @@ def _moments_quadrature(a, b, e2, p):
     return m00, m10, m20, m01, m11, m21
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _moments_closed(a, b, e2, p):
     """The same moments from closed forms in w (b != 0, e2 > 0; 0 < p < 2, p != 1: p = 0 is
     ``_moments_closed_coulomb``, p = 1 polynomial)."""
@@ -198,7 +198,7 @@ def _moments_closed(a, b, e2, p):
     return M00 * inv_b, M10 * inv_b, M20 * inv_b, M01 * inv_b, M11 * inv_b, M21 * inv_b
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _moments_closed_coulomb(a, b, e2):
     """``_moments_closed`` at p = 0 with no powers: with r_i = sqrt(w_i^2 + e^2),
     sqrt(1 + x_i^2) = r_i / e, so asinh(x2) - asinh(x1) = log((|w2| + r2) / (|w1| + r1))
@@ -234,7 +234,7 @@ def _moments_closed_coulomb(a, b, e2):
     return (M00 * inv_b, M10 * inv_b, M20 * inv_b, M01 * inv_b, M11 * inv_b, (M00 - E) * inv_b)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def link_moments(a, b, e2, p):
     """Moments m_k^j of the link integrand; see the module docstring."""
     if p == 1.0:
@@ -256,12 +256,12 @@ def link_moments(a, b, e2, p):
     return _moments_closed(a, b, e2, p)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _setup(u, phi, omega, delta_tau, p):
     return _setup_sc(u, math.sin(phi), math.cos(phi), omega, delta_tau, p)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _setup_sc(u, S, C, omega, delta_tau, p):
     a = -u * S - 0.25 * omega * S * S
     b = omega
@@ -272,7 +272,7 @@ def _setup_sc(u, S, C, omega, delta_tau, p):
     return S, C, a, b, c, e2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def force_and_slope(u, phi, omega, mu_n, mu_s, p, delta_tau):
     """Scaled net x-force F(u, tau) = 2 int_0^{1/2} f_x ds and dF/du.
 
@@ -298,7 +298,7 @@ def force_and_slope(u, phi, omega, mu_n, mu_s, p, delta_tau):
     return force_and_slope_sc(u, math.sin(phi), math.cos(phi), omega, mu_n, mu_s, p, delta_tau)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def force_and_slope_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
     """``force_and_slope`` from S = sin(phi), C = cos(phi): a stage's Newton iterations
     evaluate F at one phi several times, and sin and cos were ~15 % of an evaluation."""
@@ -306,7 +306,7 @@ def force_and_slope_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
     return _force_and_slope_from(S, C, c, mu_n, mu_s, p, *link_moments(a, b, e2, p))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _force_and_slope_from(S, C, c, mu_n, mu_s, p, m00, m10, m20, m01, m11, m21):
     F = 2.0 * (mu_n * S * m10 - mu_s * C * c * m00)
     slope = -(mu_n * S * S + mu_s * C * C) * m00
@@ -316,7 +316,7 @@ def _force_and_slope_from(S, C, c, mu_n, mu_s, p, m00, m10, m20, m01, m11, m21):
     return F, 2.0 * slope
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def force_slope_power_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
     """``force_and_slope_sc`` and the power density Pi (``power_density``) with dPi/du, from
     the same link moments: the stage Newton iterations carry Pi along, so a converged sweep
@@ -337,7 +337,7 @@ def force_slope_power_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
     return F, slope, power, power_u
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def power_density(u, phi, omega, mu_n, mu_s, p, delta_tau):
     """Pi(tau) = 2 int_0^{1/2} (mu_n v_n^2 + mu_s v_s^2) r^(p-1) ds (integrand of eq. powerp).
 

@@ -35,7 +35,7 @@ from ._sweep import (ACCEPT_STEP, ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q
                      floored_errors)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def node_weights(W, N, one_minus_M):
     """lambda (int u) and mu (int Pi) at the N nodes into W[LAMBDA], W[MU] (node N is node
     0), by the backward recursion of ``_periodic.node_weights``."""
@@ -52,7 +52,7 @@ def node_weights(W, N, one_minus_M):
             W[row, n] = following
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def local_error_estimate(W, N, shares, scale_u, scale_p):
     """The steps' local errors (``_sweep.estimate_sweep``) carried to the period integrals:
     returns (error of int u, error of int Pi) and adds each step's weighted error (in the
@@ -75,13 +75,13 @@ def local_error_estimate(W, N, shares, scale_u, scale_p):
     return e_u, e_p
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def combine(error_u, error_p, scale_u, scale_p):
     """The estimate from the estimators' summed errors of int u and int Pi."""
     return max(error_u / scale_u, error_p / scale_p)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def refinement_ceiling(W, N, shares, target, ceilings):
     """Per step, the largest step the next adaptive sweep may take inside it: inf where the
     step's share is within ``target`` times its length, else its length times

@@ -94,7 +94,7 @@ OBJECTIVES = ("efficiency", "speed", "power")
 # partial derivatives of the force and the power density
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _panel(s_c, w_c, lo, hi, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
     """Add 10-point Gauss-Legendre sums over s in [s_c + lo, s_c + hi] of the integrands to ``acc``.
 
@@ -150,7 +150,7 @@ def _panel(s_c, w_c, lo, hi, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
         acc[9] += wt * (H * g1 * q_del)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _graded_side(s_c, w_c, end, rho, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
     """Panels on [s_c, end] (either order), halving toward s_c down to length <= rho."""
     L = abs(end - s_c)
@@ -171,7 +171,7 @@ def _graded_side(s_c, w_c, end, rho, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
     _panel(s_c, w_c, min(0.0, b), max(0.0, b), u, S, C, omega, dtau, p, mu_n, mu_s, acc)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
     """F, Pi and their partial derivatives in u, phi, omega and delta_tau.
 
@@ -204,7 +204,7 @@ def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def force_partials_into(u, S, C, phi, omega, mu_n, mu_s, p, delta_tau, out):
     """``force_partials`` written into ``out`` (10,), with S = sin(phi), C = cos(phi) given:
     the adjoint calls it twice a step, and the allocation and the sine and cosine were ~1/3
@@ -240,7 +240,7 @@ def force_partials_into(u, S, C, phi, omega, mu_n, mu_s, p, delta_tau, out):
         out[8] = quadrature[8]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def force_partials_quadrature(u, phi, omega, mu_n, mu_s, p, delta_tau):
     """F, Pi and their partial derivatives in u, phi, omega and delta_tau, by quadrature.
 
@@ -283,7 +283,7 @@ def force_partials_quadrature(u, phi, omega, mu_n, mu_s, p, delta_tau):
 # parameter derivatives of the kinematics at the stages
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def n_family_parameters(code, params):
     """Number of free parameters of the encoding.
 
@@ -294,7 +294,7 @@ def n_family_parameters(code, params):
     return 5
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _z_power_log(z, g):
     """(z^g ln z, z^(g-1) ln z) with the z -> 0 limits 0 (exact for g > 1)."""
     if z <= 0.0:
@@ -303,7 +303,7 @@ def _z_power_log(z, g):
     return z ** g * lz, z ** (g - 1.0) * lz
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def angle_partials(code, params, t, tau_phase, dphi, domega):
     """d phi / d theta and d omega / d theta at time ``t`` of a step around ``tau_phase``.
 
@@ -356,7 +356,7 @@ def angle_partials(code, params, t, tau_phase, dphi, domega):
     domega[gi] = sign * 2.0 * A1 * (zg1 + g * zg1l) / length
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def step_length_partials(code, params, h, tau_phase, dh):
     """d h / d theta for a step of length h around ``tau_phase`` (nonzero only for tau0)."""
     for k in range(dh.shape[0]):
@@ -371,7 +371,7 @@ def step_length_partials(code, params, h, tau_phase, dh):
 # forward solve with the stages kept, and the adjoint sweep
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol, stages,
              stage_kinematics):
     """Periodic solution on ``grid`` (N steps); writes the converged stages (2N,) and phi,
@@ -388,7 +388,7 @@ def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol
     return status, u0, int_u, int_pi
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _transposed_stage_solve(J11, J12, J21, J22, det, r1, r2):
     """l from J_n^T l = (r1, r2): returns (sigma = l1 + l2, q = A^T l)."""
     l1 = (J22 * r1 - J21 * r2) / det
@@ -396,7 +396,7 @@ def _transposed_stage_solve(J11, J12, J21, J22, det, r1, r2):
     return (l1 + l2, (5.0 / 12.0) * l1 + 0.75 * l2, (-1.0 / 12.0) * l1 + 0.25 * l2)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_kinematics,
              grad):
     """Gradients of the period integrals from the converged stages (and phi, dphi/dtau,

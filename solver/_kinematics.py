@@ -210,7 +210,7 @@ class PowerLaw(_Family):
             "opening_exponent", "opening_concave_up")))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fourier(params, tau):
     K = int(params[0])
     phi = params[1]
@@ -227,7 +227,7 @@ def _fourier(params, tau):
     return phi, rate
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fourier_rate_slope(params, tau):
     """d^2 phi / d tau^2 of eq. (Fourier): -(2 pi)^2 sum_k k^2 (A_k cos + B_k sin)(2 pi k tau)."""
     K = int(params[0])
@@ -241,7 +241,7 @@ def _fourier_rate_slope(params, tau):
     return slope
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _power_law(params, tau, tau_phase):
     """phi and dphi/dtau; ``tau_phase`` (a point inside the step) picks the phase at corners."""
     A0, A1, tau0, gc, cup, go, oup = params[0], params[1], params[2], params[3], params[4], params[5], params[6]
@@ -260,7 +260,7 @@ def _power_law(params, tau, tau_phase):
     return A0 - A1 + 2.0 * A1 * (1.0 - y ** go), 2.0 * A1 * go * y ** (go - 1.0) / (1.0 - tau0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def angle_and_rate(code, params, tau, tau_phase):
     """phi(tau), dphi/dtau(tau) for one point; ``tau_phase`` selects the side of a corner."""
     if code == FOURIER:
@@ -272,7 +272,7 @@ def angle_and_rate(code, params, tau, tau_phase):
 RATE_SLOPE_STEP = 1e-7
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rate_slope(code, params, tau, tau_phase):
     """d omega / d tau (phi'') at tau on the side ``tau_phase``: analytic for Fourier motions
     (and harmonic ones); for a power law a central difference of the analytic omega, which
@@ -285,7 +285,7 @@ def rate_slope(code, params, tau, tau_phase):
             - _power_law(params, tau - e, tau_phase)[1]) / (2.0 * e)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def evaluate_grid(code, params, tau, tau_phase):
     n, m = tau.shape
     phi = np.empty((n, m))

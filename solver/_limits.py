@@ -24,7 +24,7 @@ GL4_NODES = 0.5 * (_GL_X + 1.0)
 GL4_WEIGHTS = 0.5 * _GL_W
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _weighted_force(u, phis, oms, wts, mu_n, mu_s, p, dtau):
     """sum_j w_j F(u, tau_j) and its u-derivative."""
     g = 0.0
@@ -36,7 +36,7 @@ def _weighted_force(u, phis, oms, wts, mu_n, mu_s, p, dtau):
     return g, dg
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _force_root(phis, oms, wts, mu_n, mu_s, p, dtau, bound):
     """Root of the weighted force in [-bound, bound] (g(-bound) > 0 > g(bound)): Newton in bisection."""
     lo = -bound
@@ -58,7 +58,7 @@ def _force_root(phis, oms, wts, mu_n, mu_s, p, dtau, bound):
     return u
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def _fast_limit(code, params, grids, mu_n, mu_s, p, dtau, nodes, weights):
     n, m = grids.shape
     out = np.empty(n)
@@ -80,7 +80,7 @@ def _fast_limit(code, params, grids, mu_n, mu_s, p, dtau, nodes, weights):
     return out
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def _quasi_static(code, params, tau, mu_n, mu_s, p, dtau):
     n, m = tau.shape
     out = np.empty((n, m))

@@ -31,7 +31,7 @@ HEUN_B = np.array([0.5, 0.5])
 ORDER = 2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def heun_step(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
     """One RK2 step (Butcher tableau HEUN_*): pure function, no state.
 
@@ -49,7 +49,7 @@ def heun_step(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
 JUMP_LIMIT = -1.5
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def step_jumps(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
     """Whether a Heun step from u jumps across a sticking band instead of resolving it."""
     F1, _ = force_and_slope(u, phi0, om0, mu_n, mu_s, p, dtau)
@@ -57,7 +57,7 @@ def step_jumps(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
     return F1 * F2 < 0.0 and (F2 - F1) / F1 < JUMP_LIMIT
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
                  max_steps, u_out, step_u, step_pi, step_m, step_stiff, stages, weights,
                  step_weights):
@@ -151,7 +151,7 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
     return int_u, int_pi, nodes[0], CONVERGED, period
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _check_inputs(nodes, ms, hs, N, stages, weights, step_weights):
     """Pseudo-stages, node weights and step weights of a marched period (see
     ``_march_point``): the trapezoidal integral h_n (u_n + u_{n+1}) / 2 has
@@ -167,7 +167,7 @@ def _check_inputs(nodes, ms, hs, N, stages, weights, step_weights):
     node_weights(weights[:N], ms[:N], one_minus_monodromy(log_m, sign_m))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def march_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
                  max_steps):
     """Batched ``_march_point``; ``grids`` row i valid up to ``n_steps[i]`` steps."""

@@ -47,7 +47,7 @@ MAX_STAGE_ITERATIONS = 60
 MAX_SHOOTING_ITERATIONS = 80
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def stage_jacobian(hd1, hd2):
     """I - h A diag(kappa dF/du at the stages) for RADAU_A; returns (J11, J12, J21, J22, det)."""
     J11 = 1.0 - (5.0 / 12.0) * hd1
@@ -57,7 +57,7 @@ def stage_jacobian(hd1, hd2):
     return J11, J12, J21, J22, J11 * J22 - J12 * J21
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def monodromy_factor(log_m, sign_m, m_minus_1):
     """(log |M|, sign M) of the monodromy M = prod m_n with one more step factor m_n, given
     as m_n - 1 (formed without cancellation; log1p keeps it near m_n = 1)."""
@@ -66,20 +66,20 @@ def monodromy_factor(log_m, sign_m, m_minus_1):
     return log_m + math.log1p(m_minus_1), sign_m
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def one_minus_monodromy(log_m, sign_m):
     """1 - M from ``monodromy_factor``'s (log |M|, sign M), without cancellation at M ~ 1."""
     return -math.expm1(log_m) if sign_m > 0.0 else 1.0 + math.exp(log_m)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def stage_tolerance(rtol, vscale):
     """The stage Newton's absolute tolerance in u: max(1e-5 rtol, 1e-14) V, V the speed scale.
     Every converged step carries a residual up to this size."""
     return max(1e-5 * rtol, 1e-14) * vscale
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def flip_cut(flipped, U, x):
     """The factor (<= 1) a Newton step x of stage value U is cut by: where the previous
     iterate flipped U's sign (``flipped``) and x flips it again keeping more than half of
@@ -89,7 +89,7 @@ def flip_cut(flipped, U, x):
     return 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def bracketed_newton_update(u0, g, one_minus_M, lo, hi):
     """Newton's step on u(0) for the shooting residual g = u(1) - u(0) with 1 - M its
     derivative, kept inside the bracket [lo, hi] of the fixed point (g > 0 below it, g < 0
@@ -105,7 +105,7 @@ def bracketed_newton_update(u0, g, one_minus_M, lo, hi):
     return candidate, lo, hi
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu_s, p, dtau,
                atol):
     """Solve one Radau IIA step from u_n, starting at the guess (U1, U2); sin_i, cos_i are
@@ -199,7 +199,7 @@ def radau_step(u_n, U1, U2, h, sin1, cos1, om1, sin2, cos2, om2, kappa, mu_n, mu
     return U1, U2, s1, s2, m_minus_1, it, P1, P2, Pu1, Pu2, ok
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _radau_step_retrying(u_n, U1, U2, predicted, h, sin1, cos1, om1, sin2, cos2, om2, kappa,
                          mu_n, mu_s, p, dtau, atol):
     """``radau_step`` from the start (U1, U2); where its Newton fails, again from u_n if the
@@ -220,7 +220,7 @@ def _radau_step_retrying(u_n, U1, U2, predicted, h, sin1, cos1, om1, sin2, cos2,
     return out[:5] + (its,) + out[6:]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
                  u_out, step_u, step_pi, step_m, stages_out=None, stage_guess=None,
                  kinematics_out=None, weights_out=None, step_weights_out=None):
@@ -376,7 +376,7 @@ def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, 
     return int_u, int_pi, u0, CONVERGED, it_out, stage_its
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def node_weights(weights, step_m, one_minus_M):
     """The sensitivity lambda_n of int_0^1 u dtau of the discrete periodic solution to a
     jump of u at node n (the discrete adjoint of the shooting, for the error functional int u).
@@ -399,7 +399,7 @@ def node_weights(weights, step_m, one_minus_M):
         weights[n] = following
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def batch_outputs(n, m):
     """Output arrays of a batched solve of n rows of grids with up to m - 1 steps:
     (int_u, int_pi, u0, status, iterations, stage_iterations, step_u, step_pi, step_m, nodes)."""
@@ -408,7 +408,7 @@ def batch_outputs(n, m):
             np.full((n, m - 1), np.nan), np.full((n, m - 1), np.nan))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol):
     """Batched ``_solve_point`` over parameter points (one thread per point).
 
@@ -424,7 +424,7 @@ def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, v
     return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def collocation_value(theta, u_n, U1, U2):
     """The quadratic collocation polynomial of a Radau step at theta = (t - t_n) / h_n:
     through (0, u_n), (1/3, U1), (1, U2)."""
@@ -432,7 +432,7 @@ def collocation_value(theta, u_n, U1, U2):
             - 4.5 * theta * (theta - 1.0) * U1 + 1.5 * theta * (theta - 1.0 / 3.0) * U2)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _collocation_guess(grid, N, old_grid, old_N, old_nodes, old_stages, guess):
     """Stage values on ``grid`` from a solution on another grid of the period: at each stage
     time, the quadratic collocation polynomial of the old step that contains it (through
@@ -449,7 +449,7 @@ def _collocation_guess(grid, N, old_grid, old_N, old_nodes, old_stages, guess):
                                                  old_stages[2 * k + 1])
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
                 old_grids, old_steps, old_nodes, old_stages):
     """``solve_points`` for rows that come in pairs: row 2j a grid, row 2j + 1 its bisection.

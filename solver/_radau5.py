@@ -155,7 +155,7 @@ class StepError(NamedTuple):
     int_pi: float
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve3(J, r0, r1, r2):
     """x with J x = r for a 3 x 3 ``J`` (tuple of 9, row-major), Gaussian elimination with
     partial pivoting (the stiff stages make the rows differ by up to ~1e10 in size)."""
@@ -184,7 +184,7 @@ def solve3(J, r0, r1, r2):
     return x0, x1, x2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def stage_matrix(hk, d1, d2, d3):
     """I - h kappa A diag(d) for the Radau IIA matrix A, row-major (``hk`` = h kappa)."""
     z1 = hk * d1
@@ -195,14 +195,14 @@ def stage_matrix(hk, d1, d2, d3):
             -A31 * z1, -A32 * z2, 1.0 - A33 * z3)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _residual(u_n, hk, U1, U2, U3, F1, F2, F3):
     return (U1 - u_n - hk * (A11 * F1 + A12 * F2 + A13 * F3),
             U2 - u_n - hk * (A21 * F1 + A22 * F2 + A23 * F3),
             U3 - u_n - hk * (A31 * F1 + A32 * F2 + A33 * F3))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.nan):
     """Solve one Radau IIA step from u_n over h, starting Newton at (U1, U2, U3).
 
@@ -325,7 +325,7 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.n
                         Pu1, Pu2, Pu3, F3, d1, d2, d3, rounds, ok, observed)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def embedded_error(u_n, f0, J0, Pi0, Pi_u0, step, h):
     """RADAU5's embedded estimate of the step's local error in (u, int u, int Pi).
 
@@ -347,7 +347,7 @@ def embedded_error(u_n, f0, J0, Pi0, Pi_u0, step, h):
     return StepError(err_u, err_v, err_w)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def dense_value(theta, u_n, U1, U2, U3):
     """The collocation polynomial of a step at theta = (tau - tau_n) / h: the cubic through
     (0, u_n), (c1, U1), (c2, U2), (1, U3)."""
@@ -358,14 +358,14 @@ def dense_value(theta, u_n, U1, U2, U3):
     return l0 * u_n + l1 * U1 + l2 * U2 + l3 * U3
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def step_integrals(h, step):
     """(int u, int Pi) over the step by the Radau weights (order 5)."""
     return (h * (A31 * step.U1 + A32 * step.U2 + A33 * step.U3),
             h * (A31 * step.P1 + A32 * step.P2 + A33 * step.P3))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def step_weights(h, step):
     """(d int_step u / du_n, d int_step Pi / du_n): the step's own share of the adjoint."""
     return (h * (A31 * step.s1 + A32 * step.s2 + A33 * step.s3),
@@ -420,14 +420,14 @@ _SIX = _interpolatory_weights(np.array([0.0, C1, THETA_MID, C2, THETA_LATE, 1.0]
 W6_0, W6_1, W6_MID, W6_2, W6_LATE, W6_3 = _SIX
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def node_polynomial(theta):
     """(theta - c1)(theta - c2)(theta - 1): it vanishes at the stages, where the collocation
     polynomial's defect does."""
     return (theta - C1) * (theta - C2) * (theta - 1.0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def dense_slope(theta, u_n, U1, U2, U3):
     """d/dtheta of ``dense_value``."""
     d0 = ((theta - C2) * (theta - 1.0) + (theta - C1) * (theta - 1.0)
@@ -451,7 +451,7 @@ MOMENT_G = np.array([[1.0 / (math.factorial(m + 1) * (m + k + 2.0)) for k in ran
                      for m in range(MOMENT_TERMS)])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def exponential_moments(z, q1, q2, q3, q4, q5):
     """(sum_k q_k I_k(z), sum_k q_k G_k(z)), k = 1..5, with I_k(z) = int_0^1 x^k e^(zx) dx and
     G_k(z) = int_0^1 x^k (e^(zx) - 1) / z dx: by their power series for |z| <= 1 (no
@@ -484,7 +484,7 @@ def exponential_moments(z, q1, q2, q3, q4, q5):
     return s_i, s_g
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _resolvent_moment(z1, z2, z3, a, b, c):
     """int_0^1 exp(int_s^1 z(r) dr) w(s) (a + b s + c s^2) ds, z the quadratic through
     (c1, z1), (c2, z2), (1, z3) (h kappa dF/du at the stages), by 8-point Gauss-Legendre."""
@@ -504,7 +504,7 @@ def _resolvent_moment(z1, z2, z3, a, b, c):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def quasi_static_kernel(z, r):
     """(e^(z r) - 1) / z, the kernel of int u's error at a sample r before the step's end
     with the slope z = h kappa dF/du frozen there (-> r as z -> 0; -> -1 / z where stiff)."""
@@ -512,7 +512,7 @@ def quasi_static_kernel(z, r):
     return r * math.expm1(min(y, 700.0)) / y if abs(y) > 1e-12 else r
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def estimate_floor(u_n, step, atol):
     """The level below which ``defect_error``'s estimate of u's local error is the stage values'
     own error (Newton's tolerance ``atol`` and rounding) seen through the defect, not the
@@ -521,7 +521,7 @@ def estimate_floor(u_n, step, atol):
                                              + abs(step.U3)))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
     """The step's local error in (u, int u, int Pi) from the defect of its collocation
     polynomial p, delta(theta) = p'(theta) / h - kappa F(p(theta), tau_n + theta h): the

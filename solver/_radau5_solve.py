@@ -88,7 +88,7 @@ class PointSolution(NamedTuple):
     vscale: float
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _stage_atol(rtol, scale, phys):
     """The stage Newton's tolerance: ``_periodic.stage_tolerance`` of the scale, and for p = 0
     at most BAND_SHARE delta_tau: where the body sticks F rises by O(mu) across a band of
@@ -101,7 +101,7 @@ def _stage_atol(rtol, scale, phys):
     return atol
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _largest_weight(model, scale_u, scale_p):
     """max(1, |lambda|, |mu| scale_u / scale_p) over the model's nodes: a stage error e moves
     U by lambda e (relative to scale_u) and P by mu e (relative to scale_p), so the stage
@@ -113,7 +113,7 @@ def _largest_weight(model, scale_u, scale_p):
     return largest
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _period_map(W, N, u0):
     """(g = u(1) - u(0), 1 - M) of a sweep: the shooting residual and one minus the
     monodromy (``_periodic.one_minus_monodromy``)."""
@@ -124,7 +124,7 @@ def _period_map(W, N, u0):
     return W[U, N] - u0, one_minus_monodromy(log_m, sign_m)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _integrals(W, N):
     int_u = 0.0
     int_p = 0.0
@@ -134,7 +134,7 @@ def _integrals(W, N):
     return int_u, int_p
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _shift(W, N, shift):
     """Move the converged sweep, which starts ``shift`` short of the fixed point, onto it to
     first order along the sensitivities (no force evaluations)."""
@@ -148,13 +148,13 @@ def _shift(W, N, shift):
     W[U, N] += shift
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _model(W, N, ceilings):
     return WeightModel(W[T, :N + 1].copy(), W[LAMBDA, :N + 1].copy(), W[MU, :N + 1].copy(),
                        ceilings[:N].copy(), N)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
     """The periodic solution of one point; see the module docstring.
 
@@ -294,7 +294,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
     return W, PointSolution(nan, nan, u0, TOLERANCE_NOT_REACHED, N, sweeps, estimate, evals, vscale)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
     """The periodic solution of the Radau IIA discretisation on the given ``grid`` (N + 1,
     nodes from 0 to 1, with the corners of phi among them), without error control: Newton on
@@ -330,7 +330,7 @@ def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
     return math.nan, math.nan, NOT_PERIODIC
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def fixed_grid_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, rtol, vscale, u_guess):
     """``fixed_grid_point`` over points (rows of ``grids``): (int_u, int_pi, status)."""
     n = grids.shape[0]
@@ -344,7 +344,7 @@ def fixed_grid_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, rtol, vsc
     return int_u, int_pi, status
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _solve_chunk(c, chunks, code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_guess,
                  max_steps, int_u, int_pi, u0, status, n_steps, sweeps, estimate, evaluations,
                  vscale):
@@ -364,7 +364,7 @@ def _solve_chunk(c, chunks, code, params, corners, kappa, mu_n, mu_s, p, dtau, r
         vscale[i] = sol.vscale
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def solve_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_guess, max_steps,
                  threads):
     """``solve_point`` over every point: (int_u, int_pi, u0, status, n_steps, sweeps,
@@ -391,7 +391,7 @@ def solve_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_gues
     return int_u, int_pi, u0, status, n_steps, sweeps, estimate, vscale, evaluations
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def series_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_guess, max_steps,
                   offsets, tau_out, u_out):
     """``solve_point`` of every point again (it is deterministic), writing the final grid's

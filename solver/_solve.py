@@ -198,7 +198,7 @@ def _representable(out, int_u):
     return np.isfinite(U) & np.isfinite(P) & (P > 0) & ((U != 0) | (int_u == 0))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def local_indicators(u_coarse, u_fine, step_derivative, integral_change, h):
     """Where each step's error originates, not where it is carried to.
 
@@ -218,7 +218,7 @@ def local_indicators(u_coarse, u_fine, step_derivative, integral_change, h):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def refinement_levels(indicators, h, rtol, order=2):
     """How many times to bisect each step: enough that its local error per unit
     length, shrinking like h^order, meets its share 0.5 rtol h_j of the tolerance;
@@ -253,7 +253,7 @@ def refinement_levels(indicators, h, rtol, order=2):
     return levels
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def bisect(grid, levels):
     """Nodes of ``grid`` with step j split into 2^levels[j] equal steps."""
     size = 1
@@ -271,7 +271,7 @@ def bisect(grid, levels):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def bisect_all(grid):
     """Nodes of ``grid`` with every step split once."""
     out = np.empty(2 * grid.size - 1)
@@ -346,7 +346,7 @@ def _pair_estimate(coarse_u, fine_u, coarse_pi, fine_pi, n_coarse, scale_u, scal
     return sum_u / scale_u, sum_p / scale_p, change_u, change_p
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def step_floors(grid, N, corners):
     """The smallest step each of the N steps of ``grid`` may be split into: CORNER_MIN_STEP
     for the steps within CORNER_REACH of a corner of phi (``corners``, in [0, 1); a corner
@@ -383,7 +383,7 @@ def _marked_levels(grid, change_u, change_p, u_coarse, u_fine, step_m, scale_u, 
     return refinement_levels(indicators, h, rtol, order)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _next_grid(grid, levels, events, corners):
     """``grid`` bisected by ``levels`` (never below the steps' floors, ``step_floors``: tiny
     steps at events are fine, bisecting them is not), with nodes on ``events``
@@ -658,7 +658,7 @@ def _solve_radau5(kinematics, physics, rtol, return_series, max_steps, start):
         force_evaluations=out["evaluations"])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _pair_rows(coarse, steps):
     """Rows 2j: the grids G of ``coarse`` (row j valid for ``steps[j]`` steps); rows 2j + 1:
     their bisections B(G) (``bisect_all``); padded with 1.  Returns (rows, steps per row).
@@ -677,7 +677,7 @@ def _pair_rows(coarse, steps):
     return rows, pair_steps
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _next_grids(rows, steps, levels, events, corners, flagged, pairs):
     """The next grids of the ``pairs`` of a pass: G (``rows[2j]``) bisected by ``levels[j]``
     with nodes on ``events[j]`` (``_next_grid``), then graded toward the turning points

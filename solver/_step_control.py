@@ -28,7 +28,7 @@ MAX_FACTOR = 3.0
 _EXPONENT = 1.0 / ERROR_ORDER
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def predict_factor(h, h_old, ratio, ratio_old):
     """The factor for the next step size from this step's error ``ratio`` (<= 1 accepted) and
     the previous accepted step's (``h_old``, ``ratio_old``; h_old <= 0 when there is none):

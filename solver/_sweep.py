@@ -136,12 +136,12 @@ class WeightModel(NamedTuple):
     N: int
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def new_workspace(capacity):
     return np.empty((N_FIELDS, capacity + 1))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def grown(W, n):
     """``W`` with room for step n (doubled, contents kept), or W itself."""
     if n + 1 < W.shape[1]:
@@ -151,7 +151,7 @@ def grown(W, n):
     return bigger
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def stage_kinematics(code, params, t0, h):
     """sin phi, cos phi, dphi/dtau at the stages tau_0 + c_i h (inside the step at corners)."""
     side = t0 + 0.5 * h
@@ -162,7 +162,7 @@ def stage_kinematics(code, params, t0, h):
                            math.cos(phi1), math.cos(phi2), math.cos(phi3), om1, om2, om3)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def sample_kinematics(code, params, t0, h):
     """sin phi, cos phi, dphi/dtau at the defect estimate's samples (``_radau5``)."""
     side = t0 + 0.5 * h
@@ -172,7 +172,7 @@ def sample_kinematics(code, params, t0, h):
                             math.cos(phi_l), om_l)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def start_values(code, params, t, side, u, phys):
     """(kappa F, kappa dF/du, Pi, dPi/du) at (t, u) on the side ``side`` of t."""
     phi, om = angle_and_rate(code, params, t, side)
@@ -181,7 +181,7 @@ def start_values(code, params, t, side, u, phys):
     return phys.kappa * F, phys.kappa * d, P, Pu
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.nan):
     """``radau5_step`` from the predicted stages (with the carried Newton ``rate`` and
     ``slope``); where its Newton fails, again from u_n, then from rest (a step into a stop
@@ -198,7 +198,7 @@ def solve_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.na
     return sol, its
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def weighted_error(err, lam, mu, scale_u, scale_p, floor=0.0, h=0.0, pi_u=0.0):
     """A step's error in the norm of U and P: its local error in u carried to the period
     integrals by the node weights lam, mu, plus its own quadrature errors (absolute values:
@@ -211,14 +211,14 @@ def weighted_error(err, lam, mu, scale_u, scale_p, floor=0.0, h=0.0, pi_u=0.0):
     return max((abs(lam) * e_u + e_v) / scale_u, (abs(mu) * e_u + e_w) / scale_p)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def floored_errors(err, floor, h, pi_u):
     """(|err u|, |err int u|, |err int Pi|) above their floors (``weighted_error``)."""
     return (max(abs(err.u) - floor, 0.0), max(abs(err.int_u) - h * floor, 0.0),
             max(abs(err.int_pi) - h * floor * pi_u, 0.0))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _ceiling_over(model, t, h, k):
     """The smallest ceiling of the model steps that [t, t + h] overlaps (k: the one holding
     t): a step may not cross a flagged step whole (one across a flagged step of 1e-3 with a
@@ -233,7 +233,7 @@ def _ceiling_over(model, t, h, k):
     return ceiling
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _model_at(model, t, k):
     """(lambda, mu, ceiling) of the weight model at t, with k the index of the model step
     holding t (advanced from the last call's); returns (lam, mu, ceiling, k)."""
@@ -251,7 +251,7 @@ def _model_at(model, t, k):
     return lam, mu, model.max_step[k], k
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _put3(W, row, n, a, b, c):
     """Rows row .. row + 2 of column n: the three stages' values a, b, c."""
     W[row, n] = a
@@ -259,7 +259,7 @@ def _put3(W, row, n, a, b, c):
     W[row + 2, n] = c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _record(W, n, t0, h, u_n, sol, err, kin, end_kind):
     W[T, n] = t0
     W[T, n + 1] = t0 + h
@@ -281,7 +281,7 @@ def _record(W, n, t0, h, u_n, sol, err, kin, end_kind):
     W[F_END, n] = sol.F3
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol, dtau):
     """The earliest sign change of a state switching function across the step, sampled at
     its start, its stages and its end along the solution: (k, theta_a, theta_b, f_a, f_b),
@@ -333,7 +333,7 @@ def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol, dtau):
     return best_k, best_a, best_b, best_fa, best_fb
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def trap_ceiling(code, params, phys, t_z, side, u):
     """The longest step next to a turning point t_z of phi: TRAP_SHARE |u| / (kappa |F(u, t_z)|).
     Where the links stop rotating the whole body slides one way and feels the full friction;
@@ -350,7 +350,7 @@ def trap_ceiling(code, params, phys, t_z, side, u):
     return TRAP_SHARE * abs(u) / abs(kF)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def step_turning(stops, stop_is_turning, n_stops, j_end, j_start):
     """The turning point of phi a step is next to, (tau, its stop's index) or (-1, -1): the
     stop the step ends on (index ``j_end``; n_stops is tau = 1, stop 0 of the next period),
@@ -364,7 +364,7 @@ def step_turning(stops, stop_is_turning, n_stops, j_end, j_start):
     return -1.0, -1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def trap_limit(code, params, phys, turning, i, stop_is_corner, stop_is_turning, side, u):
     """``trap_ceiling`` at the turning point of stop i, floored at TRAP_FLOOR where it is
     simple (``_switching.SIMPLE_TURNING``: a simple zero of omega, no corner of phi)."""
@@ -379,7 +379,7 @@ def trap_limit(code, params, phys, turning, i, stop_is_corner, stop_is_turning, 
 TRAP_SLACK = 2.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def trapped_steps(code, params, phys, stops, stop_is_corner, stop_is_turning, n_stops, W, N,
                   ceilings):
     """The ``trap_ceiling`` of ``adaptive_sweep`` checked again on the converged solution of
@@ -420,7 +420,7 @@ def trapped_steps(code, params, phys, stops, stop_is_corner, stop_is_turning, n_
     return count, evaluations
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _stop_reach(phys, u, f0, band, S, C, om, om_slope):
     """How far from u the line of g = u + omega S / 4, with the slipping body's slope
     kappa F + (omega S / 4)' = f0 + (om_slope S + om^2 C) / 4 (S, C: sin phi, cos phi;
@@ -437,7 +437,7 @@ def _stop_reach(phys, u, f0, band, S, C, om, om_slope):
     return reach if reach > 0.0 else -1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _stop_reach_at(code, params, phys, t, u, f0, band):
     """``_stop_reach`` from (t, u) with the kinematics on the right of t evaluated afresh
     (at tau = 0 and after a corner of phi)."""
@@ -455,7 +455,7 @@ _D2 = (1.0 - C1) / ((C2 - C1) * (C2 - 1.0))
 _D3 = 1.0 / (1.0 - C1) + 1.0 / (1.0 - C2)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, first_cut):
     """theta in (0, 1] of the earliest event in a solved step, or -1 where it holds none:
 
@@ -514,7 +514,7 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
     return theta if theta <= 1.0 else -1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n_stops, u0,
                    h_first, target, scale_u, scale_p, model, atol, W, max_steps, events,
                    sharp=True):
@@ -712,7 +712,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     return W, n, status, h, evaluations
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def frozen_sweep(code, params, phys, u0, atol, W, N):
     """Solve the N recorded steps of ``W`` again from u(0) = u0, in place (the stages start
     at their previous values moved along their sensitivities; the step kinematics are
@@ -740,7 +740,7 @@ def frozen_sweep(code, params, phys, u0, atol, W, N):
     return CONVERGED, iterations
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
     """The defect estimate (``_radau5.defect_error``) of every recorded step of ``W``, in
     place (rows ERR), from its stored stages: two evaluations of F per step, and the start
@@ -776,7 +776,7 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
     return fallbacks, evaluations
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def stage_kinematics_into(code, params, W, n):
     kin = stage_kinematics(code, params, W[T, n], W[T, n + 1] - W[T, n])
     _put3(W, SIN, n, kin.S1, kin.S2, kin.S3)
@@ -784,7 +784,7 @@ def stage_kinematics_into(code, params, W, n):
     _put3(W, OMEGA, n, kin.om1, kin.om2, kin.om3)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _interior_event(code, params, phys, atol, W, N, n):
     """theta of the first event (``find_event``) strictly inside recorded step n, or -1."""
     t0 = W[T, n]
@@ -803,7 +803,7 @@ def _interior_event(code, params, phys, atol, W, N, n):
     return theta if SPLIT_SHARE < theta < 1.0 - SPLIT_SHARE else -1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def event_split_errors(code, params, phys, atol, W, N, split):
     """The error of the recorded steps that hold a state event off their ends (the shooting
     moved it after the adaptive sweep had put it on a node): each such step is solved again

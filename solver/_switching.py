@@ -58,7 +58,7 @@ STOP = 2         # |g| - band: the junction comes to rest (p = 0: the body stick
 N_STATE_FUNCTIONS = 2  # those that are located at their sign changes (not STOP)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def state_function(k, u, S, om, band=0.0):
     """State switching function ``k`` (TANGENTIAL, OUTER_END or STOP, with the friction's
     ``band``) at u, S = sin phi, om = dphi/dtau."""
@@ -70,7 +70,7 @@ def state_function(k, u, S, om, band=0.0):
     return -S * g + 0.5 * om
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def exit_functions(code, params, t, side, phys, band):
     """(psi_up, psi_down) at t for a body held in the friction's band, g = u + omega S / 4
     ~ 0 (p = 0): with u_s = -omega S / 4 the velocity that keeps the junction at rest,
@@ -93,7 +93,7 @@ def exit_functions(code, params, t, side, phys, band):
     return phys.kappa * F_up - rate, rate - phys.kappa * F_down
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def locate_exit(which, code, params, a, b, fa, fb, side, phys, band):
     """Zero of exit function ``which`` (0 up, 1 down) in [a, b] (fa fb < 0), Illinois."""
     last = 0
@@ -109,7 +109,7 @@ def locate_exit(which, code, params, a, b, fa, fb, side, phys, band):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _kinematic_function(k, code, params, t, side):
     """The functions of tau alone: 0 sin phi, 1 cos phi, 2 omega, 3 omega' (by a central
     difference of the analytic omega: only its zeros are used, then refined on omega)."""
@@ -125,7 +125,7 @@ def _kinematic_function(k, code, params, t, side):
     return om
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _refine_root(k, code, params, a, b, fa, fb, side):
     """Zero of kinematic function k in [a, b] (fa fb < 0) by Illinois regula falsi."""
     last = 0
@@ -141,7 +141,7 @@ def _refine_root(k, code, params, a, b, fa, fb, side):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def stop_speed(code, params, stops, n_stops):
     """V = (1/4) int_0^1 |dphi/dtau| dtau (``_limits.kinematic_speed``) from phi at the
     ``kinematic_stops``: phi is monotone between them (they hold every zero of omega and
@@ -156,7 +156,7 @@ def stop_speed(code, params, stops, n_stops):
     return 0.25 * total
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def kinematic_stops(code, params, corners, out):
     """The step ends every sweep of a point keeps: 0, the corners of phi, the zeros of sin phi,
     cos phi and omega, and the near-tangencies (minima of |omega| below TANGENCY_SHARE of
@@ -241,7 +241,7 @@ def kinematic_stops(code, params, corners, out):
     return kept, omax
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b, band=0.0):
     """Zero of state function ``k`` along the step's collocation polynomial in theta in
     [a, b] (0 <= a < b <= 1), where its values are f_a, f_b of opposite signs: Illinois
@@ -261,7 +261,7 @@ def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b, 
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def turning_stops(code, params, stops, n_stops, omax):
     """Which of the stops are turning points of phi, (n_stops,) int8: TURNING where |omega| on
     one side of the stop is below TANGENCY_SHARE of ``omax``, max |omega|

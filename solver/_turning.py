@@ -136,12 +136,12 @@ MAX_TURNING_POINTS = 256
 MAX_WINDOW = 0.25
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _rate(code, params, t, side):
     return angle_and_rate(code, params, t, side)[1]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def zero_of_rate(code, params, t0, t1, w0, w1, side):
     """A zero of omega in [t0, t1] given omega(t0) = w0, omega(t1) = w1 of opposite signs
     (or one of them 0): Illinois regula falsi."""
@@ -164,7 +164,7 @@ def zero_of_rate(code, params, t0, t1, w0, w1, side):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _panel(code, params, t0, h, a, b, u_n, U1, U2, side, mu_n, mu_s, p, dtau):
     """(int_a^b F, int_a^b dF/du, int_a^b |F|) along u_h(tau) by 4-point Gauss-Legendre."""
     force = 0.0
@@ -181,7 +181,7 @@ def _panel(code, params, t0, h, a, b, u_n, U1, U2, side, mu_n, mu_s, p, dtau):
     return (b - a) * force, (b - a) * slope, (b - a) * size
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def step_defect(code, params, t0, t1, u_n, U1, U2, tz, window, kappa, mu_n, mu_s, p, dtau,
                 collocated):
     """D_n of the module docstring for the step [t0, t1] with stages U1, U2, the panels
@@ -231,7 +231,7 @@ def step_defect(code, params, t0, t1, u_n, U1, U2, tz, window, kappa, mu_n, mu_s
     return change - kappa * force, kappa * slope, panels, rounding
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def window_width(code, params, tz, level):
     """The half-width of the window around the zero tz of omega: the smaller distance, on
     either side, at which |omega| reaches ``level`` (|u(tz)|, at least delta_tau), by
@@ -257,7 +257,7 @@ def window_width(code, params, tz, level):
     return width
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def rate_slope_bound(code, params):
     """A bound on |d omega / d tau| over the period: sum_k (2 pi k)^2 (|A_k| + |B_k|) for the
     Fourier encoding; inf for the power law (omega' is unbounded at a corner for exponents
@@ -271,13 +271,13 @@ def rate_slope_bound(code, params):
     return bound
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _differ(a, b):
     """omega changes sign (or vanishes) between the values a and b."""
     return a == 0.0 or b == 0.0 or (a < 0.0) != (b < 0.0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _turning_points(code, params, grid, N, u_nodes, stages, dtau, out):
     """Zeros of omega (sign changes between SAMPLES points of each step, omega one-sided
     from inside the step) and near-tangencies (an interior minimum of |omega| below
@@ -328,7 +328,7 @@ def _turning_points(code, params, grid, N, u_nodes, stages, dtau, out):
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _add_turning_point(code, params, grid, n, u_nodes, stages, dtau, tz, out, count):
     """Row (tz, window) at ``count`` unless tz repeats the previous row or ``out`` is full."""
     if count >= out.shape[0] or (count > 0 and tz <= out[count - 1, 0]):
@@ -340,7 +340,7 @@ def _add_turning_point(code, params, grid, n, u_nodes, stages, dtau, tz, out, co
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _resolved_weights(step_weights, step_m, N, steps, log_factors, count):
     """The node weights lambda (``_periodic.node_weights``) with the factors m_n of the
     ``count`` steps ``steps`` replaced by their resolved ones, exp(``log_factors``).
@@ -366,7 +366,7 @@ def _resolved_weights(step_weights, step_m, N, steps, log_factors, count):
     return weights
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _layer_rate(code, params, t0, t1, u_n, U1, U2, kappa, mu_n, mu_s, p, dtau):
     """The fastest relaxation rate T^(2-p) |dF/du| of the step [t0, t1] at u_n (just after
     t0) and at its stages: the inverse width of a layer that starts at t0."""
@@ -379,7 +379,7 @@ def _layer_rate(code, params, t0, t1, u_n, U1, U2, kappa, mu_n, mu_s, p, dtau):
     return rate
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def corner_layer_error(code, params, t0, t1, u_start, U1, U2, width, weight_next, kappa, mu_n,
                        mu_s, p, dtau, atol):
     """The error in int u of the Radau step [t0, t1] (stages U1, U2) that a corner of phi's
@@ -413,7 +413,7 @@ def corner_layer_error(code, params, t0, t1, u_start, U1, U2, width, weight_next
     return integral - h * (0.75 * U1 + 0.25 * U2) + weight_next * (u - U2), u
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n, mu_s, p, dtau,
                    steps, widths, first):
     """The steps after each corner of phi that may hold its layer: among the first
@@ -449,7 +449,7 @@ def _corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n,
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, kappa, mu_n,
                  mu_s, p, dtau, scale_u, rtol, min_step, collocated, corners, flagged):
     """Returns (estimate, number of flagged steps); flagged rows (tz, target step, reach)."""
@@ -551,7 +551,7 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
                                flagged)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def flag_rows(shares, estimate, row_tz, row_h, row_reach, rtol, min_step, flagged):
     """Flag the rows holding the largest ``shares`` (of the sum ``estimate``) until the rest
     holds at most FLAG_REST rtol, and any above FLAG_SHARE rtol, into ``flagged`` as
@@ -578,7 +578,7 @@ def flag_rows(shares, estimate, row_tz, row_h, row_reach, rtol, min_step, flagge
     return count
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def turning_point_estimates(code, params, grids, n_steps, u_nodes, stages, step_m, step_weights,
                             kappa, mu_n, mu_s, p, dtau, scale_u, rtol, min_step, collocated,
                             corners):
@@ -605,7 +605,7 @@ def turning_point_estimates(code, params, grids, n_steps, u_nodes, stages, step_
     return estimate, flagged
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def grade_towards(grid, flagged, min_gap):
     """``grid`` with nodes at tz and tz +- target 2^k (k = 0, 1, ... while within reach of tz)
     for every flagged row (tz, target, reach); a negative target grades forward only, at
