@@ -374,6 +374,15 @@ def trap_limit(code, params, phys, turning, i, stop_is_corner, stop_is_turning, 
     return cap
 
 
+@njit(cache=True, error_model="numpy")
+def trap_clip(h, cap):
+    """The proposed step h clipped to a turning point's trap ceiling ``cap``: at least
+    ACCEPT_STEP, but never longer than h.  (Clipped to max(cap, ACCEPT_STEP) instead, a step
+    4e-12 short of a power law's corner was taken 1.5e-11 long, across the corner, with its
+    stages on the other side's formula; and steps below ACCEPT_STEP were lengthened.)"""
+    return min(h, max(cap, ACCEPT_STEP))
+
+
 #: at the converged solution a step next to a turning point may exceed its ``trap_ceiling``
 #: by this factor before the round is rejected (the shooting's last shift moves u a little)
 TRAP_SLACK = 2.0
@@ -600,8 +609,9 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
         if turning >= 0.0:
             cap = trap_limit(code, params, phys, turning, j, stop_is_corner, stop_is_turning,
                              t + 0.5 * h, u)
-            if h > cap:
-                h = max(cap, ACCEPT_STEP)
+            capped = trap_clip(h, cap)
+            if capped < h:
+                h = capped
                 at_stop = False
                 end_kind = ORDINARY
         if 64.0 * MIN_STEP < stop_reach < h and not event_cut:

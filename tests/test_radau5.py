@@ -298,6 +298,20 @@ def _flat_inflection_errors(scaled_period, rtols):
     return out
 
 
+def test_the_trap_clip_never_lengthens_a_step():
+    """``_sweep.trap_clip``: a step next to a turning point is cut to its ceiling, not below
+    ACCEPT_STEP, and never made longer (a step already ending on a stop closer than
+    ACCEPT_STEP keeps its length: it must not cross the stop)."""
+    accept = _sweep.ACCEPT_STEP
+    for h in (1e-14, 0.3 * accept, accept, 3.0 * accept, 1e-6, 0.1):
+        for cap in (0.0, 1e-15, 0.5 * accept, 2.0 * accept, 1e-7, 1e-3, 1.0):
+            clipped = _sweep.trap_clip(h, cap)
+            assert clipped <= h
+            assert clipped >= min(h, accept)
+            if accept <= cap < h:
+                assert clipped == cap
+
+
 def test_a_flat_inflection_keeps_the_trap_cap():
     """With ``TRAP_FLOOR`` at every turning point this point was 1.9 rtol off at rtol 1e-5
     (estimate 0.33); the floor applies at simple turning points only (0.006 rtol)."""
