@@ -464,8 +464,42 @@ _D2 = (1.0 - C1) / ((C2 - C1) * (C2 - 1.0))
 _D3 = 1.0 / (1.0 - C1) + 1.0 / (1.0 - C2)
 
 
+#: an ``exit_memo`` (``new_exit_memo``): the exit functions at the last two times they were
+#: evaluated, (tau, psi_up, psi_down) twice; NaN times: empty
+EXIT_MEMO_SIZE = 6
+
+
 @njit(cache=True, error_model="numpy")
-def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, first_cut):
+def new_exit_memo():
+    return np.full(EXIT_MEMO_SIZE, np.nan)
+
+
+@njit(cache=True, error_model="numpy")
+def clear_exit_memo(memo):
+    """Forget the memo's values (at a corner of phi the next step is on the other side,
+    whose kinematics differ at the same tau)."""
+    memo[0] = memo[3] = np.nan
+
+
+@njit(cache=True, error_model="numpy")
+def held_exits(code, params, t, side, phys, band, memo):
+    """``_switching.exit_functions`` at t, from ``memo`` where it holds t, else evaluated and
+    put in it: a held body's steps evaluate them at both ends, and a step's start is the last
+    accepted step's end (or a rejected attempt's start), which gave ~9 % of a radau5 solve's
+    time at rtol 1e-4 to repeated evaluations.  The memo must be cleared where ``side``
+    crosses a corner of phi (``clear_exit_memo``); it is keyed on tau alone."""
+    if memo[0] == t:
+        return memo[1], memo[2]
+    if memo[3] == t:
+        return memo[4], memo[5]
+    up, down = exit_functions(code, params, t, side, phys, band)
+    memo[0], memo[1], memo[2] = memo[3], memo[4], memo[5]
+    memo[3], memo[4], memo[5] = t, up, down
+    return up, down
+
+
+@njit(cache=True, error_model="numpy")
+def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, first_cut, memo):
     """theta in (0, 1] of the earliest event in a solved step, or -1 where it holds none:
 
     - a sign change of g or of the outer end's velocity (``_first_crossing``), located on
@@ -478,7 +512,8 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
       stop is not put before the line of g from the step's start, whose slope kappa F(u_n)
       + (omega S / 4)' is the slipping body's;
     - for p = 0, an exit: a step that starts in the band, where one of the exit functions
-      (``_switching.exit_functions``) turns positive.
+      (``_switching.exit_functions``) turns positive; their values at the step's ends come
+      from ``memo`` (``held_exits``) where it has them.
     """
     theta = 2.0
     k, a, b, fa, fb = _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol,
@@ -512,8 +547,8 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
                 theta = min(theta, stop)
         else:  # held in the band: does it leave within the step?
             side = t0 + 0.5 * h
-            up0, down0 = exit_functions(code, params, t0, side, phys, band)
-            up1, down1 = exit_functions(code, params, t0 + h, side, phys, band)
+            up0, down0 = held_exits(code, params, t0, side, phys, band, memo)
+            up1, down1 = held_exits(code, params, t0 + h, side, phys, band, memo)
             if up0 <= 0.0 < up1:
                 theta = min(theta, (locate_exit(0, code, params, t0, t0 + h, up0, up1, side,
                                                 phys, band) - t0) / h)
@@ -572,6 +607,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     evaluations = 1
     band = EVENT_BAND * phys.dtau
     stop_reach = _stop_reach_at(code, params, phys, t, u, f0, band)
+    memo = new_exit_memo()
     # Newton's quadratic constant, carried from step to step (``radau5_step``), in the loose
     # sweeps only (``sharp`` False): it does not bound the stage error (a reviewer measured
     # stages accepted up to 3.7e5 atol off: the constant goes stale over one-correction steps
@@ -647,7 +683,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
         # shrinking it by the controller would only approach the corner step by step
         if events and cuts < MAX_EVENT_CUTS:
             theta = find_event(code, params, phys, t, h, u, sol, kin, S0, om0, f0, atol,
-                               cuts == 0)
+                               cuts == 0, memo)
             if theta > 0.0:
                 at_start = have_previous and theta * h <= EVENT_START_SHARE * prev_h
                 if theta < 1.0 - EVENT_END_SHARE and theta * h >= MIN_STEP and not at_start:
@@ -703,6 +739,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
         n += 1
         if end_kind == CORNER_STOP:
             evaluations += 1
+            clear_exit_memo(memo)
             f0, J0, P0, Pu0 = start_values(code, params, t, t + 1e-9, u, phys)
             phi0, om0 = angle_and_rate(code, params, t, t + 1e-9)
             S0 = math.sin(phi0)
@@ -795,13 +832,15 @@ def stage_kinematics_into(code, params, W, n):
 
 
 @njit(cache=True, error_model="numpy")
-def _interior_event(code, params, phys, atol, W, N, n):
-    """theta of the first event (``find_event``) strictly inside recorded step n, or -1."""
+def _interior_event(code, params, phys, atol, W, N, n, memo):
+    """theta of the first event (``find_event``) strictly inside recorded step n, or -1
+    (``memo``: the exit functions' ``held_exits`` memo, steps visited in order)."""
     t0 = W[T, n]
     h = W[T, n + 1] - t0
     if n == 0 or W[END_KIND, n - 1] == CORNER_STOP:  # (the step's side of a corner)
         phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
         S0 = math.sin(phi0)
+        clear_exit_memo(memo)
     else:
         S0, om0 = W[SIN + 2, n - 1], W[OMEGA + 2, n - 1]
     sol = StepSolution(W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n], 0.0, 0.0, 0.0, 0.0,
@@ -809,7 +848,7 @@ def _interior_event(code, params, phys, atol, W, N, n):
     kin = StageKinematics(W[SIN, n], W[SIN + 1, n], W[SIN + 2, n], W[COS, n], W[COS + 1, n],
                           W[COS + 2, n], W[OMEGA, n], W[OMEGA + 1, n], W[OMEGA + 2, n])
     theta = find_event(code, params, phys, t0, h, W[U, n], sol, kin, S0, om0, 0.0, atol,
-                       False)
+                       False, memo)
     return theta if SPLIT_SHARE < theta < 1.0 - SPLIT_SHARE else -1.0
 
 
@@ -822,9 +861,10 @@ def event_split_errors(code, params, phys, atol, W, N, split):
     ``split`` (N,) is set for those steps.  Returns (their count, evaluations of F)."""
     count = 0
     evaluations = 0
+    memo = new_exit_memo()
     for n in range(N):
         split[n] = False
-        theta = _interior_event(code, params, phys, atol, W, N, n)
+        theta = _interior_event(code, params, phys, atol, W, N, n, memo)
         if theta < 0.0:
             continue
         t0 = W[T, n]
