@@ -228,17 +228,31 @@ def kinematic_stops(code, params, corners, out):
                         count += 1
                 t0, f0 = t1, f1
     stops = np.sort(out[:count])
-    # merge near-duplicates and drop stops at the period's end (1 is 0)
+    # merge near-duplicates (a corner of phi, not a root next to it, stays: with the root
+    # 5e-13 before it kept instead, the corner got no step end and a step ran across it,
+    # its stages on the other phase's formula) and drop stops at the period's end (1 is 0)
     kept = 0
     for i in range(count):
         t = stops[i]
         if t >= 1.0 - STOP_GAP or t < 0.0:
             continue
         if kept > 0 and t - out[kept - 1] <= STOP_GAP:
+            if _is_corner(t, ends, m) and not _is_corner(out[kept - 1], ends, m):
+                out[kept - 1] = t
             continue
         out[kept] = t
         kept += 1
     return kept, omax
+
+
+@njit(cache=True, error_model="numpy")
+def _is_corner(t, ends, m):
+    """Whether t is one of the corners of phi in ``ends`` (sorted, ends[0] = 0, ends[m - 1] =
+    1: the phases' ends of ``kinematic_stops``)."""
+    for j in range(m - 1):
+        if ends[j] == t:
+            return True
+    return False
 
 
 @njit(cache=True, error_model="numpy")

@@ -165,6 +165,21 @@ def test_kinematic_stops_are_the_zeros_of_the_kinematic_functions():
 
 
 
+def test_a_corner_next_to_a_zero_stays_a_stop():
+    """A zero of cos phi 5e-13 before a power law's corner (within STOP_GAP of it): the merged
+    stops keep the corner, so a step ends on it (a reviewer's case: the root was kept and the
+    corner dropped, and steps ran across it)."""
+    kin = solver.PowerLaw([math.pi / 2 + 0.5 - 2e-12], [0.5], [0.5], [2.0], [False], [2.0],
+                          [True])
+    code, params = kin.kernel_encoding()
+    out = np.empty(_switching.MAX_STOPS)
+    count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], out)
+    stops = out[:count]
+    assert 0.5 in stops, stops
+    near = stops[np.abs(stops - 0.5) <= _switching.STOP_GAP]
+    assert list(near) == [0.5], near  # (the root merged into the corner)
+
+
 def test_rate_slope_is_the_derivative_of_omega():
     """``rate_slope`` (phi'', used by the exit functions and the stop reach): analytic for a
     Fourier motion, a central difference of omega for a power law; both against a
