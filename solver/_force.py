@@ -217,7 +217,7 @@ def _moments_closed_coulomb(a, b, e2):
     else:
         # w1, w2 of opposite signs: asinh(x2) - asinh(x1) = sign(w2 - w1) (asinh |x2| +
         # asinh |x1|), one log of a product of two factors >= 1 (no cancellation; the sum is
-        # >= asinh(1/4) where the closed form is used, e < |b| <= 4 max |w|).  Two asinh
+        # >= asinh(|b| / 2e) > asinh(1/2) where the closed form is used, e < |b|).  Two asinh
         # calls (each a log or log1p) were ~9 % of a radau5 solve's time (bench, perf)
         e = math.sqrt(e2)
         both = ((abs(w2) + r2) / e) * ((abs(w1) + r1) / e)
