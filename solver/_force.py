@@ -207,30 +207,34 @@ def _moments_closed_coulomb(a, b, e2):
     w2 = a + 0.5 * b
     r1 = math.sqrt(w1 * w1 + e2)
     r2 = math.sqrt(w2 * w2 + e2)
+    # one division for 1 / (r1 r2), shared by M11 = 1/r1 - 1/r2 = (r2 - r1) / (r1 r2) and
+    # [w / r] (divisions were ~half of an evaluation's latency after the logs)
+    rr = 1.0 / (r1 * r2)
     if w1 * w2 > 0.0:
         M00 = math.log((abs(w2) + r2) / (abs(w1) + r1))
         if w1 < 0.0:
             M00 = -M00
         # [w / r] = e^2 (w2^2 - w1^2) / ((w2 r1 + w1 r2) r1 r2): w / r -> sign(w) cancels
         # when e << |w| (M01 = E / e^2 lost all digits at e ~ 1e-11)
-        E = e2 * ((w2 - w1) * (w2 + w1) / ((w2 * r1 + w1 * r2) * r1 * r2))
+        M01 = (w2 - w1) * (w2 + w1) * rr / (w2 * r1 + w1 * r2)
+        E = e2 * M01
     else:
         # w1, w2 of opposite signs: asinh(x2) - asinh(x1) = sign(w2 - w1) (asinh |x2| +
         # asinh |x1|), one log of a product of two factors >= 1 (no cancellation; the sum is
         # >= asinh(|b| / 2e) > asinh(1/2) where the closed form is used, e < |b|).  Two asinh
         # calls (each a log or log1p) were ~9 % of a radau5 solve's time (bench, perf)
-        e = math.sqrt(e2)
-        both = ((abs(w2) + r2) / e) * ((abs(w1) + r1) / e)
+        both = (abs(w2) + r2) * (abs(w1) + r1) / e2
         if both < math.inf:
             M00 = math.copysign(math.log(both), w2 - w1)
-        else:  # (overflow: |u| ~1e100 on a diverging Newton iterate)
+        else:  # (overflow: a diverging Newton iterate's huge |u| over a tiny e)
+            e = math.sqrt(e2)
             M00 = math.asinh(w2 / e) - math.asinh(w1 / e)
-        E = w2 / r2 - w1 / r1
+        E = (w2 * r1 - w1 * r2) * rr  # (w2 / r2 - w1 / r1: terms of one sign)
+        M01 = E / e2
     M10 = r2 - r1
-    M11 = 1.0 / r1 - 1.0 / r2
+    M11 = M10 * rr
     M20 = 0.5 * (w2 * r2 - w1 * r1 - e2 * M00)
     inv_b = 1.0 / b
-    M01 = (w2 - w1) * (w2 + w1) / ((w2 * r1 + w1 * r2) * r1 * r2) if w1 * w2 > 0.0 else E / e2
     return (M00 * inv_b, M10 * inv_b, M20 * inv_b, M01 * inv_b, M11 * inv_b, (M00 - E) * inv_b)
 
 
