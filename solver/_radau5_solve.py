@@ -13,15 +13,18 @@ threads by ``solve_points``):
    solution's node weights, then Newton on u(0) by frozen-grid sweeps (``frozen_sweep``:
    on one step sequence the discrete period map is smooth and its monodromy exact) until
    the fixed point is within 1e-3 rtol V (the converged sweep is then shifted to it to first
-   order along the stage sensitivities, as in ``_periodic``).
+   order along the stage sensitivities, as in ``_periodic``).  Where the frozen steps do not
+   carry Newton there (a stage solve fails on them, or MAX_FROZEN_SWEEPS run out), the next
+   round starts here again with an adaptive sweep, which places its steps anew.
 4. **Estimate.** Every step's local error from its defect (``_sweep.estimate_sweep``), or,
    where the shooting moved a state event off its node, from the step solved again split
    at the event (``_sweep.event_split_errors``), carried to int u and int Pi by the node
    weights of the converged solution (``_global_error``).  If the estimate exceeds rtol,
    the steps that asked for it get ceilings and steps 3-4 run again from the converged
    u(0), so that the new sweep also puts the moved events on nodes (at most MAX_ROUNDS
-   times), then TOLERANCE_NOT_REACHED.  (Moving nodes onto the moved events instead cost
-   more: bench at rtol 1e-7, 9,466 force evaluations per solve against 8,592.)
+   times), then TOLERANCE_NOT_REACHED (or the last round's failure).  (Moving nodes onto
+   the moved events instead cost more: bench at rtol 1e-7, 9,466 force evaluations per
+   solve against 8,592.)
 
 Failures are NaN plus a status code (``_status``), never silent.
 """
@@ -38,7 +41,8 @@ from ._global_error import combine, local_error_estimate, node_weights, refineme
 from ._periodic import (bracketed_newton_update, monodromy_factor, one_minus_monodromy,
                         stage_tolerance)
 from ._radau5 import ERROR_ORDER, PointPhysics
-from ._status import CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, TOLERANCE_NOT_REACHED
+from ._status import (CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED,
+                      TOLERANCE_NOT_REACHED)
 from ._sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
                      SENS, STAGE, T, U, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
                      event_split_errors, new_workspace, stage_kinematics_into, trapped_steps)
@@ -229,6 +233,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
     h_first = max((W[T, 1] - W[T, 0]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
     estimate = math.inf
     ceilings = np.full(N, math.inf)
+    failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
     for _ in range(MAX_ROUNDS):
         W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner,
                                             stop_is_turning, n_stops,
@@ -242,24 +247,38 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         for n in range(N - 1):
             corner_nodes[n + 1] = W[END_KIND, n] == CORNER_STOP
         lo, hi = -bound, bound
-        converged = False
         one_minus_M = 1.0
         g = 0.0
+        status = NOT_PERIODIC
+        best_u0 = u0
+        best_residual = math.inf
         for _ in range(MAX_FROZEN_SWEEPS):
             g, one_minus_M = _period_map(W, N, u0)
             if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
                 return W, PointSolution(nan, nan, u0, NON_FINITE, N, sweeps, math.inf, evals, vscale)
             if abs(g) <= tol_fix * abs(one_minus_M):
-                converged = True
+                status = CONVERGED
                 break
+            if abs(g / one_minus_M) < best_residual:
+                best_u0, best_residual = u0, abs(g / one_minus_M)
             u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
             status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
             sweeps += 1
             evals[COST_FROZEN] += e
             if status != CONVERGED:
-                return W, PointSolution(nan, nan, u0, status, N, sweeps, math.inf, evals, vscale)
-        if not converged or not abs(u0) < 0.999 * bound:
-            return W, PointSolution(nan, nan, u0, NOT_PERIODIC, N, sweeps, math.inf, evals, vscale)
+                break
+            status = NOT_PERIODIC
+        if status == CONVERGED and not abs(u0) < 0.999 * bound:
+            status = NOT_PERIODIC
+        if status != CONVERGED:
+            # the frozen step sequence does not carry the shooting to the fixed point: a stage
+            # solve failed on it, or Newton did not converge in MAX_FROZEN_SWEEPS.  The next
+            # round's adaptive sweep places its steps anew (from Newton's last proposal after
+            # a failed stage solve, else from the best u(0) of this round)
+            if status != STAGE_SOLVE_FAILED:
+                u0 = best_u0
+            failure = status
+            continue
         shift = g / one_minus_M
         _shift(W, N, shift)
         u0 += shift
@@ -280,6 +299,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         evals[COST_ESTIMATE] += e
         if estimate <= rtol and trapped == 0:
             return W, PointSolution(int_u, int_p, u0, CONVERGED, N, sweeps, estimate, evals, vscale)
+        failure = TOLERANCE_NOT_REACHED
         ceilings = np.full(N, math.inf)
         if estimate > rtol:
             asked = refinement_ceiling(W, N, shares, TARGET_SHARE * rtol, ceilings)
@@ -291,7 +311,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
             ceilings[n] = min(ceilings[n], trap_caps[n])
         model = _model(W, N, ceilings)
         h_first = min(h_first, W[T, 1] - W[T, 0])
-    return W, PointSolution(nan, nan, u0, TOLERANCE_NOT_REACHED, N, sweeps, estimate, evals, vscale)
+    return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals, vscale)
 
 
 @njit(cache=True, error_model="numpy")

@@ -420,3 +420,44 @@ def test_a_near_tangency_on_a_sample_is_a_stop():
     stops = np.empty(_switching.MAX_STOPS)
     count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
     assert np.any(np.abs(stops[:count] - 0.5) < 1e-12), stops[:count]
+
+
+#: honesty-harness points (set, index) that failed at these rtols before a failed frozen
+#: Newton handed its round back to an adaptive sweep (statuses STAGE_SOLVE_FAILED x 5,
+#: NOT_PERIODIC; docs/validation.md)
+_FORMER_FAILURES = [
+    ((2.7073701895190494, 0.4178940529854587, 0.4980202161820605, 11.756676628139795, True,
+      3.1208864074896026, True), (0.0946256780293442, 0.07344137266971537, 13.616303231385062,
+                                  1e-10), 1e-5),
+    ((1.8108673946378708, 0.4370784616162865, 0.9356544411657108, 7.074837440578104, False,
+      8.610916655770145, True), (1.974666281882164, 0.09194373181167029, 10.876217228688464,
+                                 1e-10), 1e-6),
+    ((2.689439390437521, 0.2613825227659425, 0.08403138709494302, 2.2850479078128125, False,
+      1.5428235662446317, False), (27.66182557574643, 0.04292214169859376, 23.29799866516825,
+                                   1e-8), 1e-6),
+    ((2.0080674232699605, 0.15621889229302757, 0.6650844696244642, 11.07383811061842, False,
+      8.012730987900236, True), (0.1413134665001736, 0.05588059537191458, 17.89529967145978,
+                                 1e-8), 1e-4),
+    ((1.9253472016349298, 1.1880824403093397, 0.07441375561628011, 10.33659631421871, False,
+      8.578267637491317, True), (1.0596281959017029, 0.5828113366329717, 1.7158211193646615,
+                                 1e-10), 1e-5),
+    ((0.3923775081572968, 0.2357088857054249, 0.5749264416499561, 8.613356078346389, False,
+      1.2621622362910032, False), (0.9809572587874266, 0.2176608198940678, 4.594304112640414,
+                                   1e-10), 1e-7),
+]
+
+
+@pytest.mark.parametrize("motion, friction, rtol", _FORMER_FAILURES)
+def test_former_harness_failures_converge_within_rtol(motion, friction, rtol):
+    """Stress power laws (mu_n / mu_s 2^-12 .. 2^12, delta to 1e-10) on which the engine
+    failed honestly: each now converges within rtol of the ``periodic`` engine at 1e-9."""
+    kin = solver.PowerLaw(*([v] for v in motion))
+    period, mu_n, mu_s, delta = friction
+    physics = solver.Physics(period=[period], mu_n=[mu_n], mu_s=[mu_s], p=0.0, delta=delta)
+    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-9)
+    assert ref.converged[0]
+    res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
+    assert res.converged[0], res.status
+    error = _error(res, ref, kin, physics)
+    assert error <= rtol, (error / rtol, res.error_estimate[0] / rtol)
+
