@@ -423,9 +423,14 @@ def test_a_near_tangency_on_a_sample_is_a_stop():
 
 
 #: honesty-harness points (set, index) that failed at these rtols before a failed frozen
-#: Newton handed its round back to an adaptive sweep (statuses STAGE_SOLVE_FAILED x 5,
-#: NOT_PERIODIC; docs/validation.md)
+#: Newton handed its round back to an adaptive sweep and before ``MAX_REFINEMENT`` (statuses
+#: STEP_BUDGET_EXCEEDED, STAGE_SOLVE_FAILED x 5, NOT_PERIODIC; docs/validation.md)
 _FORMER_FAILURES = [
+    # stress_powerlaw_21 point 265: a stage of a step next to phi ~ pi sat where dF/du > 0;
+    # its estimate of 3e291 rtol asked for a ceiling of ACCEPT_STEP (131,072 steps)
+    ((2.200718212236901, 0.9136789683191914, 0.8136606446887276, 9.542247066125448, False,
+      2.754766886476662, False), (28.6407691056302, 24.565418882019305, 0.04070763070651124,
+                                  1e-8), 1e-4),
     ((2.7073701895190494, 0.4178940529854587, 0.4980202161820605, 11.756676628139795, True,
       3.1208864074896026, True), (0.0946256780293442, 0.07344137266971537, 13.616303231385062,
                                   1e-10), 1e-5),
@@ -461,3 +466,20 @@ def test_former_harness_failures_converge_within_rtol(motion, friction, rtol):
     error = _error(res, ref, kin, physics)
     assert error <= rtol, (error / rtol, res.error_estimate[0] / rtol)
 
+
+def test_a_round_refines_a_step_at_most_max_refinement_times():
+    """``_global_error.refinement_ceiling``: a share 2^5 above its step's target asks for a
+    step half as long; one far above it (an estimate out of its regime), for at most
+    MAX_REFINEMENT times shorter, not for ACCEPT_STEP; within the target, for nothing."""
+    from solver._global_error import MAX_REFINEMENT, refinement_ceiling
+
+    W = _sweep.new_workspace(4)
+    W[_sweep.T, :4] = [0.0, 0.25, 0.5, 1.0]
+    target = 1e-4
+    shares = np.array([0.5 * target * 0.25, 32.0 * target * 0.25, 3e291])
+    ceilings = np.empty(3)
+    asked = refinement_ceiling(W, 3, shares, target, ceilings)
+    assert asked == 2
+    assert ceilings[0] == math.inf
+    assert ceilings[1] == pytest.approx(0.125, rel=1e-12)
+    assert ceilings[2] == pytest.approx(0.5 / MAX_REFINEMENT, rel=1e-12)
