@@ -323,7 +323,7 @@ def place_events(grid, events, protected, min_gap):
 
 
 @njit(cache=True, error_model="numpy")
-def _radau_from(u_n, t0, t1, code, params, kappa, mu_n, mu_s, p, dtau, atol):
+def radau_step_from(u_n, t0, t1, code, params, kappa, mu_n, mu_s, p, dtau, atol):
     """One Radau step over [t0, t1] from u_n, cold: (its integral of u, end value, ok)."""
     h = t1 - t0
     mid = 0.5 * (t0 + t1)
@@ -343,8 +343,8 @@ def split_step_error(code, params, t0, event, t1, u_n, U1, U2, weight_next, kapp
     integral of u plus ``weight_next`` (the node weight lambda_{n+1}, ``_periodic.node_weights``)
     times the change of its end value is returned (NaN where a split step fails).
     """
-    qa, ua, ok_a = _radau_from(u_n, t0, event, code, params, kappa, mu_n, mu_s, p, dtau, atol)
-    qb, ub, ok_b = _radau_from(ua, event, t1, code, params, kappa, mu_n, mu_s, p, dtau, atol)
+    qa, ua, ok_a = radau_step_from(u_n, t0, event, code, params, kappa, mu_n, mu_s, p, dtau, atol)
+    qb, ub, ok_b = radau_step_from(ua, event, t1, code, params, kappa, mu_n, mu_s, p, dtau, atol)
     if not (ok_a and ok_b):
         return math.nan
     return qa + qb - (t1 - t0) * (0.75 * U1 + 0.25 * U2) + weight_next * (ub - U2)
@@ -370,7 +370,7 @@ def _substeps_from(u_n, t0, t1, m, code, params, kappa, mu_n, mu_s, p, dtau, ato
             b = a + (end - a) / (1 << depth) if depth > 0 else end
             if not a < b < end:
                 b = end  # (a rounding residue of the step)
-            q, u_b, ok = _radau_from(u, a, b, code, params, kappa, mu_n, mu_s, p, dtau, atol)
+            q, u_b, ok = radau_step_from(u, a, b, code, params, kappa, mu_n, mu_s, p, dtau, atol)
             if not ok:
                 if depth == SUBSTEP_HALVINGS:
                     return total, u, False

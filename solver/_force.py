@@ -261,12 +261,12 @@ def link_moments(a, b, e2, p):
 
 
 @njit(cache=True, error_model="numpy")
-def _setup(u, phi, omega, delta_tau, p):
-    return _setup_sc(u, math.sin(phi), math.cos(phi), omega, delta_tau, p)
+def link_setup(u, phi, omega, delta_tau, p):
+    return link_setup_sc(u, math.sin(phi), math.cos(phi), omega, delta_tau, p)
 
 
 @njit(cache=True, error_model="numpy")
-def _setup_sc(u, S, C, omega, delta_tau, p):
+def link_setup_sc(u, S, C, omega, delta_tau, p):
     a = -u * S - 0.25 * omega * S * S
     b = omega
     c = C * (u + 0.25 * omega * S)
@@ -306,7 +306,7 @@ def force_and_slope(u, phi, omega, mu_n, mu_s, p, delta_tau):
 def force_and_slope_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
     """``force_and_slope`` from S = sin(phi), C = cos(phi): a stage's Newton iterations
     evaluate F at one phi several times, and sin and cos were ~15 % of an evaluation."""
-    S, C, a, b, c, e2 = _setup_sc(u, S, C, omega, delta_tau, p)
+    S, C, a, b, c, e2 = link_setup_sc(u, S, C, omega, delta_tau, p)
     return _force_and_slope_from(S, C, c, mu_n, mu_s, p, *link_moments(a, b, e2, p))
 
 
@@ -329,7 +329,7 @@ def force_slope_power_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
     dPi/du differentiates Pi = 2 (mu_n m_2^0 + mu_s c^2 m_0^0) term by term, with the
     moment derivatives of ``_gradient.force_partials`` for theta = u (w_u = -S, c_u = C).
     """
-    S, C, a, b, c, e2 = _setup_sc(u, S, C, omega, delta_tau, p)
+    S, C, a, b, c, e2 = link_setup_sc(u, S, C, omega, delta_tau, p)
     m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)
     F, slope = _force_and_slope_from(S, C, c, mu_n, mu_s, p, m00, m10, m20, m01, m11, m21)
     q = p - 1.0
@@ -347,6 +347,6 @@ def power_density(u, phi, omega, mu_n, mu_s, p, delta_tau):
 
     The mean power is P = T^-(p+1) int_0^1 Pi dtau.
     """
-    S, C, a, b, c, e2 = _setup(u, phi, omega, delta_tau, p)
+    S, C, a, b, c, e2 = link_setup(u, phi, omega, delta_tau, p)
     m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)
     return 2.0 * (mu_n * m20 + mu_s * c * c * m00)

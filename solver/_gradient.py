@@ -74,10 +74,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ._force import E_FLOOR, _setup_sc, link_moments, radial_power
+from ._force import E_FLOOR, link_moments, link_setup_sc, radial_power
 from ._kinematics import FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, period_grid
 from ._limits import fast_limit_velocity
-from ._periodic import (_solve_point, monodromy_factor, one_minus_monodromy,
+from ._periodic import (monodromy_factor, one_minus_monodromy, solve_point_on_grid,
                         stage_jacobian)
 from ._status import CONVERGED
 
@@ -209,7 +209,7 @@ def force_partials_into(u, S, C, phi, omega, mu_n, mu_s, p, delta_tau, out):
     """``force_partials`` written into ``out`` (10,), with S = sin(phi), C = cos(phi) given:
     the adjoint calls it twice a step, and the allocation and the sine and cosine were ~1/3
     of its cost."""
-    S, C, a, b, c, e2 = _setup_sc(u, S, C, omega, delta_tau, p)
+    S, C, a, b, c, e2 = link_setup_sc(u, S, C, omega, delta_tau, p)
     m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)
     m31 = m10 - e2 * m11
     q = p - 1.0
@@ -377,12 +377,12 @@ def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol
     """Periodic solution on ``grid`` (N steps); writes the converged stages (2N,) and phi,
     dphi/dtau, sin phi, cos phi at the stage times (4, 2N).
 
-    Returns (status, u0, I_u, I_Pi).  The shooting is the solver's own (``_solve_point``),
+    Returns (status, u0, I_u, I_Pi).  The shooting is the solver's own (``solve_point_on_grid``),
     whose converged sweep gives the stages and the Radau-weighted period integrals.
-    ``vscale`` <= 0: computed from the grid (``_solve_point``).
+    ``vscale`` <= 0: computed from the grid (``solve_point_on_grid``).
     """
     scratch = np.empty((4, N))
-    int_u, int_pi, u0, status, _, _ = _solve_point(
+    int_u, int_pi, u0, status, _, _ = solve_point_on_grid(
         code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol, scratch[0],
         scratch[1], scratch[2], scratch[3], stages, None, stage_kinematics)
     return status, u0, int_u, int_pi

@@ -24,7 +24,7 @@ FOURIER = 0
 POWER_LAW = 1
 
 
-def _as_points(name, value):
+def as_points(name, value):
     """``value`` as a finite 1-D float array over parameter points; errors name the argument."""
     arr = np.atleast_1d(np.asarray(value, dtype=float))
     if arr.ndim != 1:
@@ -82,7 +82,7 @@ class Harmonic(_Family):
     A1: np.ndarray
 
     def __post_init__(self):
-        arrs, _ = _broadcast(A0=_as_points("A0", self.A0), A1=_as_points("A1", self.A1))
+        arrs, _ = _broadcast(A0=as_points("A0", self.A0), A1=as_points("A1", self.A1))
         if np.any(arrs["A1"] < 0):
             raise ValueError("A1: amplitude must be >= 0")
         object.__setattr__(self, "A0", arrs["A0"])
@@ -183,7 +183,7 @@ class PowerLaw(_Family):
     def __post_init__(self):
         names = ("A0", "A1", "duty_cycle", "closing_exponent", "closing_concave_up",
                  "opening_exponent", "opening_concave_up")
-        arrs, _ = _broadcast(**{k: _as_points(k, getattr(self, k)) for k in names})
+        arrs, _ = _broadcast(**{k: as_points(k, getattr(self, k)) for k in names})
         if np.any(arrs["A1"] < 0):
             raise ValueError("A1: amplitude must be >= 0")
         if np.any((arrs["duty_cycle"] <= 0) | (arrs["duty_cycle"] >= 1)):

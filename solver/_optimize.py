@@ -16,7 +16,7 @@ visibly over parameter steps of 1e-7 (``HESSIAN_STEP``).  The grid is the adapti
 the start; after convergence it is re-adapted at the optimum and the search is
 repeated from there while the grid changes (``grid_rounds``).
 
-Iteration (explicit state: ``_init``, ``_step``, ``_terminate``).
+Iteration (explicit state: ``initial_state``, ``optimizer_step``, ``_terminate``).
 - BFGS on the free variables (those not held at a bound by an outward gradient),
   the inverse-Hessian update skipped when the curvature condition y.s > 0 fails.
 - Damped line search: the step is first cut to ``max_step`` in the variables, then
@@ -132,7 +132,7 @@ class OptimizeResult:
 
 
 @dataclass(frozen=True)
-class _Problem:
+class Problem:
     """Map between the optimisation variables x and (kinematics, physics); the fixed grid."""
 
     template: object
@@ -194,7 +194,7 @@ class _Problem:
 
 
 @dataclass(frozen=True)
-class _PowerConstrainedProblem(_Problem):
+class _PowerConstrainedProblem(Problem):
     """|U| at fixed mean power: the variables are the family's; T(x) solves P = ``power``.
 
     ``periods`` remembers T(x) of every evaluated x (and the latest under "last", the first
@@ -246,7 +246,7 @@ def _outputs(res):
 
 
 @dataclass(frozen=True)
-class _State:
+class State:
     x: np.ndarray
     f: float
     g: np.ndarray
@@ -304,15 +304,15 @@ def _difference_hessian(problem, state, free_mask, u0):
     return 0.5 * (H + H.T)
 
 
-def _init(problem, x0):
+def initial_state(problem, x0):
     f, g, res = problem.evaluate(x0)
     n = x0.size
     gnorm = float(np.linalg.norm(_projected(problem, x0, g))) if g is not None else math.nan
-    return _State(x=x0, f=f, g=g, hinv=np.eye(n), result=res, first_gradient_norm=gnorm,
-                  stop_reason="" if g is not None else "solve_failed")
+    return State(x=x0, f=f, g=g, hinv=np.eye(n), result=res, first_gradient_norm=gnorm,
+                 stop_reason="" if g is not None else "solve_failed")
 
 
-def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
+def optimizer_step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
     """One accepted step (BFGS or Newton), or the state with a stop reason."""
     x, f, g = state.x, state.f, state.g
     u0 = state.result.u0
@@ -413,10 +413,10 @@ def _step(problem, state, *, max_step, newton_switch, max_condition, c1=1e-4):
         V = np.eye(x.size) - rho * np.outer(s, y)
         hinv = V @ hinv @ V.T + rho * np.outer(s, s)
     new_norm = float(np.linalg.norm(_projected(problem, xt, gt)))
-    return _State(x=xt, f=ft, g=gt, hinv=hinv, result=rt, iteration=state.iteration + 1,
-                  newton_steps=state.newton_steps + int(newton),
-                  condition_number=cond, first_gradient_norm=state.first_gradient_norm,
-                  hessian_wait=wait, stalled=not newton and new_norm > STALL_RATIO * gnorm)
+    return State(x=xt, f=ft, g=gt, hinv=hinv, result=rt, iteration=state.iteration + 1,
+                 newton_steps=state.newton_steps + int(newton),
+                 condition_number=cond, first_gradient_norm=state.first_gradient_norm,
+                 hessian_wait=wait, stalled=not newton and new_norm > STALL_RATIO * gnorm)
 
 
 def _terminate(problem, state, gtol, max_iterations):
@@ -434,7 +434,7 @@ def _drain(problem, totals):
     problem.counts.update(solves=0, gradients=0)
 
 
-def _variables(template, physics, start, period_range=(1e-3, 1e4)):
+def variables(template, physics, start, period_range=(1e-3, 1e4)):
     names, values = family_parameters(template)
     if start is None:
         full = np.append(values, physics.period[0])
@@ -523,8 +523,8 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
     if len(family_template) != 1 or len(physics_template) != 1:
         raise ValueError("one parameter point at a time")
     t_start = time.perf_counter()
-    names, full, free, lower, upper = _variables(family_template, physics_template, start,
-                                                 period_range)
+    names, full, free, lower, upper = variables(family_template, physics_template, start,
+                                                period_range)
     if constrained:  # the period is fixed by P = power, not a variable
         free, lower, upper = free[:-1], lower[:-1], upper[:-1]
     kin = with_family_parameters(family_template, full[:-1])
@@ -557,14 +557,14 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
                                                free, full, lower[free], upper[free],
                                                power=power)
         else:
-            problem = _Problem(family_template, physics_template, grid, objective, sign, free,
-                               full, lower[free], upper[free])
-        state = _init(problem, x0)
+            problem = Problem(family_template, physics_template, grid, objective, sign, free,
+                              full, lower[free], upper[free])
+        state = initial_state(problem, x0)
         if hinv is not None and state.g is not None:
             state = replace(state, hinv=hinv)
         while not _terminate(problem, state, gtol, max_iterations):
-            state = _step(problem, state, max_step=max_step, newton_switch=newton_switch,
-                          max_condition=max_condition)
+            state = optimizer_step(problem, state, max_step=max_step, newton_switch=newton_switch,
+                                   max_condition=max_condition)
         totals["iterations"] += state.iteration
         totals["newton_steps"] += state.newton_steps
         _drain(problem, totals)

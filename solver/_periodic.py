@@ -221,9 +221,9 @@ def _radau_step_retrying(u_n, U1, U2, predicted, h, sin1, cos1, om1, sin2, cos2,
 
 
 @njit(cache=True, error_model="numpy")
-def _solve_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
-                 u_out, step_u, step_pi, step_m, stages_out=None, stage_guess=None,
-                 kinematics_out=None, weights_out=None, step_weights_out=None):
+def solve_point_on_grid(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol,
+                        u_out, step_u, step_pi, step_m, stages_out=None, stage_guess=None,
+                        kinematics_out=None, weights_out=None, step_weights_out=None):
     """Periodic solution for one parameter point on the first N steps of ``grid``.
 
     Writes u at the nodes into ``u_out``, the per-step integrals of u and Pi into
@@ -410,7 +410,7 @@ def batch_outputs(n, m):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol):
-    """Batched ``_solve_point`` over parameter points (one thread per point).
+    """Batched ``solve_point_on_grid`` over parameter points (one thread per point).
 
     ``grids`` has shape (n, max_steps + 1), row i valid up to ``n_steps[i]`` steps.
     """
@@ -418,7 +418,7 @@ def solve_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, v
     int_u, int_pi, u0_out, status, its, stage_its, step_u, step_pi, step_m, nodes = \
         batch_outputs(n, m)
     for i in prange(n):
-        int_u[i], int_pi[i], u0_out[i], status[i], its[i], stage_its[i] = _solve_point(
+        int_u[i], int_pi[i], u0_out[i], status[i], its[i], stage_its[i] = solve_point_on_grid(
             code, params[i], grids[i], n_steps[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
             u0[i], vscale[i], rtol, nodes[i], step_u[i], step_pi[i], step_m[i])
     return int_u, int_pi, u0_out, status, its, step_u, step_pi, step_m, nodes
@@ -433,7 +433,7 @@ def collocation_value(theta, u_n, U1, U2):
 
 
 @njit(cache=True, error_model="numpy")
-def _collocation_guess(grid, N, old_grid, old_N, old_nodes, old_stages, guess):
+def collocation_guess(grid, N, old_grid, old_N, old_nodes, old_stages, guess):
     """Stage values on ``grid`` from a solution on another grid of the period: at each stage
     time, the quadratic collocation polynomial of the old step that contains it (through
     (0, u_k), (1/3, U1_k), (1, U2_k) in theta = (t - t_k) / h_k)."""
@@ -458,7 +458,7 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
     from the coarse collocation polynomials: its stage Newton then starts O(h^3) close
     instead of O(h) (u_n).  The coarse grid's first sweep starts likewise from pair j's
     previous solution where ``old_steps[j]`` > 0 (the old_* rows: its grid, node values and
-    stages).  Both guesses are ``_collocation_guess``.  One thread per pair.
+    stages).  Both guesses are ``collocation_guess``.  One thread per pair.
 
     Returns the arrays of ``solve_points``, the stages of every row (n, 2 (m - 1)),
     written for the converged rows, and the node weights (``node_weights``) of the
@@ -478,12 +478,12 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
         N = n_steps[c]
         guess = np.empty(2 * N)
         if old_steps[j] > 0:
-            _collocation_guess(grids[c], N, old_grids[j], old_steps[j], old_nodes[j],
-                               old_stages[j], guess)
+            collocation_guess(grids[c], N, old_grids[j], old_steps[j], old_nodes[j],
+                              old_stages[j], guess)
             guess_c = guess
         else:
             guess_c = guess[:0]  # cold
-        int_u[c], int_pi[c], u0_out[c], status[c], its[c], stage_its[c] = _solve_point(
+        int_u[c], int_pi[c], u0_out[c], status[c], its[c], stage_its[c] = solve_point_on_grid(
             code, params[c], grids[c], N, kappa[c], mu_n[c], mu_s[c], p[c], dtau[c],
             u0[c], vscale[c], rtol, nodes[c], step_u[c], step_pi[c], step_m[c], stages[c],
             guess_c)
@@ -491,9 +491,9 @@ def solve_pairs(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u0, vs
         guess_f = guess[:0]
         if status[c] == CONVERGED and n_steps[f] == 2 * N:
             guess_f = np.empty(4 * N)
-            _collocation_guess(grids[f], 2 * N, grids[c], N, nodes[c], stages[c], guess_f)
+            collocation_guess(grids[f], 2 * N, grids[c], N, nodes[c], stages[c], guess_f)
             start = u0_out[c]
-        int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = _solve_point(
+        int_u[f], int_pi[f], u0_out[f], status[f], its[f], stage_its[f] = solve_point_on_grid(
             code, params[f], grids[f], n_steps[f], kappa[f], mu_n[f], mu_s[f], p[f],
             dtau[f], start, vscale[f], rtol, nodes[f], step_u[f], step_pi[f], step_m[f],
             stages[f], guess_f, None, weights[f], step_weights[f])

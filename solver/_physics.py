@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._kinematics import _as_points as _points
+from ._kinematics import as_points
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ class Physics:
     delta: np.ndarray = 1e-5
 
     def __post_init__(self):
-        arrs = {k: _points(k, getattr(self, k)) for k in ("period", "mu_n", "mu_s", "p", "delta")}
+        arrs = {k: as_points(k, getattr(self, k)) for k in ("period", "mu_n", "mu_s", "p", "delta")}
         n = max(a.shape[0] for a in arrs.values())
         for k, a in arrs.items():
             if a.shape[0] not in (1, n):

@@ -311,7 +311,7 @@ def _pad(grids):
     return out, n_steps
 
 
-def _pad_previous(solutions):
+def pad_previous(solutions):
     """(grids, steps, nodes, stages) padded over points from (grid, nodes, stages) or None
     (steps 0: no previous solution)."""
     width = max([s[0].size for s in solutions if s is not None], default=2)
@@ -805,7 +805,7 @@ class _Refinement:
         rows, steps = _pair_rows(*_pad([self.grids[i] for i in bucket]))
         results = _run_level(self.method, self.code, self.params, rows, steps, self.physics,
                              self.u0, self.vscale, self.rtol, np.repeat(bucket, 2), paired=True,
-                             previous=_pad_previous([self.previous[i] for i in bucket]))
+                             previous=pad_previous([self.previous[i] for i in bucket]))
         return _PassOutputs(rows, steps, *results)
 
     def _record(self, bucket, out):
@@ -922,7 +922,7 @@ class _Refinement:
             self.grids[i] = nodes[offsets[k]:offsets[k + 1]]
             if self.method == "periodic" and out.status[2 * j + 1] == CONVERGED:
                 N = out.steps[2 * j]
-                # views into this pass's arrays: ``_pad_previous`` copies them
+                # views into this pass's arrays: ``pad_previous`` copies them
                 self.previous[i] = (out.rows[2 * j + 1, :2 * N + 1], out.nodes[2 * j + 1, :2 * N],
                                     out.stages[2 * j + 1, :4 * N])
         return bucket[pairs[~stop]]

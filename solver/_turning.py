@@ -85,7 +85,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._events import _radau_from, illinois_update
+from ._events import illinois_update, radau_step_from
 from ._force import force_and_slope
 from ._kinematics import FOURIER, angle_and_rate
 from ._periodic import collocation_value, monodromy_factor, node_weights, one_minus_monodromy
@@ -367,7 +367,7 @@ def _resolved_weights(step_weights, step_m, N, steps, log_factors, count):
 
 
 @njit(cache=True, error_model="numpy")
-def _layer_rate(code, params, t0, t1, u_n, U1, U2, kappa, mu_n, mu_s, p, dtau):
+def layer_rate(code, params, t0, t1, u_n, U1, U2, kappa, mu_n, mu_s, p, dtau):
     """The fastest relaxation rate T^(2-p) |dF/du| of the step [t0, t1] at u_n (just after
     t0) and at its stages: the inverse width of a layer that starts at t0."""
     h = t1 - t0
@@ -383,7 +383,7 @@ def _layer_rate(code, params, t0, t1, u_n, U1, U2, kappa, mu_n, mu_s, p, dtau):
 def corner_layer_error(code, params, t0, t1, u_start, U1, U2, width, weight_next, kappa, mu_n,
                        mu_s, p, dtau, atol):
     """The error in int u of the Radau step [t0, t1] (stages U1, U2) that a corner of phi's
-    layer, of ``width`` (1 / ``_layer_rate``), may reach.
+    layer, of ``width`` (1 / ``layer_rate``), may reach.
 
     The step is solved again from ``u_start`` (its u_n, or where the re-solve of the step
     before ended) on sub-steps growing geometrically (ratio 2) from LAYER_FIRST_FRACTION of
@@ -404,7 +404,7 @@ def corner_layer_error(code, params, t0, t1, u_start, U1, U2, width, weight_next
         b = a + d
         if b + d > t1:  # the last sub-step takes the rest (at most 2 d)
             b = t1
-        q, u, ok = _radau_from(u, a, b, code, params, kappa, mu_n, mu_s, p, dtau, atol)
+        q, u, ok = radau_step_from(u, a, b, code, params, kappa, mu_n, mu_s, p, dtau, atol)
         if not ok:
             return math.nan, math.nan
         integral += q
@@ -414,8 +414,8 @@ def corner_layer_error(code, params, t0, t1, u_start, U1, U2, width, weight_next
 
 
 @njit(cache=True, error_model="numpy")
-def _corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n, mu_s, p, dtau,
-                   steps, widths, first):
+def corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n, mu_s, p, dtau,
+                  steps, widths, first):
     """The steps after each corner of phi that may hold its layer: among the first
     LAYER_SEARCH steps that start within LAYER_REACH of it, the first LAYER_STEPS whose
     fastest relaxation rate times h exceeds LAYER_STIFFNESS (a layer shorter than the step;
@@ -436,8 +436,8 @@ def _corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n,
         for n in range(n0, end):
             if grid[n] - c > LAYER_REACH:
                 break  # (a stiff step far after the corner is no layer's: a stop, say)
-            rate = _layer_rate(code, params, grid[n], grid[n + 1], u_nodes[n], stages[2 * n],
-                               stages[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
+            rate = layer_rate(code, params, grid[n], grid[n + 1], u_nodes[n], stages[2 * n],
+                              stages[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
             if rate * (grid[n + 1] - grid[n]) > LAYER_STIFFNESS:
                 steps[count] = n
                 widths[count] = 1.0 / rate
@@ -460,8 +460,8 @@ def _point_check(code, params, grid, N, u_nodes, stages, step_m, step_weights, k
     first = np.empty(LAYER_STEPS * corners.size, dtype=np.bool_)
     n_layers = 0
     if collocated:
-        n_layers = _corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n,
-                                  mu_s, p, dtau, layer_steps, widths, first)
+        n_layers = corner_layers(code, params, grid, N, u_nodes, stages, corners, kappa, mu_n,
+                                 mu_s, p, dtau, layer_steps, widths, first)
     if n_zeros == 0 and n_layers == 0:
         return 0.0, 0
     defects = np.empty(N)

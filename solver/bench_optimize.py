@@ -30,7 +30,7 @@ import scipy.optimize
 
 from ._gradient import adaptive_grid, discrete_objective, with_family_parameters, with_period
 from ._kinematics import Fourier
-from ._optimize import _Problem, _variables, optimize_motion
+from ._optimize import Problem, optimize_motion, variables
 from ._physics import Physics
 from .bench import repeat_timed
 
@@ -61,9 +61,9 @@ def compare(seed, kmax, ratio_log2, gtol, repeats=1):
           f"|grad| = {ours.gradient_norm:.2e}, "
           f"stop: {ours.stop_reason}, lambda = {ours.efficiency:.10f}")
 
-    names, full, free, lower, upper = _variables(template, physics, None)
-    problem = _Problem(template, physics, grid, "efficiency", -1.0, free, full, lower[free],
-                       upper[free])
+    names, full, free, lower, upper = variables(template, physics, None)
+    problem = Problem(template, physics, grid, "efficiency", -1.0, free, full, lower[free],
+                      upper[free])
     sign = math.copysign(1.0, ours.efficiency)
     counts = {"objective": 0}
     state = {"u0": None}

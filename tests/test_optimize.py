@@ -123,39 +123,39 @@ def test_a_direction_that_does_not_descend_fails_the_line_search():
     # halving or interpolating, the search must stop while x + alpha d still differs from
     # x: below that Armijo "holds" at f itself and the step would be taken as no progress
     from types import SimpleNamespace
-    from solver._optimize import _State, _step
+    from solver._optimize import State, optimizer_step
     x = np.array([1.0])
-    state = _State(x=x, f=2.0, g=np.array([-2.0]), hinv=np.eye(1),
-                   result=SimpleNamespace(u0=0.0), first_gradient_norm=2.0)
+    state = State(x=x, f=2.0, g=np.array([-2.0]), hinv=np.eye(1),
+                  result=SimpleNamespace(u0=0.0), first_gradient_norm=2.0)
     problem = _WrongGradient()
-    out = _step(problem, state, max_step=0.5, newton_switch=0.0, max_condition=1e12)
+    out = optimizer_step(problem, state, max_step=0.5, newton_switch=0.0, max_condition=1e12)
     assert out.stop_reason == "line_search_failed"
     assert problem.solves <= 40
 
 
 def test_a_stalled_bfgs_takes_a_newton_step_that_converges_quadratically():
-    from solver._optimize import _init, _Problem, _step, _variables
+    from solver._optimize import Problem, initial_state, optimizer_step, variables
     from dataclasses import replace
     physics = solver.Physics.from_scaled(2.0 ** -4, 2.0)
     template = solver.Harmonic(1.0, 0.5)
     grid = FixedGrid.uniform(template, 128)
     best = optimize_motion(template, physics, grid=grid)
-    names, full, free, lower, upper = _variables(template, physics, best.parameters)
-    problem = _Problem(template, physics, grid, "efficiency", -1.0, free, full, lower[free],
-                       upper[free])
+    names, full, free, lower, upper = variables(template, physics, best.parameters)
+    problem = Problem(template, physics, grid, "efficiency", -1.0, free, full, lower[free],
+                      upper[free])
     x_star = full[free].copy()
     x_star[-1] = np.log(full[-1])
     gnorms = []
     # (1e-3 off, the Hessian is already indefinite: the objective is stiff; measured
     # |g| -> 14 |g|^2 from 3e-3 down to 3e-6)
     for offset in (1e-5, 1e-6):
-        state = _init(problem, x_star + offset * np.array([1.0, -0.5, 0.3]))
+        state = initial_state(problem, x_star + offset * np.array([1.0, -0.5, 0.3]))
         gnorm = np.linalg.norm(state.g)
         # not stalled: a BFGS step (the first from the scaled identity)
-        plain = _step(problem, state, max_step=0.5, newton_switch=np.inf, max_condition=1e12)
+        plain = optimizer_step(problem, state, max_step=0.5, newton_switch=np.inf, max_condition=1e12)
         assert plain.newton_steps == 0
-        out = _step(problem, replace(state, stalled=True), max_step=0.5, newton_switch=np.inf,
-                    max_condition=1e12)
+        out = optimizer_step(problem, replace(state, stalled=True), max_step=0.5, newton_switch=np.inf,
+                             max_condition=1e12)
         assert out.newton_steps == 1 and not out.stop_reason
         gnorms.append((gnorm, np.linalg.norm(out.g)))
     # quadratic: the gradient after the Newton step shrinks like the square of the one before
@@ -166,8 +166,8 @@ def test_a_stalled_bfgs_takes_a_newton_step_that_converges_quadratically():
 
 def test_a_failed_bfgs_step_close_to_the_optimum_asks_for_newton():
     from types import SimpleNamespace
-    from solver._optimize import _State, _step
-    state = _State(x=np.array([1.0]), f=2.0, g=np.array([-2.0]), hinv=np.eye(1),
-                   result=SimpleNamespace(u0=0.0), first_gradient_norm=2.0)
-    out = _step(_WrongGradient(), state, max_step=0.5, newton_switch=np.inf, max_condition=1e12)
+    from solver._optimize import State, optimizer_step
+    state = State(x=np.array([1.0]), f=2.0, g=np.array([-2.0]), hinv=np.eye(1),
+                  result=SimpleNamespace(u0=0.0), first_gradient_norm=2.0)
+    out = optimizer_step(_WrongGradient(), state, max_step=0.5, newton_switch=np.inf, max_condition=1e12)
     assert out.stalled and not out.stop_reason and out.iteration == 0

@@ -206,7 +206,7 @@ def test_misplaced_stop_error_against_an_independent_integration():
     from cases import radau_reference
     from solver._events import misplaced_stop_error
     from solver._kinematics import period_grid
-    from solver._periodic import _solve_point
+    from solver._periodic import solve_point_on_grid
     kin, phys = SPURIOUS_STOP_CASE
     code, params = kin.kernel_encoding()
     physics = tuple(float(x[0]) for x in (
@@ -215,9 +215,9 @@ def test_misplaced_stop_error_against_an_independent_integration():
     N = grid.size - 1
     nodes, step_u, step_pi, step_m, weights, q = (np.empty(N) for _ in range(6))
     stages = np.empty(2 * N)
-    status = _solve_point(code, params[0], grid, N, *physics, 0.0,
-                          solver.kinematic_speed(kin)[0], 1e-10, nodes, step_u, step_pi, step_m,
-                          stages, None, None, weights, q)[3]
+    status = solve_point_on_grid(code, params[0], grid, N, *physics, 0.0,
+                                 solver.kinematic_speed(kin)[0], 1e-10, nodes, step_u, step_pi, step_m,
+                                 stages, None, None, weights, q)[3]
     assert status == 0
     times, origins = (a[0] for a in event_times(
         code, params, grid[None], np.array([N]), nodes[None], *(np.array([x]) for x in physics),

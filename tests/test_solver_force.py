@@ -95,8 +95,8 @@ def test_power_carried_by_the_stage_iterations(p):
 
 def _uses_quadrature(u, phi, omega, delta_tau):
     """Whether ``link_moments`` takes its Gauss-Legendre branch (the rule of _force)."""
-    from solver._force import SWITCH_RATIO, _setup
-    _, _, a, b, _, e2 = _setup(u, phi, omega, delta_tau, 0.0)
+    from solver._force import SWITCH_RATIO, link_setup
+    _, _, a, b, _, e2 = link_setup(u, phi, omega, delta_tau, 0.0)
     h = 0.25 * abs(b)
     gap = max(abs(a + 0.25 * b) - h, 0.0)
     return gap * gap + e2 >= (SWITCH_RATIO * h) ** 2

@@ -220,7 +220,7 @@ def test_shooting_is_bracketed_where_the_period_map_is_not_monotone():
     grid) and, from a far start, ran off to u(0) ~ 1e23 and called it converged.  The shooting
     iteration keeps a bracket from the sign of g = Phi(u0) - u0 alone."""
     from solver._kinematics import period_grid
-    from solver._periodic import _solve_point
+    from solver._periodic import solve_point_on_grid
 
     A0 = np.pi / 2
     kin = solver.PowerLaw([A0], [0.2 * A0], [0.5], [10.0], [True], [1.0], [False])
@@ -236,9 +236,9 @@ def test_shooting_is_bracketed_where_the_period_map_is_not_monotone():
     assert status[0] == 0
     u0s = []
     for start in (-0.5, -0.05, -0.02, 0.0, 0.05, 0.5, 3.0):
-        out = _solve_point(code, params[0], period_grid(kin, 64)[0], 64, phys.inertia_factor[0],
-                           phys.mu_n[0], phys.mu_s[0], 0.0, phys.delta_tau[0], start, vscale, 1e-6,
-                           *work)
+        out = solve_point_on_grid(code, params[0], period_grid(kin, 64)[0], 64, phys.inertia_factor[0],
+                                  phys.mu_n[0], phys.mu_s[0], 0.0, phys.delta_tau[0], start, vscale, 1e-6,
+                                  *work)
         # one fixed point, whatever the start: the same u(0) and int u as the default start's
         assert out[3] == 0, (start, out[:5])
         assert abs(out[0] - mean_u[0]) <= 1e-8 * vscale, (start, out[0], mean_u[0])
@@ -247,7 +247,7 @@ def test_shooting_is_bracketed_where_the_period_map_is_not_monotone():
 
 
 def test_bisection_guess_reproduces_the_collocation_quadratic():
-    from solver._periodic import _collocation_guess
+    from solver._periodic import collocation_guess
     from solver._solve import bisect_all
 
     grid = np.array([0.0, 0.3, 1.0])
@@ -255,13 +255,13 @@ def test_bisection_guess_reproduces_the_collocation_quadratic():
     nodes = quad(grid[:-1])
     stages = quad(np.array([0.1, 0.3, 0.3 + 0.7 / 3, 1.0]))
     guess = np.empty(8)
-    _collocation_guess(bisect_all(grid), 4, grid, 2, nodes, stages, guess)
+    collocation_guess(bisect_all(grid), 4, grid, 2, nodes, stages, guess)
     fine = np.array([0.05, 0.15, 0.2, 0.3, 0.3 + 0.35 / 3, 0.65, 0.65 + 0.35 / 3, 1.0])
     assert np.allclose(guess, quad(fine), rtol=0, atol=1e-14)
 
 
 def test_collocation_guess_reproduces_quadratics_across_grids():
-    from solver._periodic import _collocation_guess
+    from solver._periodic import collocation_guess
 
     quad = lambda t: 0.7 - 2.0 * t + 3.5 * t ** 2  # noqa: E731
     old = np.array([0.0, 0.2, 0.45, 0.7, 1.0])
@@ -269,7 +269,7 @@ def test_collocation_guess_reproduces_quadratics_across_grids():
     old_stages = quad(np.ravel(np.column_stack([old[:-1] + h / 3, old[1:]])))
     new = np.array([0.0, 0.1, 0.3, 0.33, 0.8, 1.0])
     guess = np.empty(10)
-    _collocation_guess(new, 5, old, 4, quad(old[:-1]), old_stages, guess)
+    collocation_guess(new, 5, old, 4, quad(old[:-1]), old_stages, guess)
     hn = np.diff(new)
     times = np.ravel(np.column_stack([new[:-1] + hn / 3, new[1:]]))
     assert np.allclose(guess, quad(times), rtol=0, atol=1e-14)
@@ -280,7 +280,7 @@ def test_paired_solves_match_independent_ones():
     discrete problems as solve_points, to the nonlinear tolerance."""
     from solver._kinematics import period_grid
     from solver._periodic import solve_pairs, solve_points
-    from solver._solve import _pad_previous, bisect_all
+    from solver._solve import bisect_all, pad_previous
 
     rng = np.random.default_rng(2)
     n = 24
@@ -298,13 +298,13 @@ def test_paired_solves_match_independent_ones():
     args = (code, params[rows], grids, steps, phys.inertia_factor[rows], phys.mu_n[rows],
             phys.mu_s[rows], phys.p[rows], phys.delta_tau[rows], np.zeros(2 * n), vscale, 1e-8)
     b = solve_points(*args)
-    a = solve_pairs(*args, *_pad_previous([None] * n))
+    a = solve_pairs(*args, *pad_previous([None] * n))
     assert np.all(a[3] == 0) and np.all(b[3] == 0)
     assert np.allclose(a[0], b[0], rtol=0, atol=1e-9 * vscale.max())
     assert np.allclose(a[1], b[1], rtol=1e-9)
     # the coarse grids started from those solutions (another grid: the bisected one)
     previous = [(grids[2 * j + 1], a[8][2 * j + 1, :96], a[9][2 * j + 1, :192]) for j in range(n)]
-    again = solve_pairs(*args, *_pad_previous(previous))
+    again = solve_pairs(*args, *pad_previous(previous))
     assert np.all(again[3] == 0)
     assert np.allclose(again[0], b[0], rtol=0, atol=1e-9 * vscale.max())
     assert np.allclose(again[1], b[1], rtol=1e-9)

@@ -10,7 +10,7 @@ from scipy.integrate import quad
 import solver
 from solver._force import force_and_slope
 from solver._kinematics import angle_and_rate, period_grid
-from solver._periodic import _solve_point, radau_step
+from solver._periodic import radau_step, solve_point_on_grid
 from solver._turning import grade_towards, step_defect, turning_point_estimates, window_width
 
 
@@ -63,8 +63,8 @@ def test_node_weights_are_the_sensitivity_of_int_u_to_a_jump(p, delta):
     physics = (phys.inertia_factor[0], phys.mu_n[0], phys.mu_s[0], phys.p[0], phys.delta_tau[0])
     out = [np.empty(N) for _ in range(5)]
     weights = np.empty(N)
-    *_, u0, status, _, _ = _solve_point(code, params[0], grid, N, *physics, 0.0, 1.0, 1e-13,
-                                        *out[:4], out[4].repeat(2), None, None, weights)
+    *_, u0, status, _, _ = solve_point_on_grid(code, params[0], grid, N, *physics, 0.0, 1.0, 1e-13,
+                                               *out[:4], out[4].repeat(2), None, None, weights)
     assert status == 0
     rows = _stage_kinematics(code, params[0], grid)
     jump = 1e-6
@@ -191,9 +191,9 @@ def test_turning_point_estimate_sees_the_trap_and_not_a_resolved_solution():
         N = grid.size - 1
         nodes, step_u, step_pi, step_m, weights, q = (np.empty(N) for _ in range(6))
         stages = np.empty(2 * N)
-        int_u, *_, status, _, _ = _solve_point(code, params[0], grid, N, *physics, 0.0, V, 1e-10,
-                                               nodes, step_u, step_pi, step_m, stages, None,
-                                               None, weights, q)
+        int_u, *_, status, _, _ = solve_point_on_grid(code, params[0], grid, N, *physics, 0.0, V, 1e-10,
+                                                      nodes, step_u, step_pi, step_m, stages, None,
+                                                      None, weights, q)
         assert status == 0
         scale = max(abs(int_u), 1e-3 * V)
         estimate, flagged = turning_point_estimates(
@@ -307,7 +307,7 @@ def test_each_corner_keeps_its_own_layer_steps():
     delta_tau 1e-12): the steps after tau = 0 stop at tau0, which starts its own list.
     (Searched 64 steps on, tau = 0 took tau0's steps as its own, so a flagged tau0 layer was
     graded toward tau = 0, or not re-solved at all.)"""
-    from solver._turning import LAYER_STEPS, _corner_layers
+    from solver._turning import LAYER_STEPS, corner_layers
     kin = solver.PowerLaw([1.0], [0.5], [2.0 ** -12], [2.0], [False], [2.0], [False])
     tau0 = kin.duty_cycle[0]
     grid = np.concatenate([np.linspace(0.0, tau0, 3), tau0 + 2.0 ** -13 * np.arange(1, 40),
@@ -317,8 +317,8 @@ def test_each_corner_keeps_its_own_layer_steps():
     steps = np.empty(2 * LAYER_STEPS, dtype=np.int64)
     widths = np.empty(2 * LAYER_STEPS)
     first = np.empty(2 * LAYER_STEPS, dtype=np.bool_)
-    count = _corner_layers(code, params[0], grid, N, np.zeros(N), np.zeros(2 * N),
-                           kin.corners()[0], 1e12, 1.0, 1.0, 0.0, 1e-12, steps, widths, first)
+    count = corner_layers(code, params[0], grid, N, np.zeros(N), np.zeros(2 * N),
+                          kin.corners()[0], 1e12, 1.0, 1.0, 0.0, 1e-12, steps, widths, first)
     assert list(steps[:count]) == [0, 1] + list(range(2, 2 + LAYER_STEPS))
     assert list(first[:count]) == [True, False, True] + [False] * (LAYER_STEPS - 1)
 
@@ -330,7 +330,7 @@ def test_corner_layer_error_against_an_independent_integration():
     error is ~13 rtol at rtol 1e-3 of the norm of int u (its floor 1e-3 V here): the layer
     the step misses."""
     from cases import radau_reference
-    from solver._turning import _layer_rate, corner_layer_error
+    from solver._turning import corner_layer_error, layer_rate
     kin = solver.PowerLaw([0.5729944571272555], [0.009698383749602814], [0.4888715012712118],
                           [5.0], [False], [14.468630943676835], [False])
     phys = solver.Physics.from_scaled(0.16643930643694074, 112.84102281785694, p=0.0,
@@ -344,14 +344,14 @@ def test_corner_layer_error_against_an_independent_integration():
     N = grid.size - 1
     nodes, step_u, step_pi, step_m, weights, q = (np.empty(N) for _ in range(6))
     stages = np.empty(2 * N)
-    status = _solve_point(code, params, grid, N, *physics, 0.0, V, 1e-10, nodes, step_u,
-                          step_pi, step_m, stages, None, None, weights, q)[3]
+    status = solve_point_on_grid(code, params, grid, N, *physics, 0.0, V, 1e-10, nodes, step_u,
+                                 step_pi, step_m, stages, None, None, weights, q)[3]
     assert status == 0
     n = int(np.flatnonzero(np.abs(grid - kin.duty_cycle[0]) < 1e-14)[0])
     t0, t1 = grid[n], grid[n + 1]
     side = 0.5 * (t0 + t1)
     U1, U2 = stages[2 * n], stages[2 * n + 1]
-    rate = _layer_rate(code, params, t0, t1, nodes[n], U1, U2, *physics)
+    rate = layer_rate(code, params, t0, t1, nodes[n], U1, U2, *physics)
     assert rate * (t1 - t0) > 100
     estimate, end = corner_layer_error(code, params, t0, t1, nodes[n], U1, U2, 1.0 / rate,
                                        weights[n + 1], *physics, 1e-16)
