@@ -343,7 +343,7 @@ def _solve_point(scene: StudyScene, point, vscale: float) -> dict[str, np.ndarra
     v["true_error"][~(np.isfinite(v["error_U"]) & np.isfinite(v["error_P"]))] = np.nan
     v.update({k: np.asarray(x) for k, x in ref.items()})
     if scene.kind == "stiffness":
-        v.update(_fallback(scene, v))
+        v.update(apply_fallback(scene, v))
     if scene.fixed_steps:
         v.update(_fixed_grids(scene, case, ref, T, vscale))
     if scene.baseline_tolerances:
@@ -351,7 +351,7 @@ def _solve_point(scene: StudyScene, point, vscale: float) -> dict[str, np.ndarra
     return v
 
 
-def _fallback(scene: StudyScene, v) -> dict[str, np.ndarray]:
+def apply_fallback(scene: StudyScene, v) -> dict[str, np.ndarray]:
     """Per (method, rtol): the method's own answer if converged, else the fallback method's
     converged answer at the same rtol (when the scene allows it), else none."""
     nm, nr = v["status"].shape

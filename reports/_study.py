@@ -28,8 +28,8 @@ __all__ = ["study_section", "combined_honesty", "honesty_records", "honesty_summ
 REFERENCE_SHARE = 0.1
 _COLORS = {"periodic": "#1f77b4", "march": "#d62728", "baseline": "#2ca02c"}
 #: one colour per solver status code 0 .. 8 (``solver.STATUS_REASONS``)
-_STATUS_COLORS = ["#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#d62728", "#e377c2", "#bcbd22", "#7f7f7f",
-                  "#17becf"]
+STATUS_COLORS = ["#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#d62728", "#e377c2", "#bcbd22", "#7f7f7f",
+                 "#17becf"]
 
 
 def _labels(sd, name) -> list[str]:
@@ -322,8 +322,8 @@ def _sweep_maps(sd, j: int):
                         vertical_spacing=0.25 / len(row_names))
     xlab = [_value_label(parameter, v) for v in xs]
     ylab = [motions_all[m] for m in motion_idx]
-    n_codes = len(_STATUS_COLORS)
-    status_scale = [[k / (n_codes - 1), c] for k, c in enumerate(_STATUS_COLORS)]
+    n_codes = len(STATUS_COLORS)
+    status_scale = [[k / (n_codes - 1), c] for k, c in enumerate(STATUS_COLORS)]
     used = _v(sd, "used_method") if "used_method" in sd.ds else None
     for a, m in enumerate(methods):
         for b, r in enumerate(rtols):
@@ -384,7 +384,7 @@ def _delta_figure(sd):
         for col, q in ((1, "U_ref"), (2, "P_ref")):
             fig.add_trace(go.Scatter(x=_v(sd, "delta")[sel], y=_v(sd, q)[sel], mode="lines+markers", name=motions[m],
                                      legendgroup=motions[m], showlegend=col == 1,
-                                     line={"color": _STATUS_COLORS[k % len(_STATUS_COLORS)]}), row=1, col=col)
+                                     line={"color": STATUS_COLORS[k % len(STATUS_COLORS)]}), row=1, col=col)
     fig.update_xaxes(type="log", title_text="δ", exponentformat="power")
     fig.update_yaxes(type="log", row=1, col=2)
     fig.update_layout(height=420, title={"text": "Effect of δ on U and P (paper: barely changes for δ ≤ 1e-2)",

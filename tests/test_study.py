@@ -16,7 +16,7 @@ import solver
 from cases import AGREEMENT_CASES, by_name
 from pipeline import SceneError, StoreMismatch, load_scene, parse_scene, run_scene
 from pipeline.__main__ import main, quick_variant
-from pipeline._study import NO_ANSWER, _fallback, solver_norm_errors
+from pipeline._study import NO_ANSWER, apply_fallback, solver_norm_errors
 from pipeline_cases import REPO, write_scene
 from reports._read import open_scene_store
 from reports._study import fitted_order, honesty_records, honesty_summary
@@ -198,11 +198,11 @@ def test_fallback_keeps_own_answer_else_the_fallback_method_else_none():
     status = np.array([[0, 0], [5, 0]])  # march failed at the first rtol only
     v = {"status": status, "U": np.array([[1.0, 2.0], [np.nan, 4.0]]), "P": np.ones((2, 2)),
          "true_error": np.array([[1e-4, 1e-7], [np.nan, 1e-7]])}
-    out = _fallback(scene, v)
+    out = apply_fallback(scene, v)
     np.testing.assert_array_equal(out["used_method"], [[0, 0], [0, 1]])
     np.testing.assert_array_equal(out["U_used"], [[1.0, 2.0], [1.0, 4.0]])
     v["status"] = np.array([[6, 0], [5, 0]])  # neither converged at the first rtol
-    out = _fallback(scene, v)
+    out = apply_fallback(scene, v)
     assert out["used_method"][0, 0] == out["used_method"][1, 0] == NO_ANSWER
     assert np.isnan(out["U_used"][:, 0]).all()
 
@@ -510,9 +510,9 @@ def test_periodic_is_honest_on_a_sweep_of_short_scaled_periods():
 
 
 def test_status_map_has_a_colour_for_every_status_code():
-    from reports._study import _STATUS_COLORS
-    assert len(_STATUS_COLORS) == max(solver.STATUS_REASONS) + 1
-    assert sorted(solver.STATUS_REASONS) == list(range(len(_STATUS_COLORS)))
+    from reports._study import STATUS_COLORS
+    assert len(STATUS_COLORS) == max(solver.STATUS_REASONS) + 1
+    assert sorted(solver.STATUS_REASONS) == list(range(len(STATUS_COLORS)))
 
 
 def test_pairs_that_disagree_beyond_the_answer_are_bisected_once():
