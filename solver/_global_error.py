@@ -81,7 +81,8 @@ def combine(error_u, error_p, scale_u, scale_p):
     return max(error_u / scale_u, error_p / scale_p)
 
 
-#: a round shrinks a step by at most this factor.  A share far above the tolerance says that
+#: a refinement ceiling is at most this factor below its step (the next sweep's own control
+#: and the trap caps may still shrink it further).  A share far above the tolerance says that
 #: the step's estimate left its asymptotic regime, not how much smaller the step must be
 #: (measured: 3e291 rtol from a step whose shifted stage sat where dF/du > 0, the estimate's
 #: growth factor exp(h kappa dF/du) overflowing; its ceiling of ACCEPT_STEP then exhausted

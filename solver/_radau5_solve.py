@@ -250,7 +250,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         one_minus_M = 1.0
         g = 0.0
         status = NOT_PERIODIC
-        best_u0 = u0
+        round_u0 = best_u0 = u0
         best_residual = math.inf
         for _ in range(MAX_FROZEN_SWEEPS):
             g, one_minus_M = _period_map(W, N, u0)
@@ -274,10 +274,15 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
             # the frozen step sequence does not carry the shooting to the fixed point: a stage
             # solve failed on it, or Newton did not converge in MAX_FROZEN_SWEEPS.  The next
             # round's adaptive sweep places its steps anew (from Newton's last proposal after
-            # a failed stage solve, else from the best u(0) of this round)
-            if status != STAGE_SOLVE_FAILED:
-                u0 = best_u0
+            # a failed stage solve, else from the best u(0) of this round; where that is the
+            # round's own start, the next round would repeat this one: the failure stands)
             failure = status
+            estimate = math.inf
+            if status != STAGE_SOLVE_FAILED:
+                if best_u0 == round_u0:
+                    return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
+                                            vscale)
+                u0 = best_u0
             continue
         shift = g / one_minus_M
         _shift(W, N, shift)

@@ -422,9 +422,10 @@ def test_a_near_tangency_on_a_sample_is_a_stop():
     assert np.any(np.abs(stops[:count] - 0.5) < 1e-12), stops[:count]
 
 
-#: honesty-harness points (set, index) that failed at these rtols before a failed frozen
-#: Newton handed its round back to an adaptive sweep and before ``MAX_REFINEMENT`` (statuses
-#: STEP_BUDGET_EXCEEDED, STAGE_SOLVE_FAILED x 5, NOT_PERIODIC; docs/validation.md)
+#: honesty-harness points (stress_powerlaw_21 points 265, 135, 117, 248, stress_powerlaw_22
+#: point 65, stress_powerlaw_23 points 325, 96) that failed at these rtols before a failed
+#: frozen Newton handed its round back to an adaptive sweep and before ``MAX_REFINEMENT``
+#: (statuses STEP_BUDGET_EXCEEDED, STAGE_SOLVE_FAILED x 5, NOT_PERIODIC; docs/validation.md)
 _FORMER_FAILURES = [
     # stress_powerlaw_21 point 265: a stage of a step next to phi ~ pi sat where dF/du > 0;
     # its estimate of 3e291 rtol asked for a ceiling of ACCEPT_STEP (131,072 steps)
