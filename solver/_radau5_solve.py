@@ -158,6 +158,66 @@ def _model(W, N, ceilings):
                        ceilings[:N].copy(), N)
 
 
+class FrozenNewton(NamedTuple):
+    """What ``frozen_newton`` returns.
+
+    u0 : the last u(0); g, one_minus_M : the period map there (``_period_map``); status :
+    CONVERGED (the fixed point within tol_fix, u0 inside the bracket) or the failure;
+    restart_u0 : after a failure, where the next round's adaptive sweep starts (NaN: the
+    failure stands); sweeps, evaluations : frozen sweeps made and their evaluations of F."""
+
+    u0: float
+    g: float
+    one_minus_M: float
+    status: int
+    restart_u0: float
+    sweeps: int
+    evaluations: int
+
+
+@njit(cache=True, error_model="numpy")
+def frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound):
+    """Newton on u(0) over the N recorded steps of ``W`` (``frozen_sweep``, in place) until
+    |g| <= tol_fix |1 - M|, bracketed in +-bound.
+
+    Where the frozen steps do not carry Newton to the fixed point (a stage solve fails on
+    them, a sweep is not finite, or MAX_FROZEN_SWEEPS run out), the next round's adaptive
+    sweep places its steps anew: from Newton's last proposal after a failed stage solve,
+    else from the best u(0) seen (smallest |g / (1 - M)|); where that is the start, the next
+    round would repeat this one, and the failure stands (restart_u0 NaN), as it does where
+    the period map itself is not finite."""
+    lo, hi = -bound, bound
+    start = best_u0 = u0
+    best_residual = math.inf
+    sweeps = 0
+    evaluations = 0
+    g = 0.0
+    one_minus_M = 1.0
+    status = NOT_PERIODIC
+    for _ in range(MAX_FROZEN_SWEEPS):
+        g, one_minus_M = _period_map(W, N, u0)
+        if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
+            return FrozenNewton(u0, g, one_minus_M, NON_FINITE, math.nan, sweeps, evaluations)
+        if abs(g) <= tol_fix * abs(one_minus_M):
+            status = CONVERGED if abs(u0) < 0.999 * bound else NOT_PERIODIC
+            break
+        if abs(g / one_minus_M) < best_residual:
+            best_u0, best_residual = u0, abs(g / one_minus_M)
+        u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
+        status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
+        sweeps += 1
+        evaluations += e
+        if status == STAGE_SOLVE_FAILED:
+            return FrozenNewton(u0, g, one_minus_M, status, u0, sweeps, evaluations)
+        if status != CONVERGED:
+            break
+        status = NOT_PERIODIC
+    if status == CONVERGED:
+        return FrozenNewton(u0, g, one_minus_M, status, math.nan, sweeps, evaluations)
+    restart = best_u0 if best_u0 != start else math.nan
+    return FrozenNewton(u0, g, one_minus_M, status, restart, sweeps, evaluations)
+
+
 @njit(cache=True, error_model="numpy")
 def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
     """The periodic solution of one point; see the module docstring.
@@ -246,43 +306,17 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         corner_nodes = np.zeros(N, dtype=np.bool_)
         for n in range(N - 1):
             corner_nodes[n + 1] = W[END_KIND, n] == CORNER_STOP
-        lo, hi = -bound, bound
-        one_minus_M = 1.0
-        g = 0.0
-        status = NOT_PERIODIC
-        round_u0 = best_u0 = u0
-        best_residual = math.inf
-        for _ in range(MAX_FROZEN_SWEEPS):
-            g, one_minus_M = _period_map(W, N, u0)
-            if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-                return W, PointSolution(nan, nan, u0, NON_FINITE, N, sweeps, math.inf, evals, vscale)
-            if abs(g) <= tol_fix * abs(one_minus_M):
-                status = CONVERGED
-                break
-            if abs(g / one_minus_M) < best_residual:
-                best_u0, best_residual = u0, abs(g / one_minus_M)
-            u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
-            status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
-            sweeps += 1
-            evals[COST_FROZEN] += e
-            if status != CONVERGED:
-                break
-            status = NOT_PERIODIC
-        if status == CONVERGED and not abs(u0) < 0.999 * bound:
-            status = NOT_PERIODIC
-        if status != CONVERGED:
-            # the frozen step sequence does not carry the shooting to the fixed point: a stage
-            # solve failed on it, or Newton did not converge in MAX_FROZEN_SWEEPS.  The next
-            # round's adaptive sweep places its steps anew (from Newton's last proposal after
-            # a failed stage solve, else from the best u(0) of this round; where that is the
-            # round's own start, the next round would repeat this one: the failure stands)
-            failure = status
+        fn = frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound)
+        sweeps += fn.sweeps
+        evals[COST_FROZEN] += fn.evaluations
+        u0, g, one_minus_M = fn.u0, fn.g, fn.one_minus_M
+        if fn.status != CONVERGED:
+            failure = fn.status
             estimate = math.inf
-            if status != STAGE_SOLVE_FAILED:
-                if best_u0 == round_u0:
-                    return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
-                                            vscale)
-                u0 = best_u0
+            if not math.isfinite(fn.restart_u0):
+                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
+                                        vscale)
+            u0 = fn.restart_u0
             continue
         shift = g / one_minus_M
         _shift(W, N, shift)
@@ -337,22 +371,15 @@ def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
             W[SENS + i, n] = 0.0
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
     bound = 1e3 * vscale + 10.0 * abs(u_guess)
-    lo, hi = -bound, bound
-    u0 = u_guess
-    status, _ = frozen_sweep(code, params, phys, u0, phys_atol, W, N)
-    for _ in range(MAX_FROZEN_SWEEPS):
-        if status != CONVERGED:
-            return math.nan, math.nan, status
-        g, one_minus_M = _period_map(W, N, u0)
-        if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-            return math.nan, math.nan, NON_FINITE
-        if abs(g) <= tol_fix * abs(one_minus_M):
-            _shift(W, N, g / one_minus_M)
-            int_u, int_p = _integrals(W, N)
-            return int_u, int_p, CONVERGED
-        u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
-        status, _ = frozen_sweep(code, params, phys, u0, phys_atol, W, N)
-    return math.nan, math.nan, NOT_PERIODIC
+    status, _ = frozen_sweep(code, params, phys, u_guess, phys_atol, W, N)
+    if status != CONVERGED:
+        return math.nan, math.nan, status
+    fn = frozen_newton(code, params, phys, u_guess, phys_atol, W, N, tol_fix, bound)
+    if fn.status != CONVERGED:
+        return math.nan, math.nan, fn.status
+    _shift(W, N, fn.g / fn.one_minus_M)
+    int_u, int_p = _integrals(W, N)
+    return int_u, int_p, CONVERGED
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
