@@ -221,8 +221,13 @@ def kinematic_stops(code, params, corners, out):
                     # a zero on a sample (an extremum of omega only where |omega| is small:
                     # sin^3-like motions have omega' = 0 exactly on the middle sample, and
                     # the near-tangency at tau = 0.5 was missed, 1.02 rtol off at 1e-3 with an
-                    # estimate of 0.19)
-                    if k < 3 or (abs(angle_and_rate(code, params, t1, side)[1])
+                    # estimate of 0.19); and an extremum only where omega' changes sign across
+                    # the sample: on a linear phase omega' = 0 on every sample, and each
+                    # became a turning stop whose trap cap (u ~ 0 after a concave-up closing)
+                    # shrank the whole phase's steps to 4e-11, 131,072 steps
+                    # (``test_a_linear_phase_has_no_turning_stops``)
+                    if k < 3 or (values[j, k, i - 1] * values[j, k, i + 1] < 0.0
+                                 and abs(angle_and_rate(code, params, t1, side)[1])
                                  < TANGENCY_SHARE * omax):
                         out[count] = t1
                         count += 1

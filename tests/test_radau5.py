@@ -484,3 +484,24 @@ def test_a_round_refines_a_step_at_most_max_refinement_times():
     assert ceilings[0] == math.inf
     assert ceilings[1] == pytest.approx(0.125, rel=1e-12)
     assert ceilings[2] == pytest.approx(0.5 / MAX_REFINEMENT, rel=1e-12)
+
+
+def test_a_linear_phase_has_no_turning_stops():
+    """A power law's linear phase has omega' = 0 on every sample of the stop search: none of
+    them is an extremum of omega.  Each was taken for one (a near-tangency, omega below 10 %
+    of its maximum after a steep concave-up closing), and the trap cap of a body at rest at
+    the corner (u ~ 1e-11) shrank the whole phase's steps to 4e-11: 131,072 steps,
+    STEP_BUDGET_EXCEEDED, on 204 of 87,500 points of the ``power_law`` scene (this point: a
+    converged solve in 122 steps, within rtol of the ``periodic`` engine at 1e-9)."""
+    kin = solver.PowerLaw([0.3141592653589793], [0.05235987755982988], [0.3], [10.0], [True],
+                          [1.0], [False])
+    code, params = kin.kernel_encoding()
+    stops = np.empty(_switching.MAX_STOPS)
+    count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
+    assert list(stops[:count]) == [0.0, 0.3], stops[:count]
+    physics = solver.Physics.from_scaled(2.0 ** -6, 0.125, p=0.0, delta=1e-5)
+    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-9)
+    res = solver.solve_periodic(kin, physics, method="radau5", rtol=1e-4)
+    assert res.converged[0], res.status
+    assert res.n_tau[0] < 1000
+    assert _error(res, ref, kin, physics) <= 1e-4
