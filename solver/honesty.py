@@ -114,6 +114,10 @@ WARMUP_POINTS = 4
 #: files of the solver package that hold no engine code (not in the references' key)
 HARNESS_FILES = ("honesty.py", "bench.py", "bench_optimize.py", "__main__.py")
 DEFAULT_CACHE = Path("out") / "honesty"
+#: the frozen references (``freeze``): every set's every point, committed with the package
+REFERENCE_FILE = Path(__file__).with_name("honesty_references.npz")
+#: ``--reference-method`` that judges against REFERENCE_FILE (the default)
+FROZEN = "frozen"
 #: outcome of a point's references
 JUDGED, SINGLE, FAILED = 0, 1, 2
 
@@ -205,6 +209,31 @@ def _flat_inflection_fourier(n, rng):
     return kin, _physics(rng, n, 8, (-7, 0), (1e-5, 1e-8))
 
 
+#: the power-law shapes of the paper's grid scenes (``workflows/power_law.toml``): exponent,
+#: concave up
+PAPER_SHAPES = ((10.0, False), (3.0, False), (1.0, False), (3.0, True), (10.0, True))
+
+
+def _paper_power_law(n, rng):
+    """The paper's power-law grids (``power_law``, ``exponent_sets``) drawn at random: shapes
+    from PAPER_SHAPES, duty cycle 0.1 .. 0.9, A0 in (0, pi/2], A1/A0 in (0, 1); half of the
+    points with a concave-up closing (exponent 3 or 10) and a linear opening, where the
+    order-5 engine once exceeded its step budget (a linear phase's omega' = 0 on every sample
+    made each a turning stop)."""
+    A0 = 0.5 * np.pi * (1.0 - rng.random(n))
+    A1 = A0 * (1.0 - rng.random(n))
+    duty = rng.uniform(0.1, 0.9, n)
+    shapes = np.asarray(PAPER_SHAPES)
+    closing = shapes[rng.integers(0, len(PAPER_SHAPES), n)]
+    opening = shapes[rng.integers(0, len(PAPER_SHAPES), n)]
+    steep = rng.random(n) < 0.5
+    closing[steep] = shapes[rng.integers(3, 5, int(steep.sum()))]
+    opening[steep] = shapes[2]
+    kin = solver.PowerLaw(A0, A1, duty, closing[:, 0], closing[:, 1] > 0.5, opening[:, 0],
+                          opening[:, 1] > 0.5)
+    return kin, _physics(rng, n, 6, (-3, 3), (1e-5,))
+
+
 def _bench(n, rng):
     kinematics, physics, _ = draw_points(n, rng)
     return kinematics, physics
@@ -262,6 +291,11 @@ SETS = {s.name: s for s in [
              "Fourier phi = A0 + c sin^3(2 pi tau) + terms of size 0.02 at wavenumbers 2 and 4, "
              "A0 ~ U(0.5, pi - 0.5), |c| ~ U(0.3, 1.2); mu_n/mu_s 2^U(-8, 8), scaled period "
              "2^U(-7, 0), delta from {1e-5, 1e-8}, p = 0"),
+    PointSet("paper_powerlaw", 91, _paper_power_law,
+             "PowerLaw as the paper's grids: shapes from {10 down, 3 down, linear, 3 up, 10 "
+             "up} (half of the points: closing 3 or 10 up, opening linear), duty_cycle ~ "
+             "U(0.1, 0.9), A0 ~ U(0, pi/2], A1/A0 ~ U(0, 1]; mu_n/mu_s 2^U(-6, 6), scaled "
+             "period 2^U(-3, 3), delta 1e-5, p = 0"),
     PointSet("bench", BENCH_SEED, _bench,
              "the points of python -m solver.bench (its draw_points, seed "
              f"{BENCH_SEED}): Harmonic, mu_n/mu_s 2^U(-8, 8), scaled period 2^U(-3, 3), "
@@ -466,19 +500,27 @@ class Settings:
     cache_dir: Path = DEFAULT_CACHE
     refresh: bool = False
     reuse: bool = False
+    reference_file: Path = REFERENCE_FILE
 
 
 def set_references(point_set, kinematics, physics, settings):
-    """The set's ``References`` (cached) and a dict describing them and their cost."""
+    """The set's ``References`` (frozen, or computed through the cache) and a dict
+    describing them and their cost."""
     key = f"{point_set.name}-n{len(kinematics)}-seed{point_set.seed}"
-    ref, ref_source = cached_solves(kinematics, physics, settings.reference_method,
-                                    settings.reference_rtol, key, settings.cache_dir,
-                                    settings.refresh, settings.reuse)
-    check, check_source = None, ""
-    if settings.check_method is not None:
-        check, check_source = cached_solves(kinematics, physics, settings.check_method,
-                                            settings.check_rtol, key, settings.cache_dir,
-                                            settings.refresh, settings.reuse)
+    if settings.reference_method == FROZEN:
+        ref, check, meta = frozen_references(point_set, kinematics, physics,
+                                             settings.reference_file)
+        ref_source = check_source = f"frozen at {meta['commit'][:12]}"
+        settings = _described_by(settings, meta)
+    else:
+        ref, ref_source = cached_solves(kinematics, physics, settings.reference_method,
+                                        settings.reference_rtol, key, settings.cache_dir,
+                                        settings.refresh, settings.reuse)
+        check, check_source = None, ""
+        if settings.check_method is not None:
+            check, check_source = cached_solves(kinematics, physics, settings.check_method,
+                                                settings.check_rtol, key, settings.cache_dir,
+                                                settings.refresh, settings.reuse)
     vscale = solver.kinematic_speed(kinematics)
     references = References.from_solves(ref, check, physics, vscale, settings.agreement)
     d = references.disagreement[references.kind == JUDGED]
@@ -500,6 +542,107 @@ def set_references(point_set, kinematics, physics, settings):
         disagreement_median=float(np.median(d)) if d.size else math.nan,
         disagreement_max=float(d.max()) if d.size else math.nan)
     return references, info
+
+
+def set_digest(kinematics, physics):
+    """Short hash of a set's points (kernel parameters and physics), stored with the frozen
+    references so that a changed generator is refused, not judged against stale values."""
+    return hashlib.sha256(np.ascontiguousarray(_fingerprint(kinematics, physics),
+                                               dtype=np.float64).tobytes()).hexdigest()[:16]
+
+
+def _git_commit():
+    import subprocess
+    try:
+        here = Path(__file__).parent
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
+                                text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "."], cwd=here,
+                               capture_output=True, text=True, check=True).stdout.strip()
+        return commit + ("+dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def freeze(names, settings, path=REFERENCE_FILE):
+    """Compute every point's reference and check of the sets ``names`` (full size, through
+    the cache of ``cached_solves``) and write them to ``path``: per set its U, P and status
+    of both, the points' digest, and a JSON ``meta`` (commit, seeds, settings, the
+    cross-check's largest disagreement).  Returns the meta dict."""
+    arrays = {}
+    meta = dict(commit=_git_commit(), engine_digest=engine_digest(),
+                created=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                reference=[settings.reference_method, settings.reference_rtol],
+                check=[settings.check_method, settings.check_rtol], sets={})
+    for name in names:
+        point_set = SETS[name]
+        kinematics, physics = point_set.sample()
+        key = f"{point_set.name}-n{len(kinematics)}-seed{point_set.seed}"
+        start = time.perf_counter()
+        ref, _ = cached_solves(kinematics, physics, settings.reference_method,
+                               settings.reference_rtol, key, settings.cache_dir,
+                               settings.refresh, settings.reuse)
+        check, _ = cached_solves(kinematics, physics, settings.check_method,
+                                 settings.check_rtol, key, settings.cache_dir,
+                                 settings.refresh, settings.reuse)
+        references = References.from_solves(ref, check, physics,
+                                            solver.kinematic_speed(kinematics))
+        d = references.disagreement[references.kind == JUDGED]
+        for label, solves in (("reference", ref), ("check", check)):
+            arrays[f"{name}/{label}_U"] = solves.U
+            arrays[f"{name}/{label}_P"] = solves.P
+            arrays[f"{name}/{label}_status"] = solves.status
+        meta["sets"][name] = dict(
+            seed=point_set.seed, points=len(kinematics), generator=point_set.generator,
+            digest=set_digest(kinematics, physics),
+            reference_seconds=ref.seconds, check_seconds=check.seconds,
+            reference_failed=int(np.count_nonzero(~ref.converged)),
+            check_failed=int(np.count_nonzero(~check.converged)),
+            disagreement_max=float(d.max()) if d.size else math.nan,
+            disagreement_median=float(np.median(d)) if d.size else math.nan)
+        print(f"   {name}: {len(kinematics)} points, {time.perf_counter() - start:.0f} s, "
+              f"disagreement max {meta['sets'][name]['disagreement_max']:.2e}", flush=True)
+    np.savez_compressed(path, meta=np.array(json.dumps(json_value(meta))), **arrays)
+    return meta
+
+
+def frozen_meta(path=REFERENCE_FILE):
+    """The ``meta`` dict of the frozen references at ``path``."""
+    with np.load(path) as data:
+        return json.loads(str(data["meta"]))
+
+
+def frozen_references(point_set, kinematics, physics, path=REFERENCE_FILE):
+    """The frozen (reference, check) ``Solves`` of the first len(kinematics) points of
+    ``point_set``.  Raises ValueError where the file lacks the set or holds other points."""
+    meta = frozen_meta(path)
+    stored = meta["sets"].get(point_set.name)
+    if stored is None:
+        raise ValueError(f"--set: {point_set.name!r} has no frozen references in {path} "
+                         "(python -m solver.honesty --freeze makes them)")
+    full_kin, full_phys = point_set.sample(stored["points"])
+    n = len(kinematics)
+    if set_digest(full_kin, full_phys) != stored["digest"] or n > stored["points"]:
+        raise ValueError(f"--set: {point_set.name!r}'s points are not those of the frozen "
+                         f"references in {path} (its generator changed, or more than "
+                         f"{stored['points']} points)")
+    out = []
+    with np.load(path) as data:
+        for label in ("reference", "check"):
+            out.append(Solves(U=data[f"{point_set.name}/{label}_U"][:n],
+                              P=data[f"{point_set.name}/{label}_P"][:n],
+                              status=data[f"{point_set.name}/{label}_status"][:n],
+                              n_tau=np.zeros(n, dtype=np.int64),
+                              error_estimate=np.zeros(n), seconds=0.0))
+    return out[0], out[1], meta
+
+
+def _described_by(settings, meta):
+    """``settings`` with the frozen references' own methods and rtols (for the printout)."""
+    from dataclasses import replace
+    return replace(settings, reference_method=f"{meta['reference'][0]} (frozen)",
+                   reference_rtol=meta["reference"][1], check_method=meta["check"][0],
+                   check_rtol=meta["check"][1])
 
 
 REFERENCE_KINDS = {JUDGED: "cross-checked", SINGLE: "single reference",
@@ -631,7 +774,15 @@ def build_parser():
                         help="where this engine version has no cached reference, use the "
                              "newest cached one of the same points made by an earlier "
                              "version (printed per set; for iterating on an engine)")
-    parser.add_argument("--reference-method", default=REFERENCE_METHOD)
+    parser.add_argument("--reference-method", default=FROZEN,
+                        help=f"'{FROZEN}' (default): the committed references "
+                             f"({REFERENCE_FILE.name}); or an engine computing them now "
+                             f"(cached under --cache-dir)")
+    parser.add_argument("--reference-file", type=Path, default=REFERENCE_FILE)
+    parser.add_argument("--freeze", action="store_true",
+                        help=f"compute every point's reference ({REFERENCE_METHOD} at "
+                             f"--reference-rtol) and check of the sets and write them to "
+                             "--reference-file; judges nothing")
     parser.add_argument("--reference-rtol", type=float, default=REFERENCE_RTOL)
     parser.add_argument("--check-method", default=None,
                         help="cross-check engine, or 'none' (default: radau5 where it exists, "
@@ -653,16 +804,22 @@ def settings_from(args):
         check_rtol = REFERENCE_RTOL if check_method != "march" else MARCH_CHECK_RTOL
     if args.check_rtol is not None:
         check_rtol = args.check_rtol
-    for m in (*methods, args.reference_method, check_method):
+    reference_method = args.reference_method
+    if args.freeze and reference_method == FROZEN:
+        reference_method = REFERENCE_METHOD
+    if args.freeze and check_method is None:
+        raise ValueError("--freeze needs a --check-method")
+    for m in (*methods, reference_method if reference_method != FROZEN else None,
+              check_method):
         if m is not None and m not in solver.METHODS:
             raise ValueError(f"method: expected one of {solver.METHODS}, got {m!r}")
     if args.points is not None and args.points < 1:
         raise ValueError("--points must be >= 1")
     return Settings(methods=methods, rtols=tuple(args.rtol), points=args.points,
-                    reference_method=args.reference_method, reference_rtol=args.reference_rtol,
+                    reference_method=reference_method, reference_rtol=args.reference_rtol,
                     check_method=check_method, check_rtol=check_rtol,
                     agreement=args.agreement, cache_dir=args.cache_dir, refresh=args.refresh,
-                    reuse=args.reuse_references)
+                    reuse=args.reuse_references, reference_file=args.reference_file)
 
 
 def main(argv=None):
@@ -674,8 +831,26 @@ def main(argv=None):
         return 2
     wall = time.perf_counter()
     names = args.set or list(SETS)
-    engines = dict.fromkeys((*settings.methods, settings.reference_method,
-                             settings.check_method))
+    if args.freeze:
+        print(f"freezing the references of {', '.join(names)}: {settings.reference_method} "
+              f"rtol {settings.reference_rtol:.0e}, check {settings.check_method} rtol "
+              f"{settings.check_rtol:.0e} -> {settings.reference_file}", flush=True)
+        meta = freeze(names, settings, settings.reference_file)
+        print(json.dumps(json_value(dict(frozen=meta,
+                                         wall_seconds=time.perf_counter() - wall))))
+        return 0
+    if settings.reference_method == FROZEN:
+        try:
+            for name in names:
+                frozen_references(SETS[name], *SETS[name].sample(settings.points),
+                                  settings.reference_file)
+        except (ValueError, OSError) as exc:
+            print(str(exc).splitlines()[0], file=sys.stderr)
+            return 2
+    engines = dict.fromkeys((*settings.methods,
+                             settings.reference_method if settings.reference_method != FROZEN
+                             else None, settings.check_method
+                             if settings.reference_method != FROZEN else None))
     warm_up([m for m in engines if m is not None], SETS[names[0]], settings)
     print(f"honesty of {', '.join(settings.methods)} at rtol "
           f"{', '.join(f'{r:.0e}' for r in settings.rtols)}; references "
