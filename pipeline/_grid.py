@@ -13,8 +13,11 @@ import numpy as np
 from ._scene import Scene
 
 __all__ = [
+    "DEFAULT_POINTS_PER_CHUNK",
     "calibrate_points_per_task",
+    "chunks_per_task",
     "chunk_shape",
+    "scene_chunks",
     "chunk_grid",
     "chunk_region",
     "iter_chunks",
@@ -27,15 +30,19 @@ __all__ = [
 TASK_SECONDS = 4.0
 #: Bounds of the calibrated points per task.
 MIN_POINTS_PER_TASK, MAX_POINTS_PER_TASK = 16, 16384
+#: Points of one chunk of a grid store unless the scene says ``[execution] points_per_chunk``.
+#: A constant, never a timing: where chunks begin decides which grid neighbours a chunk's
+#: sweep may start from, so it must follow from the scene alone.
+DEFAULT_POINTS_PER_CHUNK = 256
 
 
 def calibrate_points_per_task(scene: Scene, workers: int, n_probe: int = 16) -> tuple[int, float]:
     """Points per task so that a task takes about ``TASK_SECONDS``, from a timed probe.
 
     The probe solves ``n_probe`` points spread evenly over the scene's grid (after one
-    untimed warm-up point, which pays any JIT compilation). Chunking changes no value (the
-    solver treats points independently), only how the work is cut; the chosen layout is
-    stored with the store and reused on resume.
+    untimed warm-up point, which pays any JIT compilation).  It decides only how many whole
+    chunks one task takes (:func:`chunks_per_task`), never where chunks begin
+    (:func:`scene_chunks`), so the machine's load changes no stored value.
 
     Returns
     -------
@@ -62,20 +69,43 @@ def calibrate_points_per_task(scene: Scene, workers: int, n_probe: int = 16) -> 
 
 
 def chunk_shape(shape: tuple[int, ...], target: int) -> tuple[int, ...]:
-    """Chunk shape with about ``target`` points, filling the trailing axes first.
+    """Chunk shape of at most ``target`` points (at least one point), filling the trailing axes first.
 
-    Trailing axes are usually the kinematic parameters that reductions run over, so a chunk
-    holds whole contiguous slabs of them.
+    Trailing axes are whole while they fit; the axis where ``target`` runs out is cut into the
+    fewest pieces that fit, of equal length (the last one shorter by the remainder), and the
+    axes before it are cut to length 1.  Trailing axes are usually the kinematic parameters
+    that reductions run over, so a chunk holds whole contiguous slabs of them.
+
+    >>> chunk_shape((3, 3, 20, 20), 256)   # 20 rows of 20 fit 12 at a time: 2 pieces of 10
+    (1, 1, 10, 20)
     """
     chunks = [1] * len(shape)
     inner = 1
     for i in range(len(shape) - 1, -1, -1):
-        c = max(1, min(shape[i], target // inner))
-        chunks[i] = c
-        inner *= c
-        if c < shape[i]:
-            break
+        fit = max(1, target // inner)
+        if shape[i] <= fit:
+            chunks[i] = shape[i]
+            inner *= shape[i]
+            continue
+        pieces = -(-shape[i] // fit)
+        chunks[i] = -(-shape[i] // pieces)
+        break
     return tuple(chunks)
+
+
+def scene_chunks(scene: Scene) -> tuple[int, ...]:
+    """The chunk shape of ``scene``'s store: a function of the scene alone.
+
+    :func:`chunk_shape` of the grid's shape and ``[execution] points_per_chunk`` (default
+    :data:`DEFAULT_POINTS_PER_CHUNK`); no timing, worker count or load enters it.
+    """
+    target = getattr(scene.execution, "points_per_chunk", None) or DEFAULT_POINTS_PER_CHUNK
+    return chunk_shape(scene.shape, target)
+
+
+def chunks_per_task(points_per_task: int, points_per_chunk: int) -> int:
+    """Whole chunks one task takes: as many as fit in ``points_per_task`` points, at least one."""
+    return max(1, int(points_per_task) // max(1, int(points_per_chunk)))
 
 
 def chunk_grid(shape, chunks) -> tuple[int, ...]:

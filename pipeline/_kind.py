@@ -3,14 +3,20 @@
 A run is a chain of small named steps, the same for every kind (pangeo-forge-recipes'
 ``StoreToZarr`` is the model)::
 
-    lock the store -> open or create its skeleton -> pending chunks -> fan out one task per
-    chunk -> the kind's driver-side steps (series, reductions) -> run record, consolidation
+    lock the store -> open or create its skeleton -> pending chunks -> check their layout ->
+    fan out tasks of whole chunks -> the kind's driver-side steps (series, reductions) -> run
+    record, consolidation
 
 A kind supplies the parts that differ:
 
 * ``create_skeleton(run)``: every array, coordinate and attribute of an empty store, before
   any task runs (``pipeline.kind`` names the kind; format-1 grid stores carry no kind);
+* ``chunk_layout(scene)``: the chunk shape the scene's store must have, a function of the
+  scene alone (never of a timing); a store of another layout with chunks still to compute is
+  refused.  ``None`` (the default): whatever the kind's skeleton chose;
 * ``pending_chunks(store)``: the chunk indices without their done marker;
+* ``chunks_per_task(run, chunks, pending)``: how many consecutive pending chunks one task
+  computes (default 1); it may come from a timing, since it moves no chunk boundary;
 * ``chunk_task(store, scene, chunks, index)``: a module-level function, run inside a dask task
   (picklable arguments only), that computes chunk ``index`` of the layout ``chunks``, writes
   whole aligned chunks of its arrays (``_store.write_region``), then its done marker, and
@@ -87,6 +93,14 @@ class SceneKind:
 
     def create_skeleton(self, run: RunContext) -> None:
         raise NotImplementedError
+
+    def chunk_layout(self, scene) -> tuple[int, ...] | None:
+        """The chunk shape of ``scene``'s store, from the scene alone; None: not checked."""
+        return None
+
+    def chunks_per_task(self, run: RunContext, chunks: tuple[int, ...], pending: list) -> int:
+        """Consecutive pending chunks one task computes (each written whole, then marked)."""
+        return 1
 
     def pending_chunks(self, store: Path) -> list[tuple[int, ...]]:
         """Chunk indices (C order) whose done marker is not set."""

@@ -4,8 +4,9 @@
 
     open_run        resolve store and scheduler, hold the store's lock
     prepare_store   refuse a store of a different scene, or (re)create the skeleton, or resume
+    check_layout    refuse chunks still to compute in a layout that is not the scene's
     warm_up         compile the solver's kernels once, here, before work fans out
-    compute_chunks  one task per chunk without its done marker
+    compute_chunks  tasks of consecutive chunks without their done marker (each chunk whole)
     finish          the kind's steps whose state flag is unset (series, reductions)
     record          run record and consolidated metadata, when anything was computed
 
@@ -125,19 +126,57 @@ def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool) -> dict:
     return meta
 
 
+def _shape(chunks) -> str:
+    return " x ".join(str(int(c)) for c in chunks)
+
+
+def check_layout(run: RunContext, kind: SceneKind, meta: dict, pending) -> None:
+    """Refuse a store whose chunk layout is not the scene's (``kind.chunk_layout``) while chunks
+    remain to compute: the store was started by an older pipeline, whose layout came from a
+    timing probe, or with another ``[execution] points_per_chunk``.  A store with every chunk
+    done is left as it is (nothing is computed in its layout)."""
+    want = kind.chunk_layout(run.scene)
+    have = tuple(int(c) for c in meta["layout"]["chunks"])
+    if want is None or not pending or tuple(want) == have:
+        return
+    raise StoreMismatch(
+        f"{run.store}: its chunks ({_shape(have)}) are not this scene's chunk layout ({_shape(want)}), so its "
+        f"{len(pending)} unfinished chunks cannot be resumed (a store started by an older pipeline, which chose "
+        "chunks by a timing probe, or with another [execution] points_per_chunk); rerun with --overwrite to "
+        "start over, or choose another --store")
+
+
+def run_chunks(chunk_task, store: str, scene, chunks: tuple[int, ...], indices) -> dict:
+    """One task: ``chunk_task`` on each chunk of ``indices`` in turn (each written whole and then
+    marked done by ``chunk_task``); the sum of their ``points``, ``failures`` and ``seconds``."""
+    total = {"points": 0, "failures": 0, "seconds": 0.0}
+    for idx in indices:
+        r = chunk_task(store, scene, chunks, idx)
+        total = {k: total[k] + r[k] for k in total}
+    return total
+
+
 def compute_chunks(run: RunContext, kind: SceneKind, meta: dict, pending) -> list[dict]:
-    """One task per pending chunk, fanned out on the run's scheduler; their results."""
+    """Tasks of ``kind.chunks_per_task`` consecutive pending chunks, fanned out on the run's
+    scheduler; their results."""
     if not pending:
         return []
     import dask
 
-    chunks = tuple(meta["layout"]["chunks"])
+    chunks = tuple(int(c) for c in meta["layout"]["chunks"])
+    per_task = max(1, int(kind.chunks_per_task(run, chunks, pending)))
+    groups = [pending[i:i + per_task] for i in range(0, len(pending), per_task)]
     label = run.scene.kind
-    tasks = [dask.delayed(kind.chunk_task, pure=False)(
-        str(run.store), run.scene, chunks, idx, dask_key_name=f"pipeline-{label}-" + "-".join(map(str, idx)))
-        for idx in pending]
+
+    def key(group):
+        first = f"pipeline-{label}-" + "-".join(map(str, group[0]))
+        return first if len(group) == 1 else f"{first}-and-{len(group) - 1}"
+
+    tasks = [dask.delayed(run_chunks, pure=False)(kind.chunk_task, str(run.store), run.scene, chunks, group,
+                                                  dask_key_name=key(group)) for group in groups]
     total = int(_chunk_count(meta))
-    bar = Progress(len(tasks), run.scene.n_points / total, run.scene.name, run.progress, rate_unit=kind.rate_unit)
+    bar = Progress(len(tasks), per_task * run.scene.n_points / total, run.scene.name, run.progress,
+                   unit="tasks" if per_task > 1 else "chunks", rate_unit=kind.rate_unit)
     return compute(tasks, run.scheduler, bar)
 
 
@@ -184,6 +223,7 @@ def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None =
     with open_run(scene, store, scheduler, workers, session, progress, echo) as run:
         meta = prepare_store(run, kind, overwrite)
         pending = kind.pending_chunks(run.store)
+        check_layout(run, kind, meta, pending)
         if pending or not is_complete(meta["state"]):
             warm_up_kernels(kind.kernel_sets(scene), echo)
         t_solve = time.perf_counter()

@@ -251,6 +251,8 @@ class Execution:
     scheduler: str = "processes"
     workers: int | None = None
     store: str | None = None
+    #: grid scenes: points of one store chunk (the chunk layout; see ``_grid.scene_chunks``)
+    points_per_chunk: int | None = None
 
 
 @dataclass(frozen=True)
@@ -587,7 +589,7 @@ _TOP_KEYS = {
     "outputs": "stored quantities and diagnostics",
     "reductions": "maxima over axes",
     "series": "u(tau) at a few points",
-    "execution": "points_per_task, scheduler, workers, store (not hashed)",
+    "execution": "points_per_chunk, points_per_task, scheduler, workers, store (not hashed)",
 }
 
 
@@ -708,10 +710,12 @@ def parse_grid_scene(doc: dict, ctx: "ParseContext", text: str) -> Scene:
     series = _parse_series(ctx, doc["series"], dims, fixed) if "series" in doc else None
 
     ex = ctx.table(doc.get("execution", {}), "execution",
-                   {"points_per_task": "", "scheduler": "", "workers": "", "store": ""})
+                   {"points_per_chunk": "", "points_per_task": "", "scheduler": "", "workers": "", "store": ""})
     execution = Execution(
         points_per_task=ctx.integer(ex["points_per_task"], "execution.points_per_task", lo=1)
         if "points_per_task" in ex else None,
+        points_per_chunk=ctx.integer(ex["points_per_chunk"], "execution.points_per_chunk", lo=1)
+        if "points_per_chunk" in ex else None,
         scheduler=ctx.string(ex.get("scheduler", "processes"), "execution.scheduler", _SCHEDULERS),
         workers=ctx.integer(ex["workers"], "execution.workers", lo=1) if "workers" in ex else None,
         store=ctx.string(ex["store"], "execution.store") if "store" in ex else None,

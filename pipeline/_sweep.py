@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._grid import calibrate_points_per_task, chunk_region, chunk_shape, region_parameters, solve_points
+from ._grid import (calibrate_points_per_task, chunk_region, chunks_per_task, region_parameters, scene_chunks,
+                    solve_points)
 from ._kind import RunContext, SceneKind, Step
 from ._reduce import grid_reduction, objective, polish_cells
 from ._scene import Scene, parse_grid_scene
@@ -152,17 +153,30 @@ class GridKind(SceneKind):
     def parse(self, doc, ctx, text):
         return parse_grid_scene(doc, ctx, text)
 
+    def chunk_layout(self, scene) -> tuple[int, ...]:
+        """``_grid.scene_chunks``: from the grid's shape and ``[execution] points_per_chunk``."""
+        return scene_chunks(scene)
+
     def create_skeleton(self, run: RunContext) -> None:
-        """Chunks of ``[execution] points_per_task`` points, else of about ``TASK_SECONDS`` of
-        work from a timed probe (``_grid.calibrate_points_per_task``)."""
+        create_skeleton(run.store, run.scene, self.chunk_layout(run.scene))
+
+    def chunks_per_task(self, run: RunContext, chunks: tuple[int, ...], pending: list) -> int:
+        """Chunks of about ``[execution] points_per_task`` points per task, else of about
+        ``TASK_SECONDS`` of work from a timed probe (``_grid.calibrate_points_per_task``),
+        leaving each worker about 4 tasks.  Only the grouping of chunks into tasks depends on
+        the timing; the chunks themselves, and so every stored value, do not."""
         scene = run.scene
-        target = scene.execution.points_per_task
-        if target is None:
-            target, rate = calibrate_points_per_task(scene, run.n_workers)
-            if run.progress:
-                run.echo(f"{scene.name}: probe {rate:,.0f} solves/s per worker -> {target} points per task",
-                         file=sys.stderr)
-        create_skeleton(run.store, scene, chunk_shape(scene.shape, target))
+        per_chunk = int(np.prod(chunks))
+        if scene.execution.points_per_task is not None:
+            return chunks_per_task(scene.execution.points_per_task, per_chunk)
+        if len(pending) <= run.n_workers:
+            return 1  # one chunk per worker at most: nothing to group, no probe needed
+        target, rate = calibrate_points_per_task(scene, run.n_workers)
+        k = min(chunks_per_task(target, per_chunk), max(1, len(pending) // (4 * max(1, run.n_workers))))
+        if run.progress:
+            run.echo(f"{scene.name}: probe {rate:,.0f} solves/s per worker -> {k} chunk{'s' * (k > 1)} "
+                     f"of {per_chunk} points per task", file=sys.stderr)
+        return k
 
     def steps(self, scene) -> tuple[Step, ...]:
         steps = []

@@ -12,7 +12,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 
-#: A small harmonic scene: 2 x 2 x 4 x 4 = 64 points in 8 chunks of 8 points.
+#: A small harmonic scene: 2 x 2 x 4 x 4 = 64 points in 8 chunks of 8 points (1 x 1 x 2 x 4), one per task.
 SMALL = """
 [scene]
 name = "small"
@@ -57,6 +57,7 @@ points = [{ anisotropy_ratio = 16.0, scaled_period = 2.0, A0 = 0.4, A1_ratio = 0
           { anisotropy_ratio = 0.0625, scaled_period = 1.0, A0 = 1.5, A1_ratio = 0.2 }]
 
 [execution]
+points_per_chunk = 8
 points_per_task = 8
 """
 

@@ -236,7 +236,7 @@ def test_distributed_local_cluster_matches_local_scheduler(reference, tmp_path):
     assert_stores_equal(store, ref_store)
 
 
-def test_default_chunking_is_calibrated_by_a_probe(tmp_path):
+def test_task_size_is_calibrated_by_a_probe(tmp_path):
     from pipeline._grid import MAX_POINTS_PER_TASK, MIN_POINTS_PER_TASK, calibrate_points_per_task
 
     text = small_scene_text().replace("points_per_task = 8\n", "")
@@ -249,6 +249,59 @@ def test_default_chunking_is_calibrated_by_a_probe(tmp_path):
     proc = cli("estimate", write_scene(tmp_path, text, "e.toml"), "--probe", "4", "--workers", "2")
     assert proc.returncode == 0, proc.stderr
     assert "small" in proc.stdout and "total" in proc.stdout
+
+
+def test_stores_do_not_depend_on_the_probe(tmp_path, monkeypatch):
+    """Issue 29: one scene run under a slow and a fast probe (5 and 5,000 solves/s per worker)
+    gives equal stores, every array (data and pipeline_state) included; only the number of
+    chunks per task differs."""
+    import pipeline._sweep as sweep
+    from pipeline._store import store_meta
+
+    # 16 chunks of 4 points (1 x 1 x 1 x 4); no points_per_task: the probe groups them into tasks.
+    text = small_scene_text().replace("points_per_chunk = 8\npoints_per_task = 8\n", "points_per_chunk = 4\n")
+    scene = load_scene(write_scene(tmp_path, text))
+    stores, lines = [], []
+    # (points per task, solves/s per worker) as the probe would report them, slow and fast
+    for target, rate in ((4, 5.0), (20000, 5000.0)):
+        monkeypatch.setattr(sweep, "calibrate_points_per_task", lambda scene, workers, t=target, r=rate: (t, r))
+        store = tmp_path / f"probe{rate:g}.zarr"
+        said = []
+        summary = run_scene(scene, store, scheduler="synchronous", progress=True,
+                            echo=lambda *a, **k: said.append(" ".join(map(str, a))))
+        assert summary.computed_chunks == summary.total_chunks == 16
+        lines += [m for m in said if "probe" in m]
+        stores.append(store)
+    assert lines == ["small: probe 5 solves/s per worker -> 1 chunk of 4 points per task",
+                     "small: probe 5,000 solves/s per worker -> 4 chunks of 4 points per task"]
+    assert store_meta(stores[0])["layout"] == store_meta(stores[1])["layout"]
+    assert read_store(stores[0])["pipeline_state/chunk_done"].shape == (2, 2, 4, 1)
+    assert_stores_equal(stores[0], stores[1])
+
+
+def test_store_of_another_chunk_layout_is_refused_until_complete(reference, tmp_path, capsys):
+    """A store whose chunks are not the scene's layout (an older pipeline chose them by a
+    timing probe) is refused while chunks remain to compute, with a one-line error naming
+    --overwrite; a complete one is left as it is."""
+    from pipeline._store import create_skeleton
+
+    scene, ref_store, _ = reference
+    path = write_scene(tmp_path, small_scene_text(polish=True))
+    store = tmp_path / "old.zarr"
+    create_skeleton(store, scene, (1, 1, 4, 4))  # as the probe of an older pipeline might have chosen
+    with pytest.raises(StoreMismatch, match=r"chunks \(1 x 1 x 4 x 4\) are not this scene's chunk layout "
+                                            r"\(1 x 1 x 2 x 4\).*--overwrite"):
+        run_scene(load_scene(path), store, scheduler="synchronous", progress=False)
+    assert main(["run", str(path), "--store", str(store), "--no-progress"]) == 3
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--overwrite" in err and "chunk layout" in err
+    assert (read_store(store)["status"] == -1).all()  # untouched
+    # The scene's layout changed under a complete store (points_per_chunk is not hashed): nothing
+    # is left to compute in the old layout, so the store is accepted as it is.
+    other = write_scene(tmp_path, small_scene_text(polish=True).replace("points_per_chunk = 8", "points_per_chunk = 16"),
+                        "other.toml")
+    summary = run_scene(load_scene(other), ref_store, scheduler="synchronous", progress=False)
+    assert summary.computed_chunks == 0 and "nothing to do" in summary.line()
 
 
 def test_run_killed_during_reductions_recomputes_only_reductions(reference, tmp_path):

@@ -9,7 +9,7 @@ import pytest
 
 from pipeline import SceneError, load_scene, parse_scene
 from pipeline.__main__ import main
-from pipeline._grid import chunk_grid, chunk_region, chunk_shape, iter_chunks
+from pipeline._grid import DEFAULT_POINTS_PER_CHUNK, chunk_grid, chunk_region, chunk_shape, iter_chunks, scene_chunks
 from pipeline_cases import REPO, cli, small_scene_text, write_scene
 
 SHIPPED = sorted((REPO / "workflows").glob("*.toml"))
@@ -138,6 +138,42 @@ def test_chunks_tile_the_grid(shape, target):
         seen[chunk_region(idx, shape, chunks)] += 1
     assert (seen == 1).all()
     assert len(list(iter_chunks(shape, chunks))) == np.prod(chunk_grid(shape, chunks))
+
+
+def test_chunk_shape_is_a_function_of_the_scene_only(tmp_path, monkeypatch):
+    """Issue 29: where chunks begin follows from the grid's shape and [execution]
+    points_per_chunk, never from a timing, the scheduler, the workers or points_per_task."""
+    import pipeline._sweep as sweep
+    from pipeline._kind import RunContext
+    from pipeline._registry import kind_of
+    from pipeline._schedule import Scheduler
+    from pipeline._store import store_meta
+
+    assert chunk_shape((3, 3, 20, 20), 256) == (1, 1, 10, 20)
+    assert chunk_shape((2, 3, 64, 64), 256) == (1, 1, 4, 64)
+    assert chunk_shape((7, 4, 5, 5, 5, 5, 5), 256) == (1, 1, 1, 2, 5, 5, 5)
+    quick = load_scene(REPO / "workflows" / "quick.toml")
+    assert scene_chunks(quick) == chunk_shape(quick.shape, DEFAULT_POINTS_PER_CHUNK) == (1, 1, 10, 20)
+    assert chunk_grid(quick.shape, scene_chunks(quick)) == (3, 3, 2, 1)
+    base = small_scene_text().replace("points_per_chunk = 8\npoints_per_task = 8\n", "")
+    runs = ["", "points_per_task = 3\n", "points_per_task = 5000\nworkers = 1\n", "scheduler = 'threads'\nworkers = 2\n"]
+    scenes = [parse_scene(base.replace("[execution]\n", "[execution]\n" + extra), "a.toml") for extra in runs]
+    assert {scene_chunks(s) for s in scenes} == {chunk_shape((2, 2, 4, 4), DEFAULT_POINTS_PER_CHUNK)} == {(2, 2, 4, 4)}  # 64 points: one chunk
+    chunked = parse_scene(base.replace("[execution]\n", "[execution]\npoints_per_chunk = 8\n"), "a.toml")
+    assert scene_chunks(chunked) == (1, 1, 2, 4) and chunked.hash == scenes[0].hash
+
+    # The skeleton never asks the probe: its layout is the scene's under any load.
+    def no_probe(*args, **kwargs):
+        raise AssertionError("the chunk layout must not depend on a timing probe")
+
+    monkeypatch.setattr(sweep, "calibrate_points_per_task", no_probe)
+    for i, scene in enumerate([scenes[0], chunked]):
+        store = tmp_path / f"s{i}.zarr"
+        with Scheduler("synchronous", None) as sched:
+            kind_of(scene).create_skeleton(RunContext(scene, store, sched, 1, True, print))
+        layout = store_meta(store)["layout"]
+        assert tuple(layout["chunks"]) == scene_chunks(scene)
+        assert tuple(layout["chunk_grid"]) == chunk_grid(scene.shape, scene_chunks(scene))
 
 
 def test_T2_axes_map_to_the_physical_friction():
