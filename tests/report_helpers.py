@@ -53,6 +53,7 @@ points = [{ anisotropy_ratio = 16.0, scaled_period = 2.0, A0 = 0.4, A1_ratio = 0
           { anisotropy_ratio = 0.0625, scaled_period = 1.0, A0 = 1.4, A1_ratio = 0.3 }]
 
 [execution]
+points_per_chunk = 9
 points_per_task = 9
 """
 
@@ -84,6 +85,7 @@ statistic = "absmax"
 over = ["A0", "A1_ratio"]
 
 [execution]
+points_per_chunk = 9
 points_per_task = 9
 """
 
@@ -132,6 +134,7 @@ polish = true
 polish_max_evaluations = 8
 
 [execution]
+points_per_chunk = 12
 points_per_task = 12
 """
 
@@ -196,14 +199,14 @@ def synthetic_store(store: Path, scene_file: Path) -> Path:
 
     import pipeline
     from pipeline import _reduce, _store
-    from pipeline._grid import chunk_shape
+    from pipeline._grid import scene_chunks
 
     scene = pipeline.load_scene(scene_file)
     if is_optima_scene(scene_file):
         return synthetic_optima_store(store, scene)
     if getattr(scene, "kind", "grid") != "grid":
         return synthetic_study_store(store, scene)
-    _store.create_skeleton(store, scene, chunk_shape(scene.shape, 4096))
+    _store.create_skeleton(store, scene, scene_chunks(scene))
     mesh = np.meshgrid(*[np.linspace(0.0, 1.0, a.size) for a in scene.axes], indexing="ij", sparse=True)
     base = sum(np.sin(2.0 + 1.3 * k * m) for k, m in enumerate(mesh, start=1))
     data = {}
