@@ -21,7 +21,7 @@ from numba import njit, prange
 
 from ._force import force_and_slope, power_density
 from ._kinematics import angle_and_rate
-from ._periodic import batch_outputs, monodromy_factor, node_weights, one_minus_monodromy
+from ._monodromy import batch_outputs, monodromy_factor, node_weights, one_minus_monodromy
 from ._status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
 
 #: Heun's method (explicit trapezoidal RK2).
@@ -58,19 +58,9 @@ def step_jumps(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
 
 
 @njit(cache=True, error_model="numpy")
-def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
-                 max_steps, u_out, step_u, step_pi, step_m, step_stiff, stages, weights,
-                 step_weights):
-    """March on the first N steps of ``grid``; per-step integrals into ``step_u``, ``step_pi``.
-
-    ``step_stiff[n]`` flags the steps of the last period that chatter through a
-    sticking phase (consecutive ``step_jumps``).  ``stages`` (>= 2N), ``weights`` and
-    ``step_weights`` (>= N) receive what the turning-point and event checks need:
-    pseudo-stages (u_n + (u_{n+1} - u_n) / 3, u_{n+1}), on which the check's quadratic
-    through theta = 0, 1/3, 1 is the linear interpolant of the march, and the node and step
-    weights of ``_periodic.node_weights`` for the trapezoidal integral of u.
-    Returns (int_u, int_Pi, u0, status, periods).
-    """
+def _step_kinematics(code, params, grid, N):
+    """phi and dphi/dtau at both ends of every step (taken on the step's side of a corner)
+    and the step lengths: (phis, oms) of shape (2N,), hs of shape (N,)."""
     phis = np.empty(2 * N)
     oms = np.empty(2 * N)
     hs = np.empty(N)
@@ -80,10 +70,23 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
         mid = grid[n] + 0.5 * h
         phis[2 * n], oms[2 * n] = angle_and_rate(code, params, grid[n], mid)
         phis[2 * n + 1], oms[2 * n + 1] = angle_and_rate(code, params, grid[n + 1], mid)
-    nodes = np.empty(N + 1)
-    ms = np.empty(N)
+    return phis, oms, hs
+
+
+@njit(cache=True, error_model="numpy")
+def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
+                 max_steps, nodes, step_m, step_u, step_pi, step_stiff):
+    """March on the first N steps of ``grid`` from u(0) = ``u_init`` until periodic.
+
+    On return (when CONVERGED) ``nodes[:N + 1]`` holds u at the grid's nodes over the last
+    period marched, ``step_m[:N]`` each step's du_{n+1}/du_n, ``step_u``, ``step_pi`` each
+    step's trapezoidal integral of u and Pi, and ``step_stiff[:N]`` flags the steps that
+    chatter through a sticking phase (consecutive ``step_jumps``).
+    Returns (int_u, int_Pi, u0, status, periods, force evaluations).
+    """
+    phis, oms, hs = _step_kinematics(code, params, grid, N)
     # |u(0) - fixed point| <= tol_fix: a shift of u(0) carries about one for one into int u,
-    # whose norm can be as small as 1e-3 V (``_solve``), so this is 1 % of rtol there
+    # whose norm can be as small as 1e-3 V, so this is 1 % of rtol there
     tol_fix = max(1e-5 * rtol, 1e-13) * vscale
     bound = 1e3 * vscale + 1.0
     max_periods = max(max_steps // N, 3)
@@ -92,15 +95,18 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
     prev_ratio = math.nan
     status = STEP_BUDGET_EXCEEDED
     period = 0
+    evaluations = 0
     for period in range(1, max_periods + 1):
         u_begin = u
         nodes[0] = u
         for n in range(N):
-            u, ms[n] = heun_step(u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1],
-                                 oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
+            u, step_m[n] = heun_step(u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1],
+                                     oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
+            evaluations += 2
             nodes[n + 1] = u
             if not (abs(u) <= bound):
-                return math.nan, math.nan, u_begin, UNSTABLE if math.isfinite(u) else NON_FINITE, period
+                status = UNSTABLE if math.isfinite(u) else NON_FINITE
+                return math.nan, math.nan, u_begin, status, period, evaluations
         change = u - u_begin
         if change == 0.0:
             status = CONVERGED
@@ -120,7 +126,7 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
         prev_ratio = ratio
         prev_change = change
     if status != CONVERGED:
-        return math.nan, math.nan, u, status, period
+        return math.nan, math.nan, u, status, period, evaluations
     # the last period marched (from u_begin) is periodic to tolerance: trapezoidal quadrature
     int_u = 0.0
     int_pi = 0.0
@@ -132,14 +138,13 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
         step_pi[n] = 0.5 * h * (P0 + P1)
         int_u += step_u[n]
         int_pi += step_pi[n]
-        u_out[n] = nodes[n]
-        step_m[n] = ms[n]
         step_stiff[n] = step_jumps(nodes[n], h, phis[2 * n], oms[2 * n], phis[2 * n + 1],
                                    oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
-    # one jump is a velocity reversal or a stop inside a step (the error indicators see
-    # it); consecutive jumps are chatter through a sticking phase: the explicit method
-    # stalls at |u| ~ h T^(2-p) mu instead of ~delta_tau, an O(h) error whose sign does
-    # not change with h, so the comparison with the bisection does not reliably see it
+        evaluations += 2
+    # one jump is a velocity reversal or a stop inside a step (harmless: the error
+    # estimate sees it); consecutive jumps are chatter through a sticking phase: the
+    # explicit method stalls at |u| ~ h T^(2-p) mu instead of ~delta_tau, an O(h) error
+    # whose sign does not change with h, so comparing grids does not reliably see it
     first = step_stiff[0]
     prev = step_stiff[N - 1]
     for n in range(N):
@@ -147,15 +152,76 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
         nxt = step_stiff[n + 1] if n + 1 < N else first
         step_stiff[n] = cur and (prev or nxt)
         prev = cur
-    _check_inputs(nodes, ms, hs, N, stages, weights, step_weights)
-    return int_u, int_pi, nodes[0], CONVERGED, period
+    return int_u, int_pi, nodes[0], CONVERGED, period, evaluations
 
 
 @njit(cache=True, error_model="numpy")
+def band_stiffness(phi, h, kappa, mu_n, mu_s, p, dtau):
+    """h T^(2-p) |dF/du| across the sticking band of a link at rest at angle phi:
+    z = h kappa (mu_n sin^2 phi + mu_s cos^2 phi) delta_tau^(p-1) (the slope of F there,
+    2 (mu_n S^2 + mu_s C^2) int_0^(1/2) r^(p-1) ds with r ~ delta_tau).  Heun resolves the
+    band only for z below about 2 (its stability limit on the real axis)."""
+    S = math.sin(phi)
+    C = math.cos(phi)
+    return h * kappa * (mu_n * S * S + mu_s * C * C) * max(dtau, 1e-300) ** (p - 1.0)
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def march_level(code, params, grids, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
+                max_steps):
+    """``_march_point`` on every row of ``grids`` (shape (n, N + 1), one grid per point, all
+    of N steps), one thread per point.
+
+    Returns (int_u, int_pi, u0, status, periods, evaluations, chatter_mass, stiffness,
+    nodes): per point the period integrals, the periodic u(0), the ``_status`` code,
+    the periods marched and the force evaluations; ``chatter_mass`` = sum of |u_n| h_n
+    over the chattering steps (0: none), ``stiffness`` the largest ``band_stiffness`` of
+    a chattering step (0: none); ``nodes`` (n, N) u at the nodes without tau = 1.
+    """
+    n, m = grids.shape
+    N = m - 1
+    int_u = np.full(n, np.nan)
+    int_pi = np.full(n, np.nan)
+    u0 = np.full(n, np.nan)
+    status = np.full(n, NON_FINITE, dtype=np.int8)
+    periods = np.zeros(n, dtype=np.int64)
+    evaluations = np.zeros(n, dtype=np.int64)
+    chatter_mass = np.zeros(n)
+    stiffness = np.zeros(n)
+    nodes_out = np.full((n, N), np.nan)
+    for i in prange(n):
+        nodes = np.empty(N + 1)
+        step_m = np.empty(N)
+        step_u = np.empty(N)
+        step_pi = np.empty(N)
+        stiff = np.zeros(N, dtype=np.bool_)
+        int_u[i], int_pi[i], u0[i], status[i], periods[i], evaluations[i] = _march_point(
+            code, params[i], grids[i], N, kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
+            u_init[i], vscale[i], rtol, max_steps, nodes, step_m, step_u, step_pi, stiff)
+        if status[i] != CONVERGED:
+            continue
+        nodes_out[i, :] = nodes[:N]
+        for k in range(N):
+            if stiff[k]:
+                h = grids[i, k + 1] - grids[i, k]
+                chatter_mass[i] += abs(nodes[k]) * h
+                phi, _ = angle_and_rate(code, params[i], grids[i, k] + 0.5 * h,
+                                        grids[i, k] + 0.5 * h)
+                stiffness[i] = max(stiffness[i], band_stiffness(phi, h, kappa[i], mu_n[i],
+                                                                mu_s[i], p[i], dtau[i]))
+    return int_u, int_pi, u0, status, periods, evaluations, chatter_mass, stiffness, nodes_out
+
+
+# ---- the old implicit engine's refinement loop (``_solve._Refinement``) calls the march
+# through ``march_points``: its pseudo-stages and node weights feed that loop's event and
+# turning-point checks.  Delete both with that loop.
+
+@njit(cache=True, error_model="numpy")
 def _check_inputs(nodes, ms, hs, N, stages, weights, step_weights):
-    """Pseudo-stages, node weights and step weights of a marched period (see
-    ``_march_point``): the trapezoidal integral h_n (u_n + u_{n+1}) / 2 has
-    d/du_n = h_n (1 + m_n) / 2."""
+    """Pseudo-stages (u_n + (u_{n+1} - u_n) / 3, u_{n+1}), on which the old checks'
+    quadratic through theta = 0, 1/3, 1 is the linear interpolant of the march, and node
+    and step weights (``_monodromy.node_weights``) of a marched period: the trapezoidal
+    integral h_n (u_n + u_{n+1}) / 2 has d/du_n = h_n (1 + m_n) / 2."""
     log_m = 0.0
     sign_m = 1.0
     for n in range(N):
@@ -170,7 +236,8 @@ def _check_inputs(nodes, ms, hs, N, stages, weights, step_weights):
 @njit(cache=True, parallel=True, error_model="numpy")
 def march_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
                  max_steps):
-    """Batched ``_march_point``; ``grids`` row i valid up to ``n_steps[i]`` steps."""
+    """Batched ``_march_point`` for the old refinement loop; ``grids`` row i valid up to
+    ``n_steps[i]`` steps."""
     n, m = grids.shape
     int_u, int_pi, u0_out, status, periods, _, step_u, step_pi, step_m, nodes = \
         batch_outputs(n, m)
@@ -179,9 +246,15 @@ def march_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u_ini
     weights = np.full((n, m - 1), np.nan)
     step_weights = np.full((n, m - 1), np.nan)
     for i in prange(n):
-        int_u[i], int_pi[i], u0_out[i], status[i], periods[i] = _march_point(
-            code, params[i], grids[i], n_steps[i], kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
-            u_init[i], vscale[i], rtol, max_steps, nodes[i], step_u[i], step_pi[i], step_m[i],
-            stiff[i], stages[i], weights[i], step_weights[i])
+        N = n_steps[i]
+        row_nodes = np.empty(N + 1)
+        int_u[i], int_pi[i], u0_out[i], status[i], periods[i], _ = _march_point(
+            code, params[i], grids[i], N, kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
+            u_init[i], vscale[i], rtol, max_steps, row_nodes, step_m[i], step_u[i],
+            step_pi[i], stiff[i])
+        if status[i] == CONVERGED:
+            nodes[i, :N] = row_nodes[:N]
+            hs = np.diff(grids[i, :N + 1])
+            _check_inputs(row_nodes, step_m[i], hs, N, stages[i], weights[i], step_weights[i])
     return (int_u, int_pi, u0_out, status, periods, step_u, step_pi, step_m, nodes, stiff,
             stages, weights, step_weights)

@@ -86,3 +86,17 @@ def radau_reference(code, params, physics, t0, t1, u0, side=None):
                     atol=[1e-14, 1e-18], first_step=1e-9)
     assert ref.success
     return ref.y[1, -1], ref.y[0, -1]
+
+
+def random_harmonic(n, seed):
+    """``n`` random harmonic points for the march's honesty checks: scaled period
+    2^U(-2, 2), mu_n/mu_s 2^U(-4, 4), delta 1e-5, amplitudes as ``solver.bench.draw_points``
+    (A0 in (0, pi/2], A1 / A0 in (0, 1]).  Returns (Harmonic, Physics)."""
+    import numpy as np
+    rng = np.random.default_rng(seed)
+    ratio = 2.0 ** rng.uniform(-4.0, 4.0, n)
+    scaled_period = 2.0 ** rng.uniform(-2.0, 2.0, n)
+    A0 = 0.5 * np.pi * (1.0 - rng.random(n))
+    A1 = A0 * (1.0 - rng.random(n))
+    return solver.Harmonic(A0, A1), solver.Physics.from_scaled(ratio, scaled_period, p=0.0,
+                                                               delta=1e-5)

@@ -1,0 +1,227 @@
+"""The ``march`` method's own driver: the explicit march on uniformly doubled grids, with
+the error of the period integrals estimated by Richardson extrapolation.
+
+For each parameter point:
+
+1. **Grid.** ``_kinematics.period_grid(kinematics, N)``: N steps per period, uniform
+   inside each phase of phi, its corners on nodes; doubling N bisects every step.
+2. **March.** The discrete periodic state on that grid by ``_march.march_level``: Heun's
+   explicit RK2 (order 2) marched period by period until the change of u(0) over a period,
+   divided by one minus the observed contraction, is below 1e-5 rtol V (Aitken jumps
+   where the contraction is slow).  The first grid starts from rest, every later one from
+   the previous grid's periodic u(0).
+3. **Estimate.** With I in {int_0^1 u dtau, int_0^1 Pi dtau} on N/2, N and 2N steps,
+   d1 = I_N - I_(N/2), d2 = I_2N - I_N and their ratio r = d1 / d2 (4 for order 2):
+
+   * 3 <= r <= 6 (asymptotic, order 2): err(I_2N) = |d2| / 3;
+   * 1.5 < r < 3 (order observed below 2, e.g. a corner of phi with a weak singularity):
+     err(I_2N) = |d2| / (r - 1), the geometric tail at the observed ratio;
+   * otherwise (no asymptotic regime yet, or both changes at the periodicity test's noise):
+     err(I_2N) = max(|d1|, |d2|), which only passes when both changes are below rtol.
+
+   The estimate is for I_2N, the value returned (not the extrapolated one, whose error
+   would have no estimate of its own).  It is taken in the solver's norm
+   e = max(err(int u) / max(|int u|, 1e-3 V), err(int Pi) / |int Pi|),
+   V = ``kinematic_speed``.  The point is converged when e <= rtol on a grid whose march
+   does not chatter (below); otherwise N doubles.
+4. **Stiffness.** The explicit step is stable only while h T^(2-p) |dF/du| stays below
+   about 2; across a sticking band (|dF/du| ~ mu / delta_tau) a larger step chatters
+   (``_march.step_jumps`` on consecutive steps), u stalls at ~h T^(2-p) mu instead of
+   ~delta_tau, and that error falls only like h.  A grid whose chatter carries more than
+   CHATTER_SHARE rtol of int u is not accepted.  The point is UNSTABLE when the finest grid
+   still chatters, or earlier when two grids in turn chattered, resolving the band would
+   need more than HOPELESS times ``max_steps`` steps (``_march.band_stiffness``), and the
+   chatter's mass does not fall fast enough to become negligible by then (``_hopeless``).
+
+Statuses: CONVERGED; UNSTABLE (chatter, or the march left every bound on the finest grid);
+NON_FINITE; STEP_BUDGET_EXCEEDED (the march on the finest grid did not become periodic
+within MARCH_STEP_BUDGET steps or MAX_PERIODS periods); TOLERANCE_NOT_REACHED (the finest grid allowed, N <=
+``max_steps``, marched fine but its estimate is above rtol).  Every failure has NaN
+integrals.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ._kinematics import period_grid
+from ._limits import kinematic_speed
+from ._march import march_level
+from ._status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
+
+#: steps per period of the first grid (a multiple of 8: ``_kinematics.phase_steps``)
+FIRST_STEPS = 16
+#: steps marched on one grid (periods x N) before STEP_BUDGET_EXCEEDED ...
+MARCH_STEP_BUDGET = 2 ** 22
+#: ... and periods (a coarse grid can settle on a 2-cycle through a sticking band instead
+#: of a fixed point: harmonic_short_period burnt 2^22 steps on each of N = 16 .. 128)
+MAX_PERIODS = 4096
+#: the ratio of successive differences within which the order-2 estimate |d2| / 3 is used
+RATIO_LOW, RATIO_HIGH = 3.0, 6.0
+#: below this ratio no geometric tail is assumed at all
+RATIO_FLOOR = 1.5
+#: the u floor of int u's norm, as a share of V (as ``_solve.U_FLOOR_FRACTION``)
+U_FLOOR_FRACTION = 1e-3
+#: chatter matters when the |u| stalled in it carries this share of rtol of int u
+CHATTER_SHARE = 0.1
+#: give up on chatter when resolving the band needs this many times ``max_steps``
+HOPELESS = 4
+#: a step chatters from h T^(2-p) |dF/du| above about this (``_march.JUMP_LIMIT``)
+CHATTER_STIFFNESS = 1.5
+
+
+def richardson_error(d1, d2):
+    """The error of I_2N from d1 = I_N - I_(N/2) and d2 = I_2N - I_N (the module
+    docstring's rule, step 3), elementwise; inf where d1 or d2 is not finite."""
+    d1 = np.asarray(d1, dtype=float)
+    d2 = np.asarray(d2, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = d1 / d2
+        fallback = np.maximum(np.abs(d1), np.abs(d2))
+        err = np.where((r >= RATIO_LOW) & (r <= RATIO_HIGH), np.abs(d2) / 3.0,
+                       np.where((r > RATIO_FLOOR) & (r < RATIO_LOW), np.abs(d2) / (r - 1.0),
+                                fallback))
+    return np.where(np.isfinite(d1) & np.isfinite(d2), err, np.inf)
+
+
+def _norm(err_u, err_pi, int_u, int_pi, vscale):
+    """e = max(err_u / max(|int u|, 1e-3 V), err_pi / |int Pi|)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.maximum(err_u / np.maximum(np.abs(int_u), U_FLOOR_FRACTION * vscale),
+                          err_pi / np.abs(int_pi))
+
+
+def _hopeless(N, stiffness, mass, last_mass, threshold, max_steps):
+    """Points whose chatter will outlast the finest grid: resolving the band needs more
+    than HOPELESS max_steps steps (N z / CHATTER_STIFFNESS, z = ``band_stiffness``), and so
+    does waiting for its mass to fall below ``threshold`` at the rate observed between the
+    last two grids (both chattered; an unknown or non-falling rate counts as never)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rate = np.log2(last_mass / mass)
+        grids_needed = np.where(rate > 0.5, np.log2(mass / threshold) / rate, np.inf)
+        fading = N * 2.0 ** np.minimum(grids_needed, 60.0) <= HOPELESS * max_steps
+    unresolvable = N * stiffness / CHATTER_STIFFNESS > HOPELESS * max_steps
+    return unresolvable & ~fading & np.isfinite(last_mass)
+
+
+def _march_grid(kinematics, physics, index, N, u_init, vscale, rtol):
+    """``march_level`` for the points ``index`` on their N-step grids; returns its outputs
+    and the grids (len(index), N + 1)."""
+    code, params = kinematics.kernel_encoding()
+    grids = period_grid(kinematics.take(index), N)
+    out = march_level(code, params[index], grids, physics.inertia_factor[index],
+                      physics.mu_n[index], physics.mu_s[index], physics.p[index],
+                      physics.delta_tau[index], u_init, np.maximum(vscale[index], 1e-300),
+                      float(rtol), min(MARCH_STEP_BUDGET, MAX_PERIODS * N))
+    return out, grids
+
+
+def fixed_grid(kinematics, physics, n_steps, *, rtol=1e-10):
+    """The march's periodic state on one grid of ``n_steps`` steps (a multiple of 8), no
+    error control: for order studies.  ``rtol`` only sets the periodicity test.
+
+    Returns
+    -------
+    int_u, int_pi : ndarray, shape (n_points,)
+        int_0^1 u dtau and int_0^1 Pi dtau of the discrete periodic solution (NaN on failure).
+    status : ndarray of int8, shape (n_points,)
+    """
+    n = len(kinematics)
+    if len(physics) == 1 and n > 1:
+        physics = physics.take(np.zeros(n, dtype=int))
+    vscale = kinematic_speed(kinematics)
+    out, _ = _march_grid(kinematics, physics, np.arange(n), n_steps, np.zeros(n), vscale, rtol)
+    return out[0], out[1], out[3]
+
+
+def solve(kinematics, physics, rtol, max_steps, return_series):
+    """The periodic steady state of eq. (Newtonu) by the explicit march with Richardson error
+    control (module docstring), for ``_solve.solve_periodic(method="march")``.
+
+    Parameters
+    ----------
+    kinematics : Harmonic | PowerLaw | Fourier
+        phi(tau) for n_points points.
+    physics : Physics
+        length 1 or n_points.
+    rtol : float
+        Target error in the norm e above.
+    max_steps : int
+        Finest grid allowed (steps per period).
+    return_series : bool
+        Also return u at the nodes of each converged point's returned grid.
+
+    Returns
+    -------
+    dict with, each of shape (n_points,) unless noted:
+        int_u, int_pi : int_0^1 u dtau and int_0^1 Pi dtau on the returned grid (2N steps:
+            the finer of the last pair), NaN unless converged;
+        status : int8 ``_status`` code;
+        estimate : e of the returned value (inf where none was formed);
+        n_tau : steps per period of the returned (or last tried) grid;
+        iterations : periods marched, summed over grids;
+        still : phi is constant (V = 0): nothing was solved (status NO_MOTION, NaN);
+        series : None, or per point (u at the nodes, the nodes tau) without tau = 1 (empty
+            arrays for failed points);
+        evaluations : (n_points, 1) int64, the evaluations of F (two per Heun step, two per
+            step of the final chatter check), summed over grids.
+    """
+    n = len(kinematics)
+    if len(physics) == 1 and n > 1:
+        physics = physics.take(np.zeros(n, dtype=int))
+    vscale = kinematic_speed(kinematics)
+    int_u = np.full(n, np.nan)
+    int_pi = np.full(n, np.nan)
+    status = np.full(n, TOLERANCE_NOT_REACHED, dtype=np.int8)
+    estimate = np.full(n, np.inf)
+    n_tau = np.zeros(n, dtype=np.int64)
+    iterations = np.zeros(n, dtype=np.int64)
+    evaluations = np.zeros((n, 1), dtype=np.int64)
+    still = vscale == 0.0
+    series = [(np.array([]), np.array([])) for _ in range(n)] if return_series else None
+    # the last two grids' integrals (NaN: that grid failed or was not marched yet)
+    last = np.full((n, 2), np.nan)
+    before = np.full((n, 2), np.nan)
+    u_start = np.zeros(n)
+    last_mass = np.full(n, np.nan)  # the chatter mass of the last grid (NaN: none)
+    active = np.flatnonzero(~still)
+    N = FIRST_STEPS
+    while active.size and N <= max_steps:
+        out, grids = _march_grid(kinematics, physics, active, N, u_start[active], vscale, rtol)
+        iu, ip, u0, st, periods, evals, chatter_mass, stiffness, nodes = out
+        iterations[active] += periods
+        evaluations[active, 0] += evals
+        n_tau[active] = N
+        ok = st == CONVERGED
+        u_start[active[ok]] = u0[ok]
+        current = np.column_stack([iu, ip])
+        d1 = last[active] - before[active]
+        d2 = current - last[active]
+        e = _norm(richardson_error(d1[:, 0], d2[:, 0]), richardson_error(d1[:, 1], d2[:, 1]),
+                  iu, ip, vscale[active])
+        scale_u = np.maximum(np.abs(iu), U_FLOOR_FRACTION * vscale[active])
+        chatters = ok & (chatter_mass > CHATTER_SHARE * rtol * scale_u)
+        e = np.where(ok & ~chatters, e, np.inf)
+        estimate[active] = np.where(ok, e, estimate[active])
+        # the kernel's failure, chatter, or (not yet known) the tolerance
+        status[active] = np.where(~ok, st, np.where(chatters, UNSTABLE, TOLERANCE_NOT_REACHED))
+        hopeless = chatters & _hopeless(N, stiffness, chatter_mass, last_mass[active],
+                                        CHATTER_SHARE * rtol * scale_u, max_steps)
+        last_mass[active] = np.where(chatters, chatter_mass, np.nan)
+        done = (e <= rtol) | hopeless
+        accepted = done & (e <= rtol)
+        status[active[accepted]] = CONVERGED
+        int_u[active[accepted]] = iu[accepted]
+        int_pi[active[accepted]] = ip[accepted]
+        if series is not None:
+            for j in np.flatnonzero(accepted):
+                series[active[j]] = (nodes[j].copy(), grids[j, :-1].copy())
+        before[active] = last[active]
+        last[active] = current
+        active = active[~done]
+        N *= 2
+    status[still] = NO_MOTION
+    failed = status != CONVERGED
+    int_u[failed] = np.nan
+    int_pi[failed] = np.nan
+    return dict(int_u=int_u, int_pi=int_pi, status=status, estimate=estimate, n_tau=n_tau,
+                iterations=iterations, still=still, series=series, evaluations=evaluations)
