@@ -24,6 +24,7 @@ from pathlib import Path
 
 from ._kind import RunContext, SceneKind
 from ._registry import kind_of
+from ._scene import engine_versions
 from ._schedule import Progress, Scheduler, Session, compute
 from ._store import (STATE_FLAGS, StoreMismatch, consolidate, is_complete, open_existing, record_run,
                      remove_partials, run_lock, set_state)
@@ -112,6 +113,15 @@ def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool) -> dict:
     meta = open_existing(store)
     if meta is not None:
         old = meta["provenance"]["scene_hash"]
+        engines, ours = meta["provenance"].get("engines"), engine_versions()
+        if engines != ours and not overwrite:
+            def label(versions):
+                return (", ".join(f"{k} {v}" for k, v in versions.items()) if versions
+                        else "an engine before versions were recorded")
+            raise StoreMismatch(
+                f"{store}: computed by {label(engines)}; this solver is {label(ours)}: results "
+                "of two engines are never mixed in one store; rerun with --overwrite to start "
+                "over, or choose another --store")
         if old != scene.hash and not overwrite:
             raise StoreMismatch(
                 f"{store}: built from a different scene ({meta['provenance']['scene_file']}, hash "

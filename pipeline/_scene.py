@@ -42,6 +42,7 @@ __all__ = [
     "read_scene_file",
     "read_toml",
     "scene_hash",
+    "engine_versions",
     "type_name",
     "axis_attrs",
     "FAMILY_PARAMETERS",
@@ -308,8 +309,18 @@ class Scene:
         return dict(self.fixed)
 
 
+def engine_versions() -> dict[str, str]:
+    """{method: version} of the solver's engines (``solver.ENGINES``): part of every scene's
+    hash and provenance, so that results of two engine versions never share a store."""
+    import solver
+
+    return {name: engine.version for name, engine in sorted(solver.ENGINES.items())}
+
+
 def scene_hash(science: dict) -> str:
-    blob = json.dumps(science, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    """sha256 of the scene's science part and the solver's ``engine_versions``."""
+    blob = json.dumps({**science, "engines": engine_versions()}, sort_keys=True,
+                      separators=(",", ":"), allow_nan=False)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 

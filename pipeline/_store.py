@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from ._scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
+from ._scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs, engine_versions
 
 __all__ = [
     "ATTRS_KEY",
@@ -167,6 +167,7 @@ def provenance(scene: Scene) -> dict:
         "scene_name": scene.name,
         "scene_file": str(scene.path),
         "scene_hash": scene.hash,
+        "engines": engine_versions(),
         "scene": scene.science,
         "scene_toml": scene.text,
         "title": scene.title,
@@ -199,11 +200,14 @@ def open_group(store: Path, mode: str):
         return zarr.open_group(store=str(store), mode=mode, zarr_format=3, use_consolidated=False)
 
 
-def status_meanings() -> dict[str, str]:
+def status_meanings(method: str | None = None) -> dict[str, str]:
+    """{code: meaning} of the solver's statuses, in the words of engine ``method`` (None:
+    whichever engine gave it, ``solver.STATUS_REASONS``)."""
     import solver
 
     meanings = {str(NOT_COMPUTED): "not computed yet"}
-    meanings.update({str(int(k)): str(v) for k, v in sorted(solver.STATUS_REASONS.items())})
+    meanings.update({str(int(k)): (solver.status_reason(k, method) if method else str(v))
+                     for k, v in sorted(solver.STATUS_REASONS.items())})
     return meanings
 
 
@@ -235,7 +239,7 @@ def reduction_arrays(scene: Scene, r: Reduction) -> tuple[tuple[str, ...], tuple
         if kind == "polished":
             arrays[f"{base}_status"] = (np.dtype(np.int8), NOT_COMPUTED,
                                         {"long_name": f"solver status at the polished optimum of {r.name}",
-                                         "flag_meanings": status_meanings()})
+                                         "flag_meanings": status_meanings(scene.method)})
             arrays[f"{base}_evaluations"] = (np.dtype(np.int32), 0,
                                              {"long_name": "solver calls spent polishing"})
     return dims, shape, arrays
@@ -265,7 +269,7 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
         dtype, fill = output_dtype(name)
         attrs = {"long_name": QUANTITIES.get(name) or DIAGNOSTICS.get(name) or "solver status"}
         if name == "status":
-            attrs["flag_meanings"] = status_meanings()
+            attrs["flag_meanings"] = status_meanings(scene.method)
             attrs["long_name"] = "solver status: 0 converged; any other code is a failure (outputs NaN)"
         create_array(g, name, shape=shape, chunks=chunks, dtype=dtype, fill=fill, dims=scene.dims, attrs=attrs)
     for r in scene.reductions:
@@ -300,7 +304,7 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
                      attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau"})
         create_array(g, "series_status", shape=(n,), chunks=(n,), dtype=np.int8, fill=NOT_COMPUTED,
                      dims=("series_point",), attrs={"long_name": "solver status of the series points",
-                                                    "flag_meanings": status_meanings()})
+                                                    "flag_meanings": status_meanings(scene.method)})
     grid = tuple(-(-s // c) for s, c in zip(shape, chunks))
     sg = g.create_group(STATE_GROUP)
     create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,

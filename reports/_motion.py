@@ -141,7 +141,7 @@ def compute_motion(family: str, params: dict, *, rtol: float, method: str = "per
     res = solver.solve_periodic(kin, phys, method=method, rtol=rtol, return_series=True)
     status = int(res.status[0])
     if status != 0:
-        raise RuntimeError(f"solver status {status}: {solver.STATUS_REASONS.get(status, 'unknown')}")
+        raise RuntimeError(f"solver status {status}: {solver.status_reason(status, method)}")
     tn = np.asarray(res.tau[0], dtype=np.float64)
     un = np.asarray(res.u[0], dtype=np.float64)
     ok = np.isfinite(tn) & np.isfinite(un)  # final grids may be padded

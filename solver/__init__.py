@@ -19,8 +19,8 @@ from ._kinematics import Fourier, Harmonic, PowerLaw, period_grid
 from ._limits import fast_limit_velocity, kinematic_speed, quasi_static_velocity
 from ._physics import Physics, physical_from_scaled, scaled_from_physical
 from ._optimize import OptimizeResult, optimize_motion
-from ._solve import METHODS, SolveResult, solve_fixed_grid, solve_periodic
-from ._status import STATUS_REASONS  # noqa: E402
+from ._solve import ENGINES, METHODS, Engine, SolveResult, solve_fixed_grid, solve_periodic
+from ._status import STATUS_REASONS, status_reason  # noqa: E402
 from ._warmup import KERNEL_SETS, kernel_cache, warm_up  # noqa: E402  (compile ahead: pipeline's driver)
 
 restore_cache_dir(_numba_cache_dir)  # other packages' kernels keep their own
@@ -29,6 +29,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Fourier", "Harmonic", "PowerLaw", "Physics", "SolveResult", "STATUS_REASONS", "METHODS",
+    "ENGINES", "Engine", "status_reason",
     "solve_periodic", "solve_fixed_grid", "force_and_slope", "power_density", "period_grid", "fast_limit_velocity",
     "quasi_static_velocity", "kinematic_speed", "physical_from_scaled", "scaled_from_physical",
     "FixedGrid", "GradientResult", "adaptive_grid", "discrete_objective", "discrete_solution",

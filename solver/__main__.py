@@ -139,7 +139,7 @@ def run_point(args):
     seconds = time.perf_counter() - start
     out = res.point(0)
     out["status"] = int(out["status"])
-    out["reason"] = solver.STATUS_REASONS[out["status"]]
+    out["reason"] = solver.status_reason(out["status"], args.method)
     out["seconds"] = seconds
     out["method"] = args.method
     out["anisotropy_ratio"], out["scaled_period"] = (

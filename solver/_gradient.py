@@ -589,10 +589,11 @@ class FixedGrid:
 
 
 def adaptive_grid(kinematics, physics, *, rtol=1e-6, max_steps_per_period=None):
-    """The final grid of ``solve_periodic`` at ``rtol`` (one point) as a ``FixedGrid``."""
-    from ._solve import solve_periodic
-    res = solve_periodic(kinematics, physics, rtol=rtol, return_series=True,
-                         max_steps_per_period=max_steps_per_period)
+    """The final grid of the order-3 engine (``_solve.solve_order3``) at ``rtol`` (one point)
+    as a ``FixedGrid``: the grid of the discretisation this module differentiates."""
+    from ._solve import solve_order3
+    res = solve_order3(kinematics, physics, rtol=rtol, return_series=True,
+                       max_steps_per_period=max_steps_per_period)
     if not res.converged[0]:
         raise RuntimeError(f"adaptive solve did not converge (status {res.status[0]})")
     return FixedGrid.from_nodes(kinematics, np.append(res.tau[0], 1.0))

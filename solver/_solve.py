@@ -52,19 +52,44 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from numba import njit, prange
 
-from . import _march, _periodic, _radau5_solve
+from . import _march, _march_solve, _periodic, _radau5_solve
 from ._events import event_times, place_events, unresolved_events
 from ._kinematics import period_grid
 from ._limits import fast_limit_velocity, kinematic_speed
 from ._status import CONVERGED, NO_MOTION, OUT_OF_RANGE, TOLERANCE_NOT_REACHED, UNSTABLE
 from ._turning import MAX_FLAGGED, grade_towards, turning_point_estimates
 
-METHODS = ("periodic", "march", "radau5")
+#: the public methods of ``solve_periodic``: the engine, and the march, its independent check
+METHODS = ("periodic", "march")
+
+
+@dataclass(frozen=True)
+class Engine:
+    """What computes a method's results: its ``name`` (the method), the ``scheme`` in words,
+    and a ``version`` that changes whenever the discretisation or the error control changes
+    (a store records both and refuses to resume one started by another version)."""
+
+    name: str
+    scheme: str
+    version: str
+
+    @property
+    def label(self):
+        return f"{self.name} {self.version}"
+
+
+#: bump a version with every change of its engine's discretisation or error control
+ENGINES = {
+    "periodic": Engine("periodic", "event-driven 3-stage Radau IIA (order 5) with one-pass "
+                       "error control (_radau5_solve)", "5.1"),
+    "march": Engine("march", "explicit Heun RK2 (order 2) from rest, period by period, "
+                    "grid-pair refinement", "2.0"),
+}
 U_FLOOR_FRACTION = 1e-3
 MARCH_MAX_STEPS = 2 ** 22  # steps per solve (periods x steps per period) before giving up
 MAX_BISECTIONS = 4  # per refinement pass and step
@@ -558,10 +583,11 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
         physics = physics.take(np.zeros(n, dtype=int))
     code, params = kinematics.kernel_encoding()
     vscale = kinematic_speed(kinematics)
-    u0 = (fast_limit_velocity(kinematics, physics) if method in ("periodic", "radau5")
-          else np.zeros(n))
+    u0 = fast_limit_velocity(kinematics, physics) if method == "periodic" else np.zeros(n)
     grids = period_grid(kinematics, n_steps)
-    if method == "radau5":
+    if method == "march":
+        return _march_solve.fixed_grid(kinematics, physics, n_steps, rtol=rtol)
+    if method == "periodic":
         return _radau5_solve.fixed_grid_points(
             code, params, grids, physics.inertia_factor, physics.mu_n, physics.mu_s, physics.p,
             physics.delta_tau, float(rtol), np.maximum(vscale, 1e-300), u0)
@@ -581,11 +607,11 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         phi(tau) for n_points parameter points.
     physics : Physics
         T, mu_n, mu_s, p, delta; length 1 or n_points.
-    method : {"periodic", "march", "radau5"}
-        "periodic": Radau IIA (order 3, L-stable) on the periodic grid, solved by Newton on u(0).
-        "march": explicit RK2 (Heun, order 2) from rest until periodic.
-        "radau5": event-driven 3-stage Radau IIA (order 5) with one-pass error control
-        (``_radau5_solve``; in development).
+    method : {"periodic", "march"}
+        "periodic": the engine: event-driven 3-stage Radau IIA (order 5, L-stable) with
+        one-pass error control, Newton on u(0) (``_radau5_solve``).
+        "march": explicit RK2 (Heun, order 2) from rest until periodic: the independent
+        check (reports UNSTABLE on stiff sticking instead of a wrong number).
     rtol : float
         Target relative error of U and P (see the module docstring for the norm).
     return_series : bool
@@ -607,10 +633,27 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     if len(physics) == 1 and n > 1:
         physics = physics.take(np.zeros(n, dtype=int))
     start = time.perf_counter()
-    if method == "radau5":
-        return _solve_radau5(kinematics, physics, rtol, return_series,
-                             max_steps_per_period or _SPECS["periodic"].max_steps_per_period,
-                             start)
+    driver = _radau5_solve.solve if method == "periodic" else _march_solve.solve
+    out = driver(kinematics, physics, rtol,
+                 max_steps_per_period or _SPECS[method].max_steps_per_period, return_series)
+    return _result(out, physics, method, start)
+
+
+def solve_order3(kinematics, physics, *, rtol=1e-6, return_series=False,
+                 max_steps_per_period=None):
+    """The former default engine (2-stage Radau IIA, order 3, grid-pair refinement), kept
+    only until the gradient stands on the new engine; not a method of ``solve_periodic``."""
+    n = len(kinematics)
+    if len(physics) == 1 and n > 1:
+        physics = physics.take(np.zeros(n, dtype=int))
+    result = _solve_by_refinement(kinematics, physics, "order3", rtol, return_series,
+                                  max_steps_per_period, time.perf_counter())
+    return replace(result, method="order3")
+
+
+def _solve_by_refinement(kinematics, physics, method, rtol, return_series,
+                         max_steps_per_period, start):
+    method = "periodic" if method == "order3" else method  # (the old engine's kernels' name)
     run = _Refinement(kinematics, physics, method, rtol, return_series,
                       max_steps_per_period or _SPECS[method].max_steps_per_period)
     active = run.active
@@ -624,9 +667,11 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     return run.result(time.perf_counter() - start)
 
 
-def _solve_radau5(kinematics, physics, rtol, return_series, max_steps, start):
-    """``solve_periodic`` by the ``radau5`` engine (``_radau5_solve``)."""
-    out = _radau5_solve.solve(kinematics, physics, rtol, max_steps, return_series)
+def _result(out, physics, method, start):
+    """The ``SolveResult`` of a driver's output dict (``_radau5_solve.solve``,
+    ``_march_solve.solve``: int_u, int_pi, status, estimate, n_tau, iterations, still,
+    series, evaluations): the physical outputs, NaN where not converged, phi constant as
+    NO_MOTION with U = P = 0, and U or P beyond the float range as OUT_OF_RANGE."""
     status = out["status"]
     still = out["still"]
     status[still] = NO_MOTION
@@ -654,7 +699,7 @@ def _solve_radau5(kinematics, physics, rtol, return_series, max_steps, start):
     return SolveResult(
         **outputs, status=status, converged=status == CONVERGED, error_estimate=estimate,
         iterations=out["iterations"], n_tau=out["n_tau"], u=u_arr, tau=tau_arr,
-        seconds=time.perf_counter() - start, method="radau5",
+        seconds=time.perf_counter() - start, method=method,
         force_evaluations=out["evaluations"])
 
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import solver
+from references import reference
 from cases import AGREEMENT_CASES, radau_reference
 from solver import _radau5, _sweep, _switching
 from solver._kinematics import angle_and_rate
@@ -36,12 +37,12 @@ def test_order_of_accuracy_is_five(case):
     about 5, across the corners too."""
     grids = [8, 16, 32, 64]
     ref_u, ref_p, st = solver.solve_fixed_grid(case.kinematics, case.physics, 1024,
-                                               method="radau5")
+                                               method="periodic")
     assert st[0] == 0
     errors = []
     for n in grids:
         mean_u, mean_pi, st = solver.solve_fixed_grid(case.kinematics, case.physics, n,
-                                                      method="radau5")
+                                                      method="periodic")
         assert st[0] == 0
         errors.append(abs(mean_u[0] - ref_u[0]) + abs(mean_pi[0] - ref_p[0]))
     slope = -np.polyfit(np.log(grids), np.log(errors), 1)[0]
@@ -209,8 +210,8 @@ def test_agrees_with_the_march_and_is_honest(case):
     its error is within its estimate (and the estimate within rtol); and within 2 rtol of
     the march where the march converges (the independent method of the paper)."""
     rtol = 1e-5
-    res = solver.solve_periodic(case.kinematics, case.physics, method="radau5", rtol=rtol)
-    ref = solver.solve_periodic(case.kinematics, case.physics, rtol=1e-9)
+    res = solver.solve_periodic(case.kinematics, case.physics, method="periodic", rtol=rtol)
+    ref = reference(case.kinematics, case.physics)
     assert res.converged[0], solver.STATUS_REASONS[int(res.status[0])]
     T = case.physics.period[0]
     V = solver.kinematic_speed(case.kinematics)[0]
@@ -230,7 +231,7 @@ def test_agrees_with_lsoda():
     from solver.bench import baseline_point, family_angle
     cases = [c for c in AGREEMENT_CASES if c.name in ("linear_two_phase", "clapping_fourier")]
     for case in cases:
-        res = solver.solve_periodic(case.kinematics, case.physics, method="radau5", rtol=1e-8)
+        res = solver.solve_periodic(case.kinematics, case.physics, rtol=1e-8)
         ph = case.physics
         V = solver.kinematic_speed(case.kinematics)[0]
         U, P, _, _ = baseline_point(family_angle(case.kinematics), ph.mu_n[0], ph.mu_s[0],
@@ -244,7 +245,7 @@ def test_failure_is_nan_with_a_status():
     """A step budget too small for the motion: NaN and STEP_BUDGET_EXCEEDED, never a number."""
     kin = solver.Harmonic(1.0, 0.5)
     res = solver.solve_periodic(kin, solver.Physics.from_scaled(2.0 ** -4, -0.0 + 1.5),
-                                method="radau5", rtol=1e-7, max_steps_per_period=8)
+                                method="periodic", rtol=1e-7, max_steps_per_period=8)
     assert not res.converged[0]
     assert res.status[0] == 5
     assert math.isnan(res.U[0]) and math.isnan(res.P[0])
@@ -258,8 +259,8 @@ def test_node_weights_of_short_periods_do_not_hide_the_error():
                          [[-0.33443973, -0.1719513, -0.72521199, 0.16735269]])
     physics = solver.Physics.from_scaled(0.7147975132556633, 0.01235850613052716, delta=1e-5)
     rtol = 1e-3
-    res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
-    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-8)
+    res = solver.solve_periodic(kin, physics, method="periodic", rtol=rtol)
+    ref = reference(kin, physics)
     assert res.converged[0] and ref.converged[0]
     error = _error(res, ref, kin, physics)
     assert error <= max(res.error_estimate[0], 1e-8) * 1.5 and error <= rtol, \
@@ -286,10 +287,10 @@ def test_a_body_passing_a_turning_point_is_not_trapped():
 
     kin, physics = SETS["short_period_harmonic"].sample()
     kin, physics = kin.take([93]), physics.take([93])
-    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-8)
+    ref = reference(kin, physics)
     assert ref.converged[0]
     for rtol in (1e-3, 1e-5):
-        res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
+        res = solver.solve_periodic(kin, physics, method="periodic", rtol=rtol)
         assert res.converged[0]
         error = _error(res, ref, kin, physics)
         assert error <= rtol, (rtol, error, res.error_estimate[0])
@@ -303,11 +304,11 @@ def _flat_inflection_errors(scaled_period, rtols):
     kin = solver.Fourier([[np.pi / 2, 0.0, 0.01700679, 0.0, 0.0]],
                          [[-0.81044481, 0.0, 0.27014827, 0.0]])
     physics = solver.Physics.from_scaled(0.02867196, scaled_period, p=0.0, delta=1e-8)
-    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-8)
+    ref = reference(kin, physics)
     assert ref.converged[0]
     out = []
     for rtol in rtols:
-        res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
+        res = solver.solve_periodic(kin, physics, method="periodic", rtol=rtol)
         error = _error(res, ref, kin, physics)
         out.append((rtol, error, res.error_estimate[0], res.converged[0]))
     return out
@@ -378,10 +379,10 @@ def test_stiff_slipping_steps_estimate_int_u_with_the_slope_along_the_step():
     kin = solver.PowerLaw([1.0707], [0.568054], [0.937767], [1.4688], [True], [2.55895],
                           [False])
     physics = solver.Physics.from_scaled(173.111, 72.1087, p=0.0, delta=1e-9)
-    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-9)
+    ref = reference(kin, physics)
     assert ref.converged[0]
     for rtol in (1e-3, 3e-4, 1e-4, 3e-5, 1e-5):
-        res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
+        res = solver.solve_periodic(kin, physics, method="periodic", rtol=rtol)
         assert res.converged[0], rtol
         error = _error(res, ref, kin, physics)
         assert error <= rtol and error <= 1.5 * res.error_estimate[0], \
@@ -403,9 +404,9 @@ def test_stiff_slipping_steps_estimate_int_u_with_the_slope_along_the_step():
 def test_stiff_steps_keep_the_layer_in_int_u_error(kin, physics, rtol):
     """On stiff steps int u's error is the larger of the one-slope moment (which holds the
     end layer) and the quasi-static estimate (which holds the slope's change)."""
-    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-9)
+    ref = reference(kin, physics)
     assert ref.converged[0]
-    res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
+    res = solver.solve_periodic(kin, physics, method="periodic", rtol=rtol)
     error = _error(res, ref, kin, physics)
     assert res.converged[0] and error <= rtol, (error / rtol, res.error_estimate[0] / rtol)
 
@@ -460,9 +461,9 @@ def test_former_harness_failures_converge_within_rtol(motion, friction, rtol):
     kin = solver.PowerLaw(*([v] for v in motion))
     period, mu_n, mu_s, delta = friction
     physics = solver.Physics(period=[period], mu_n=[mu_n], mu_s=[mu_s], p=0.0, delta=delta)
-    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-9)
+    ref = reference(kin, physics)
     assert ref.converged[0]
-    res = solver.solve_periodic(kin, physics, method="radau5", rtol=rtol)
+    res = solver.solve_periodic(kin, physics, method="periodic", rtol=rtol)
     assert res.converged[0], res.status
     error = _error(res, ref, kin, physics)
     assert error <= rtol, (error / rtol, res.error_estimate[0] / rtol)
@@ -500,8 +501,8 @@ def test_a_linear_phase_has_no_turning_stops():
     count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
     assert list(stops[:count]) == [0.0, 0.3], stops[:count]
     physics = solver.Physics.from_scaled(2.0 ** -6, 0.125, p=0.0, delta=1e-5)
-    ref = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-9)
-    res = solver.solve_periodic(kin, physics, method="radau5", rtol=1e-4)
+    ref = reference(kin, physics)
+    res = solver.solve_periodic(kin, physics, method="periodic", rtol=1e-4)
     assert res.converged[0], res.status
     assert res.n_tau[0] < 1000
     assert _error(res, ref, kin, physics) <= 1e-4

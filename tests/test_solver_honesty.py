@@ -1,11 +1,13 @@
 """The honesty harness (``solver.honesty``): its judging logic, its point sets, and a small
 honesty subset of every periodic engine in ``solver.METHODS`` (but the march).
 
-The subset: the first 4 points of four of the harder sets, each engine at rtol 1e-3 and 1e-5,
-against references computed here (``periodic`` at rtol 1e-8, cross-checked by the march at
-1e-6 where it converges).  With 2 x 16 solves per engine the harness's 99 % share within
-rtol allows no miss: every judged solve must be within rtol (a failed solve counts as
-outside), none silent.  Measurement history: ``docs/validation.md``.
+The subset: the first points of several of the harder sets (the paper's power-law grids
+among them), each engine at rtol 1e-3 and 1e-5, against the frozen references
+(``solver/honesty_references.npz``: the former order-3 engine at rtol 1e-9, cross-checked by
+the order-5 engine at 1e-9), so that the engine never checks itself.  With 2 x 40 solves
+per engine the harness's 99 % share within rtol allows no miss: every judged solve must be
+within rtol (a failed solve counts as outside), none silent.  Measurement history:
+``docs/validation.md``.
 """
 from types import SimpleNamespace
 
@@ -15,15 +17,12 @@ import pytest
 import solver
 from solver import bench, honesty
 
-#: (set, first points): the march is 10x dearer than the engines on short periods and never
-#: converges on long ones (UNSTABLE), so those sets stay in the full harness only
-SUBSET = (("stress_powerlaw_22", 4), ("fourier_clapping", 4), ("harmonic_extreme", 4),
-          ("p0.5_harmonic", 4))
+#: (set, first points) judged against the frozen references
+SUBSET = (("stress_powerlaw_22", 6), ("fourier_clapping", 6), ("harmonic_extreme", 6),
+          ("p0.5_harmonic", 6), ("short_period_harmonic", 6), ("paper_powerlaw", 10))
 SUBSET_RTOLS = (1e-3, 1e-5)
-SUBSET_REFERENCE = ("periodic", 1e-8)
-SUBSET_CHECK = ("march", 1e-6)
 #: fewer judged points than this and the subset would say nothing
-MIN_JUDGED = 12
+MIN_JUDGED = 30
 
 
 # ----------------------------------------------------------------------------- judging logic
@@ -175,8 +174,7 @@ def subset():
     out = {}
     for name, n in SUBSET:
         kin, phys = honesty.SETS[name].sample(n)
-        reference = honesty.Solves.run(kin, phys, *SUBSET_REFERENCE)
-        check = honesty.Solves.run(kin, phys, *SUBSET_CHECK)
+        reference, check, _ = honesty.frozen_references(honesty.SETS[name], kin, phys)
         out[name] = (kin, phys, honesty.References.from_solves(
             reference, check, phys, solver.kinematic_speed(kin)))
     return out
@@ -217,3 +215,43 @@ def test_references_of_an_earlier_engine_are_reused_only_when_asked(tmp_path, mo
     assert source == "" and calls == [2, 2]
     _, source = honesty.cached_solves(kin, phys, "periodic", 1e-9, "s", tmp_path)
     assert source == "" and calls == [2, 2, 2]
+
+
+# ----------------------------------------------------------------------------- frozen references
+
+def test_frozen_references_hold_every_set_with_its_provenance():
+    """The committed file has every set's every point, made from the sets' generators as they
+    are today (their digests match), with the commit and settings that made them; the
+    reference and its cross-check (independent engines at rtol 1e-9) agree to 1e-7 in the
+    solver's norm wherever both converged."""
+    meta = honesty.frozen_meta()
+    assert meta["reference"][0] == "periodic" and meta["reference"][1] <= 1e-9
+    assert meta["check"][1] <= 1e-9 and len(meta["commit"]) >= 7
+    assert set(meta["sets"]) == set(honesty.SETS)
+    for name, point_set in honesty.SETS.items():
+        stored = meta["sets"][name]
+        kin, phys = point_set.sample()
+        assert stored["points"] == len(kin) and stored["seed"] == point_set.seed
+        assert stored["digest"] == honesty.set_digest(kin, phys), name
+        assert stored["disagreement_max"] <= 1e-7, (name, stored["disagreement_max"])
+
+
+def test_freeze_round_trip(tmp_path, monkeypatch):
+    """``freeze`` writes what ``frozen_references`` reads back, for a prefix of the set too;
+    another set of points is refused with a message naming the set."""
+    calls = _counting_engine(monkeypatch)
+    point_set = honesty.PointSet("tiny", 5, lambda n, rng: (solver.Harmonic(
+        rng.uniform(0.5, 1.0, n), np.full(n, 0.3)), _physics(n)), "tiny harmonic", points=3)
+    monkeypatch.setitem(honesty.SETS, "tiny", point_set)
+    settings = honesty.Settings(methods=("periodic",), reference_method="periodic",
+                                reference_rtol=1e-9, check_method="march", check_rtol=1e-7,
+                                cache_dir=tmp_path / "cache")
+    path = tmp_path / "frozen.npz"
+    meta = honesty.freeze(["tiny"], settings, path)
+    assert calls == [3, 3] and meta["sets"]["tiny"]["points"] == 3
+    kin, phys = point_set.sample(2)
+    ref, check, read_meta = honesty.frozen_references(point_set, kin, phys, path)
+    assert ref.U.shape == (2,) and read_meta["sets"]["tiny"]["digest"] == meta["sets"]["tiny"]["digest"]
+    other = honesty.PointSet("tiny", 6, point_set.draw, "tiny harmonic", points=3)
+    with pytest.raises(ValueError, match="'tiny'"):
+        honesty.frozen_references(other, *other.sample(2), path)

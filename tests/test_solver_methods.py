@@ -5,9 +5,11 @@ import numpy as np
 import pytest
 
 import solver
+from references import reference
 from cases import AGREEMENT_CASES, Case
 
-METHOD_ORDERS = {"periodic": 3, "march": 2}
+#: the march's order here; the engine's (5) is tests/test_radau5.py's
+METHOD_ORDERS = {"march": 2}
 
 
 ORDER_CASES = [
@@ -20,11 +22,11 @@ ORDER_CASES = [
 ]
 
 
-@pytest.mark.parametrize("method", ["periodic", "march"])
+@pytest.mark.parametrize("method", ["march"])
 @pytest.mark.parametrize("case", ORDER_CASES, ids=lambda c: c.name)
 def test_order_of_accuracy(case, method):
     """Slope of log(error) against log(N) (diffrax-style order test)."""
-    grids = [32, 64, 128, 256] if method == "periodic" else [128, 256, 512, 1024]
+    grids = [128, 256, 512, 1024]
     ref_u, ref_p, st = solver.solve_fixed_grid(case.kinematics, case.physics, grids[-1] * 32, method=method)
     assert st[0] == 0
     errors = []
@@ -57,10 +59,11 @@ def test_methods_agree_within_rtol(case):
 def test_error_estimate_is_honest_against_a_fine_reference(case, rtol):
     """The returned estimate bounds the true error, in the solver's norm (max of U's error
     relative to max(|U T|, 1e-3 V) and P's relative error), and is below rtol.  Reference:
-    the periodic method at rtol 1e-9 (its own error, <= 1e-9, is 1e-4 of the smallest
-    compared; the methods' agreement is ``test_methods_agree_within_rtol``'s)."""
+    the former order-3 engine at rtol 1e-9 (``tests/references.py``; its own error, <= 1e-9,
+    is 1e-4 of the smallest compared; the methods' agreement is
+    ``test_methods_agree_within_rtol``'s)."""
     res = solver.solve_periodic(case.kinematics, case.physics, rtol=rtol)
-    ref = solver.solve_periodic(case.kinematics, case.physics, rtol=1e-9)
+    ref = reference(case.kinematics, case.physics)
     assert res.converged[0] and ref.converged[0]
     T = case.physics.period[0]
     scale_u = max(abs(ref.U[0]) * T, 1e-3 * solver.kinematic_speed(case.kinematics)[0])
@@ -205,7 +208,7 @@ def test_scipy_lsoda_baseline_agrees_on_every_family(name):
 
     case = {c.name: c for c in AGREEMENT_CASES}[name]
     kin, phys = case.kinematics, case.physics
-    ref = solver.solve_periodic(kin, phys, rtol=1e-8)
+    ref = reference(kin, phys)
     vscale = solver.kinematic_speed(kin)[0]
     U, P, periods, _ = bench.baseline_point(bench.family_angle(kin), phys.mu_n[0], phys.mu_s[0],
                                             phys.p[0], phys.period[0], phys.delta_tau[0], vscale,

@@ -1,0 +1,82 @@
+"""Points that once broke an engine's error control, each held against its stored reference.
+
+They were found by stress sweeps of the former order-3 engine (a corner of F in a blind spot
+of a grid and its bisection, stops between shared nodes, a corner of u' at a stale node,
+stops forced early by spurious stage roots, a stage residual counted as a defect) and are
+kept for the engine that replaced it: each solve at the listed rtols must converge within
+rtol, in the solver's norm, of the reference (``tests/references.py``: the former engine at
+rtol 1e-8 .. 1e-9, an independent discretisation).  The history of each point is in
+docs/validation.md and in the git log of ``tests/test_solver_events.py`` and
+``tests/test_solver_turning.py``, where they were first held.
+"""
+import numpy as np
+import pytest
+
+import solver
+from references import reference
+from solver.bench import solution_error
+
+REGRESSIONS = {
+    # a corner of F sat in a blind spot of the step/bisection pair (70 rtol off, no events)
+    "kink_leaves_the_link_near_a_turning_point": (
+        solver.Harmonic([0.958], [0.649 * 0.958]),
+        solver.Physics.from_scaled(2 ** -0.72, 0.414, p=0.0, delta=1e-5), (1e-4, 1e-5, 1e-6)),
+    # the stop right after the corner at tau = 0, misplaced by the secant of the node values
+    "stop_right_after_the_corner": (
+        solver.PowerLaw([1.1644793019715023], [0.8434785270895884], [0.46192329623999384],
+                        [3.0], [False], [1.0], [False]),
+        solver.Physics.from_scaled(2 ** 6.934710276918857, 2.513750234504831, p=0.0,
+                                   delta=1e-5), (1e-4, 1e-5, 1e-6)),
+    # a stop at tau 0.0096 inside a step, the same distance from nodes of both grids
+    "stop_between_shared_nodes": (
+        solver.PowerLaw([1.0064810055487958], [0.13924241292100864], [0.17119305099346455],
+                        [10.0], [False], [3.0], [True]),
+        solver.Physics.from_scaled(0.0565007951085289, 4.8261221947868265, p=0.0, delta=1e-8),
+        (1e-4, 1e-5)),
+    # where g = u + omega S / 4 crosses zero u'' jumps; that event sat past a stale node
+    "corner_of_u_prime_at_a_stale_node_a": (
+        solver.Harmonic([0.5145897604110815], [0.27657883466906485]),
+        solver.Physics.from_scaled(202.24583056219387, 0.26835620019215956, p=0.0, delta=1e-5),
+        (1e-5,)),
+    "corner_of_u_prime_at_a_stale_node_b": (
+        solver.Harmonic([1.1333585399822783], [1.054069901106421]),
+        solver.Physics.from_scaled(97.92991888688162, 0.4221571958585374, p=0.0, delta=1e-5),
+        (1e-4,)),
+    # during a dwell of phi u sticks at g ~ -5e-15: g never changes sign
+    "stop_that_keeps_the_sign_of_g": (
+        solver.PowerLaw([1.11706477], [0.07002536], [0.17588923], [10.0], [False], [3.0],
+                        [True]),
+        solver.Physics([4.86911806], [0.18494962], [5.40687788], p=0.0, delta=1e-8), (1e-4,)),
+    # a stage stuck on a spurious root stopped u 1.8e-3 before the stop (mu_n/mu_s 3,020)
+    "stop_forced_early_by_a_spurious_root": (
+        solver.PowerLaw([1.8500986326845215], [1.2483753329829477], [0.2919403621941638],
+                        [6.321938411908913], [False], [3.0930357998761355], [True]),
+        solver.Physics.from_scaled(3019.633740089039, 56.29317468157276, p=0.0, delta=1e-5),
+        (1e-3,)),
+    "stop_forced_early_neighbour": (
+        solver.PowerLaw([1.8730589450843962], [1.228801695952612], [0.23469493023743124],
+                        [7.122139834770227], [False], [3.0398580342139843], [True]),
+        solver.Physics.from_scaled(7971.722214334097, 55.08018350081435, p=0.0, delta=1e-5),
+        (1e-3,)),
+    # a corner of exponent 20 on both sides where the body rests (u 1e-56): node weights of
+    # 9e18, and the stage Newton's residual once counted as a defect
+    "rest_at_a_corner_of_exponent_20": (
+        solver.PowerLaw([2.1930766425058286], [0.3106065040016449], [0.7189580800698627],
+                        [20.0], [True], [20.0], [False]),
+        solver.Physics.from_scaled(73.23732052227966, 0.035042416335456184, p=0.0,
+                                   delta=1e-10), (1e-5, 1e-6)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(REGRESSIONS))
+def test_regression_point_converges_within_rtol(name):
+    kin, phys, rtols = REGRESSIONS[name]
+    ref = reference(kin, phys)
+    assert ref.converged[0]
+    V = solver.kinematic_speed(kin)
+    for rtol in rtols:
+        res = solver.solve_periodic(kin, phys, rtol=rtol)
+        assert res.converged[0], (rtol, solver.status_reason(res.status[0]))
+        error = float(solution_error(res.U, res.P, ref.U, ref.P, phys.period, V)[0])
+        assert error <= rtol and res.error_estimate[0] <= rtol, (rtol, error / rtol,
+                                                                  res.error_estimate[0] / rtol)
