@@ -52,19 +52,24 @@ power law the grid moves with tau0: every node keeps its fraction of its phase (
 on tau0, omega ~ 1/(phase length) does, and so do the step lengths h_n.  T enters through
 kappa, delta_tau = T delta and the prefactors of U and P.
 
-Cost of one gradient (bench_optimize's problem, Kmax = 7, mu_n/mu_s = 2^-4: see
-docs/validation.md): the adjoint evaluates the closed-form partials at the 3 stages of
-every step and solves three 3 x 3 systems per step.
+Cost of one gradient (bench_optimize's problem, Kmax = 7, mu_n/mu_s = 2^-4, seed 1: the
+engine's grid at rtol 1e-6 has 200 steps, the order-3 engine's had 1,592): forward solve
+from a warm u(0) 0.19 ms plus adjoint 0.10 ms (order 3: 0.59 + 0.38 ms); the adjoint
+evaluates the closed-form partials at the 3 stages of every step and solves three 3 x 3
+systems per step (~0.5 us a step against ~0.24 for order 3's two stages and 2 x 2 systems).
+
+A frozen grid is not error-controlled away from where it was made: far from it a step can
+carry h kappa F_u > 0 at a stage (the anisotropic friction's destabilising slope) up to a
+fold of the stage equations, det J_n -> 0, where the discrete solution branch ends, the
+objective jumps and its exact gradient grows like 1 / det J_n (bench_optimize seed 3:
+h kappa F_u = 2.7 at a stage, det J_n = 2e-5, the line search failed there).
 
 Partial derivatives of F and Pi.  ``force_partials`` forms them in closed form from
 the forward solve's own link moments, the omega partials by homogeneity, falling back
 to the quadrature below for those two where homogeneity cancels (near omega = 0); on
 inputs concentrated on the hard cases the two agree to 1e-11 of the natural scales
-(tests/test_gradient.py), and the closed forms make a gradient ~2.8x cheaper (Kmax = 7,
-1592 steps: 9.8 -> 3.4 ms, with the trigonometric recurrences and the stages taken from
-the shooting's converged sweep; the adjoint sweep alone, with phi, dphi/dtau and sin phi,
-cos phi at the stages also taken from the shooting and the force partials written in place,
-costs ~0.4 of a line-search trial solve: 1592 steps, 0.38 ms against 0.98 ms).
+(tests/test_gradient.py), and the closed forms made a gradient ~2.8x cheaper (measured on
+the order-3 discretisation, Kmax = 7, 1592 steps: 9.8 -> 3.4 ms).
 ``force_partials_quadrature``: integrals over the
 link of the s-derivatives of the integrands, evaluated by composite 10-point
 Gauss-Legendre.  The integrand is analytic in s except at s* +- i eta, where
@@ -103,9 +108,9 @@ from ._kinematics import angle_and_rate
 from ._monodromy import monodromy_factor, one_minus_monodromy
 from ._radau5 import (A11, A12, A13, A21, A22, A23, A31, A32, A33, C1, C2, PointPhysics, solve3,
                       stage_matrix)
-from ._radau5_solve import _integrals, _shift, _stage_atol, frozen_newton
-from ._sweep import (COS, END_KIND, ERR, OMEGA, SENS, SIN, STAGE, T as W_T, U as W_U,
-                     frozen_sweep, new_workspace)
+from ._radau5_solve import BAND_SHARE, frozen_newton
+from ._sweep import (COS, END_KIND, ERR, INT_P, INT_U, M_MINUS_1, OMEGA, Q_P, Q_U, SENS, SIN,
+                     STAGE, T as W_T, U as W_U, frozen_sweep, new_workspace)
 from . import _radau5_solve
 from ._status import CONVERGED
 
@@ -400,6 +405,30 @@ def step_length_partials(code, params, h, tau_phase, dh):
 
 
 @njit(cache=True, error_model="numpy")
+def _stage_atol(rtol, vscale, dtau, p):
+    """The engine's stage Newton tolerance (``_radau5_solve._stage_atol``, copied: private
+    there): max(1e-5 rtol, 1e-14) V, and for p = 0 at most BAND_SHARE delta_tau."""
+    atol = max(1e-5 * rtol, 1e-14) * vscale
+    if p == 0.0:
+        atol = min(atol, BAND_SHARE * dtau)
+    return atol
+
+
+@njit(cache=True, error_model="numpy")
+def _shift_onto_fixed_point(W, N, shift):
+    """The converged sweep, ``shift`` short of the fixed point, moved onto it to first order
+    along the stage sensitivities (``_radau5_solve._shift``, copied: private there)."""
+    for n in range(N):
+        W[W_U, n] += shift
+        for i in range(3):
+            W[STAGE + i, n] += W[SENS + i, n] * shift
+        W[INT_U, n] += W[Q_U, n] * shift
+        W[INT_P, n] += W[Q_P, n] * shift
+        shift *= 1.0 + W[M_MINUS_1, n]
+    W[W_U, N] += shift
+
+
+@njit(cache=True, error_model="numpy")
 def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     """Periodic solution of the 3-stage Radau IIA discretisation on ``nodes`` (N steps).
 
@@ -412,7 +441,7 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     value (``fixed_grid_point`` starts it at u0; the two agree to the stage tolerance).
 
     Returns (status, u0, I_u, I_Pi); the speed scale V = (1/4) int |dphi/dtau| dtau (Radau
-    rule) sets the nonlinear tolerances as in the engine (``_radau5_solve._stage_atol``).
+    rule) sets the nonlinear tolerances as in the engine (``_stage_atol``).
     """
     vscale = 0.0
     for n in range(N):
@@ -442,7 +471,7 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
         W[ERR, n] = W[ERR + 1, n] = W[ERR + 2, n] = 0.0
         W[END_KIND, n] = 0.0
     vscale = max(vscale, 1e-300)
-    atol = _stage_atol(rtol, vscale, phys)
+    atol = _stage_atol(rtol, vscale, phys.dtau, phys.p)
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
     bound = 1e3 * vscale + 10.0 * abs(u0)
     status, _ = frozen_sweep(code, params, phys, u0, atol, W, N)
@@ -452,8 +481,12 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     if fn.status != CONVERGED:
         return fn.status, fn.u0, math.nan, math.nan
     shift = fn.g / fn.one_minus_M
-    _shift(W, N, shift)
-    int_u, int_pi = _integrals(W, N)
+    _shift_onto_fixed_point(W, N, shift)
+    int_u = 0.0
+    int_pi = 0.0
+    for n in range(N):  # summed in order, as ``_radau5_solve._integrals``
+        int_u += W[INT_U, n]
+        int_pi += W[INT_P, n]
     return CONVERGED, fn.u0 + shift, int_u, int_pi
 
 
