@@ -1,48 +1,75 @@
 """Exact gradients of the discretised periodic problem by the adjoint method.
 
-The discrete problem (one parameter point, a fixed grid tau_0 = 0 < ... < tau_N = 1).
-The unknowns are the Radau IIA stages x_n = (U1_n, U2_n) of every step, U1 at
-t_n + h_n/3 and U2 at t_{n+1}; the method is stiffly accurate, so u_{n+1} = U2_n
-and periodicity closes the cycle, u_0 = U2_{N-1}.  With F_j = F(U_j; phi_j,
-omega_j, delta_tau) (eq. Newtonu) and kappa = T^(2-p) the residuals are
+The discrete problem (one parameter point, a fixed grid tau_0 = 0 < ... < tau_N = 1, by
+default the step sequence of the order-5 engine's converged solve, ``adaptive_grid``).
+The method is the engine's 3-stage Radau IIA (order 5, ``_radau5``: nodes
+c = ((4 - sqrt 6)/10, (4 + sqrt 6)/10, 1), matrix A, weights b = last row of A =
+((16 - sqrt 6)/36, (16 + sqrt 6)/36, 1/9)).  The unknowns are the stages
+x_n = (U1_n, U2_n, U3_n) of every step, U_i at tau_n + c_i h_n; the method is stiffly
+accurate, so u_{n+1} = U3_n and periodicity closes the cycle, u_0 = U3_{N-1}.  With
+F_j = F(U_j; phi_j, omega_j, delta_tau) (eq. Newtonu; phi, omega on the step's side of a
+corner) and kappa = T^(2-p) the residuals are
 
-    R_i,n = U_i,n - U2_{n-1} - h_n kappa sum_j a_ij F_j,n        (i = 1, 2; n - 1 mod N)
+    R_i,n = U_i,n - U3_{n-1} - h_n kappa sum_j a_ij F_j,n        (i = 1, 2, 3; n - 1 mod N)
 
-and the objectives are built from the Radau-weighted period integrals
+and the objectives are built from the Radau-weighted period integrals (the engine's own,
+``_radau5.step_integrals``)
 
-    I_u = sum_n h_n (3/4 U1_n + 1/4 U2_n),   I_Pi = sum_n h_n (3/4 Pi(U1_n) + 1/4 Pi(U2_n)),
+    I_u = sum_n h_n b . U_n,   I_Pi = sum_n h_n b . Pi(U_n)   [Pi: eq. powerp's integrand],
     U = I_u / T,  P = T^-(p+1) I_Pi,  lambda = sign(U) |U|^(p+1) / P   (eqs. U, powerp, lambdap).
 
+The forward solve is the engine's fixed-grid solve (``_radau5_solve.fixed_grid_point``:
+frozen sweeps, Newton on u(0), the converged sweep shifted onto the fixed point), with the
+nonlinear tolerances at rounding level (rtol 1e-13), so I_u and I_Pi are the engine's
+numbers on that grid (tests/test_gradient.py: equal to ``fixed_grid_point``'s).
+
 Adjoint.  For I in {I_u, I_Pi}: dI/dtheta = dI/dtheta|_x - l^T dR/dtheta with
-(dR/dx)^T l = (dI/dx)^T.  dR/dx is cyclic block-bidiagonal: the 2 x 2 stage
-Jacobian J_n on the diagonal and -(1, 1)^T e_2^T coupling step n to U2_{n-1}.
-Its transpose gives, with sigma_n = l1_n + l2_n,
+(dR/dx)^T l = (dI/dx)^T.  dR/dx is cyclic block-bidiagonal: the 3 x 3 stage Jacobian
+J_n = I - h_n kappa A diag(F_u at the stages) on the diagonal and -1 e_3^T coupling step n
+to U3_{n-1}.  Its transpose gives, with sigma_n = 1 . l_n,
 
-    J_n^T l_n = g_n + e_2 sigma_{n+1},     sigma_n = c_n + m_n sigma_{n+1},
+    J_n^T l_n = g_n + e_3 sigma_{n+1},     sigma_n = c_n + m_n sigma_{n+1},
 
-where c_n = (J_n^-1 1) . g_n and m_n = (J_n^-1 1)_2 = du_{n+1}/du_n is the same
-step derivative the forward shooting multiplies into the monodromy M.  So the
-adjoint is one backward sweep: sigma_0 = (sum_n (prod_{k<n} m_k) c_n) / (1 - M),
-with 1 - M accumulated as -expm1(sum log m_n) like the forward solve, then
-sigma_n and l_n step by step backward (|m_n| <~ 1, so the backward recursion is
-stable; it is O(N), both right-hand sides at once).
+where g_n = h_n b (I_u) or h_n b diag(Pi_u) (I_Pi), s_n = J_n^-1 1 = dU_n/du_n,
+c_n = s_n . g_n and m_n = (s_n)_3 = du_{n+1}/du_n, the step derivative whose product over
+the period is the monodromy M.  So the adjoint is one backward sweep:
+sigma_0 = (sum_n (prod_{k<n} m_k) c_n) / (1 - M), with m_n - 1 = (J_n^-1 h_n kappa A F_u)_3
+formed without cancellation and 1 - M accumulated as -expm1(sum log m_n) (``_monodromy``),
+then l_n and sigma_n step by step backward by 3 x 3 transposed solves (``_radau5.solve3``,
+pivoted: stiff stages make J_n's columns differ by ~1e10; |m_n| <~ 1, so the backward
+recursion is stable; it is O(N), both functionals in the same sweep).  With q_n = A^T l_n,
 
-Parameter dependence.  phi and omega at the stages depend on the family's
-parameters; for the power law the grid moves with tau0: every node keeps its
-fraction of its phase (closing [0, tau0], opening [tau0, 1]), so the stage
-fractions x are fixed, phi there does not depend on tau0, omega ~ 1/(phase
-length) does, and so do the step lengths h_n.  T enters through kappa, delta_tau
-= T delta and the prefactors of U and P.
+    dI/dtheta = sum_n [ dh_n/dtheta (b . G(U_n) + kappa q_n . F_n) + h_n kappa q_n . dF_n/dtheta
+                        + h_n b . dG/dtheta ],   G = u or Pi,
+
+dF/dtheta = F_phi dphi/dtheta + F_omega domega/dtheta (+ F_delta for delta_tau), and the
+kappa column sum_n h_n q_n . F_n.
+
+Parameter dependence.  phi and omega at the stages depend on the family's parameters
+(Harmonic A0, A1; Fourier A_k, B_k; power law A0, A1, tau0, gamma_c, gamma_o); for the
+power law the grid moves with tau0: every node keeps its fraction of its phase (closing
+[0, tau0], opening [tau0, 1]), so the stage fractions are fixed, phi there does not depend
+on tau0, omega ~ 1/(phase length) does, and so do the step lengths h_n.  T enters through
+kappa, delta_tau = T delta and the prefactors of U and P.
+
+Cost of one gradient (bench_optimize's problem, Kmax = 7, mu_n/mu_s = 2^-4, seed 1: the
+engine's grid at rtol 1e-6 has 200 steps, the order-3 engine's had 1,592): forward solve
+from a warm u(0) 0.19 ms plus adjoint 0.10 ms (order 3: 0.59 + 0.38 ms); the adjoint
+evaluates the closed-form partials at the 3 stages of every step and solves three 3 x 3
+systems per step (~0.5 us a step against ~0.24 for order 3's two stages and 2 x 2 systems).
+
+A frozen grid is not error-controlled away from where it was made: far from it a step can
+carry h kappa F_u > 0 at a stage (the anisotropic friction's destabilising slope) up to a
+fold of the stage equations, det J_n -> 0, where the discrete solution branch ends, the
+objective jumps and its exact gradient grows like 1 / det J_n (bench_optimize seed 3:
+h kappa F_u = 2.7 at a stage, det J_n = 2e-5, the line search failed there).
 
 Partial derivatives of F and Pi.  ``force_partials`` forms them in closed form from
 the forward solve's own link moments, the omega partials by homogeneity, falling back
 to the quadrature below for those two where homogeneity cancels (near omega = 0); on
 inputs concentrated on the hard cases the two agree to 1e-11 of the natural scales
-(tests/test_gradient.py), and the closed forms make a gradient ~2.8x cheaper (Kmax = 7,
-1592 steps: 9.8 -> 3.4 ms, with the trigonometric recurrences and the stages taken from
-the shooting's converged sweep; the adjoint sweep alone, with phi, dphi/dtau and sin phi,
-cos phi at the stages also taken from the shooting and the force partials written in place,
-costs ~0.4 of a line-search trial solve: 1592 steps, 0.38 ms against 0.98 ms).
+(tests/test_gradient.py), and the closed forms made a gradient ~2.8x cheaper (measured on
+the order-3 discretisation, Kmax = 7, 1592 steps: 9.8 -> 3.4 ms).
 ``force_partials_quadrature``: integrals over the
 link of the s-derivatives of the integrands, evaluated by composite 10-point
 Gauss-Legendre.  The integrand is analytic in s except at s* +- i eta, where
@@ -77,8 +104,14 @@ from numba import njit
 from ._force import E_FLOOR, link_moments, link_setup_sc, radial_power
 from ._kinematics import FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, period_grid
 from ._limits import fast_limit_velocity
-from ._periodic import (monodromy_factor, one_minus_monodromy, solve_point_on_grid,
-                        stage_jacobian)
+from ._kinematics import angle_and_rate
+from ._monodromy import monodromy_factor, one_minus_monodromy
+from ._radau5 import (A11, A12, A13, A21, A22, A23, A31, A32, A33, C1, C2, PointPhysics, solve3,
+                      stage_matrix)
+from ._radau5_solve import BAND_SHARE, frozen_newton
+from ._sweep import (COS, END_KIND, ERR, INT_P, INT_U, M_MINUS_1, OMEGA, Q_P, Q_U, SENS, SIN,
+                     STAGE, T as W_T, U as W_U, frozen_sweep, new_workspace)
+from . import _radau5_solve
 from ._status import CONVERGED
 
 _x10, _w10 = np.polynomial.legendre.leggauss(10)
@@ -372,129 +405,212 @@ def step_length_partials(code, params, h, tau_phase, dh):
 
 
 @njit(cache=True, error_model="numpy")
-def _forward(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol, stages,
-             stage_kinematics):
-    """Periodic solution on ``grid`` (N steps); writes the converged stages (2N,) and phi,
-    dphi/dtau, sin phi, cos phi at the stage times (4, 2N).
+def _stage_atol(rtol, vscale, dtau, p):
+    """The engine's stage Newton tolerance (``_radau5_solve._stage_atol``, copied: private
+    there): max(1e-5 rtol, 1e-14) V, and for p = 0 at most BAND_SHARE delta_tau."""
+    atol = max(1e-5 * rtol, 1e-14) * vscale
+    if p == 0.0:
+        atol = min(atol, BAND_SHARE * dtau)
+    return atol
 
-    Returns (status, u0, I_u, I_Pi).  The shooting is the solver's own (``solve_point_on_grid``),
-    whose converged sweep gives the stages and the Radau-weighted period integrals.
-    ``vscale`` <= 0: computed from the grid (``solve_point_on_grid``).
+
+@njit(cache=True, error_model="numpy")
+def _shift_onto_fixed_point(W, N, shift):
+    """The converged sweep, ``shift`` short of the fixed point, moved onto it to first order
+    along the stage sensitivities (``_radau5_solve._shift``, copied: private there)."""
+    for n in range(N):
+        W[W_U, n] += shift
+        for i in range(3):
+            W[STAGE + i, n] += W[SENS + i, n] * shift
+        W[INT_U, n] += W[Q_U, n] * shift
+        W[INT_P, n] += W[Q_P, n] * shift
+        shift *= 1.0 + W[M_MINUS_1, n]
+    W[W_U, N] += shift
+
+
+@njit(cache=True, error_model="numpy")
+def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
+    """Periodic solution of the 3-stage Radau IIA discretisation on ``nodes`` (N steps).
+
+    The engine's own fixed-grid solve (``_radau5_solve.fixed_grid_point``: a frozen sweep,
+    Newton on u(0) by frozen sweeps, the converged sweep shifted onto the fixed point), on
+    the workspace ``W`` (``_sweep.new_workspace(N)``), which holds the converged stages
+    afterwards (rows STAGE .. STAGE + 2).  Writes phi, dphi/dtau, sin phi, cos phi at the
+    stage times tau_n + c_i h_n (each on its step's side of a corner) into
+    ``stage_kinematics`` (4, 3N).  The first sweep starts every stage at its step's start
+    value (``fixed_grid_point`` starts it at u0; the two agree to the stage tolerance).
+
+    Returns (status, u0, I_u, I_Pi); the speed scale V = (1/4) int |dphi/dtau| dtau (Radau
+    rule) sets the nonlinear tolerances as in the engine (``_stage_atol``).
     """
-    scratch = np.empty((4, N))
-    int_u, int_pi, u0, status, _, _ = solve_point_on_grid(
-        code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u0, vscale, rtol, scratch[0],
-        scratch[1], scratch[2], scratch[3], stages, None, stage_kinematics)
-    return status, u0, int_u, int_pi
+    vscale = 0.0
+    for n in range(N):
+        t0 = nodes[n]
+        h = nodes[n + 1] - t0
+        side = t0 + 0.5 * h
+        W[W_T, n] = t0
+        W[W_T, n + 1] = nodes[n + 1]
+        for i in range(3):
+            c = C1 if i == 0 else (C2 if i == 1 else 1.0)
+            phi, om = angle_and_rate(code, params, t0 + c * h, side)
+            S = math.sin(phi)
+            C = math.cos(phi)
+            W[SIN + i, n] = S
+            W[COS + i, n] = C
+            W[OMEGA + i, n] = om
+            stage_kinematics[0, 3 * n + i] = phi
+            stage_kinematics[1, 3 * n + i] = om
+            stage_kinematics[2, 3 * n + i] = S
+            stage_kinematics[3, 3 * n + i] = C
+            b = A31 if i == 0 else (A32 if i == 1 else A33)
+            vscale += 0.25 * h * b * abs(om)
+            # the first sweep's stage prediction W[STAGE] + W[SENS] (u_n - W[W_U]) is u_n
+            W[STAGE + i, n] = u0
+            W[SENS + i, n] = 1.0
+        W[W_U, n] = u0
+        W[ERR, n] = W[ERR + 1, n] = W[ERR + 2, n] = 0.0
+        W[END_KIND, n] = 0.0
+    vscale = max(vscale, 1e-300)
+    atol = _stage_atol(rtol, vscale, phys.dtau, phys.p)
+    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
+    bound = 1e3 * vscale + 10.0 * abs(u0)
+    status, _ = frozen_sweep(code, params, phys, u0, atol, W, N)
+    if status != CONVERGED:
+        return status, u0, math.nan, math.nan
+    fn = frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound)
+    if fn.status != CONVERGED:
+        return fn.status, fn.u0, math.nan, math.nan
+    shift = fn.g / fn.one_minus_M
+    _shift_onto_fixed_point(W, N, shift)
+    int_u = 0.0
+    int_pi = 0.0
+    for n in range(N):  # summed in order, as ``_radau5_solve._integrals``
+        int_u += W[INT_U, n]
+        int_pi += W[INT_P, n]
+    return CONVERGED, fn.u0 + shift, int_u, int_pi
 
 
 @njit(cache=True, error_model="numpy")
-def _transposed_stage_solve(J11, J12, J21, J22, det, r1, r2):
-    """l from J_n^T l = (r1, r2): returns (sigma = l1 + l2, q = A^T l)."""
-    l1 = (J22 * r1 - J21 * r2) / det
-    l2 = (-J12 * r1 + J11 * r2) / det
-    return (l1 + l2, (5.0 / 12.0) * l1 + 0.75 * l2, (-1.0 / 12.0) * l1 + 0.25 * l2)
-
-
-@njit(cache=True, error_model="numpy")
-def _adjoint(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, stages, stage_kinematics,
+def _adjoint(code, params, nodes, N, kappa, mu_n, mu_s, p, dtau, stages, stage_kinematics,
              grad):
-    """Gradients of the period integrals from the converged stages (and phi, dphi/dtau,
-    sin phi, cos phi there: ``_forward``'s).
+    """Gradients of the period integrals from the converged stages (3N,) and phi, dphi/dtau,
+    sin phi, cos phi there (4, 3N) (``_forward``'s); see the module docstring.
 
     ``grad`` has shape (2, n_par + 2): rows I_u and I_Pi; columns the family
     parameters, then kappa, then delta_tau (each held independent of the others).
     Returns 1 - M; the period integrals come from the forward solve (``_forward``).
     """
-    a11, a12, a21, a22 = 5.0 / 12.0, -1.0 / 12.0, 0.75, 0.25
-    b1, b2 = 0.75, 0.25
     n_par = grad.shape[1] - 2
-    jac = np.empty((N, 4))      # J11, J12, J21, J22
-    sens = np.empty((N, 2))     # J^-1 1 = (dU1/du_n, dU2/du_n)
-    part = np.empty((N, 2, 10))  # force_partials at the two stages
+    jac = np.empty((N, 9))       # J_n = I - h kappa A diag(F_u), row-major
+    sens = np.empty((N, 3))      # s_n = J_n^-1 1 = dU_i/du_n
+    part = np.empty((N, 3, 10))  # force_partials at the three stages
     log_m = 0.0
     sign_m = 1.0
     phis, oms, sins, coss = (stage_kinematics[0], stage_kinematics[1], stage_kinematics[2],
                              stage_kinematics[3])
     for n in range(N):
-        h = grid[n + 1] - grid[n]
-        for j in range(2):
-            i = 2 * n + j
+        hk = (nodes[n + 1] - nodes[n]) * kappa
+        for j in range(3):
+            i = 3 * n + j
             force_partials_into(stages[i], sins[i], coss[i], phis[i], oms[i], mu_n, mu_s, p,
                                 dtau, part[n, j])
         # F_u of force_partials is the closed-form slope of the forward residual
-        hd1 = h * kappa * part[n, 0, 1]
-        hd2 = h * kappa * part[n, 1, 1]
-        J11, J12, J21, J22, det = stage_jacobian(hd1, hd2)
-        jac[n, 0], jac[n, 1], jac[n, 2], jac[n, 3] = J11, J12, J21, J22
-        sens[n, 0] = (J22 - J12) / det
-        sens[n, 1] = (J11 - J21) / det
-        v1 = a11 * hd1 + a12 * hd2
-        v2 = a21 * hd1 + a22 * hd2
-        mm1 = (-J21 * v1 + J11 * v2) / det  # m_n - 1 without cancellation
-        log_m, sign_m = monodromy_factor(log_m, sign_m, mm1)
+        z1 = hk * part[n, 0, 1]
+        z2 = hk * part[n, 1, 1]
+        z3 = hk * part[n, 2, 1]
+        J = stage_matrix(hk, part[n, 0, 1], part[n, 1, 1], part[n, 2, 1])
+        for k in range(9):
+            jac[n, k] = J[k]
+        # s - 1 = J^-1 (h kappa A diag(F_u) 1): m_n - 1 without cancellation
+        e1, e2, e3 = solve3(J, A11 * z1 + A12 * z2 + A13 * z3, A21 * z1 + A22 * z2 + A23 * z3,
+                            A31 * z1 + A32 * z2 + A33 * z3)
+        sens[n, 0] = 1.0 + e1
+        sens[n, 1] = 1.0 + e2
+        sens[n, 2] = 1.0 + e3
+        log_m, sign_m = monodromy_factor(log_m, sign_m, e3)
     one_minus_M = one_minus_monodromy(log_m, sign_m)
 
-    # sigma_0 = A_0 / (1 - M), A_n = c_n + m_n A_{n+1}, A_N = 0, for both functionals: the
-    # right-hand side g_n of step n is h (b1, b2) for I_u and h (b1 Pi_u1, b2 Pi_u2) for I_Pi
+    # sigma_0 = S_0 / (1 - M), S_n = c_n + m_n S_{n+1}, S_N = 0, for both functionals: the
+    # right-hand side g_n of step n is h b for I_u and h b diag(Pi_u) for I_Pi
     sigma_u = 0.0
     sigma_p = 0.0
     for n in range(N - 1, -1, -1):
-        h = grid[n + 1] - grid[n]
-        s1, s2 = sens[n, 0], sens[n, 1]
-        sigma_u = h * (s1 * b1 + s2 * b2) + s2 * sigma_u
-        sigma_p = h * (s1 * b1 * part[n, 0, 6] + s2 * b2 * part[n, 1, 6]) + s2 * sigma_p
+        h = nodes[n + 1] - nodes[n]
+        s1, s2, s3 = sens[n, 0], sens[n, 1], sens[n, 2]
+        sigma_u = h * (A31 * s1 + A32 * s2 + A33 * s3) + s3 * sigma_u
+        sigma_p = h * (A31 * s1 * part[n, 0, 6] + A32 * s2 * part[n, 1, 6]
+                       + A33 * s3 * part[n, 2, 6]) + s3 * sigma_p
     sigma_u /= one_minus_M
     sigma_p /= one_minus_M
 
     for k in range(grad.shape[1]):
         grad[0, k] = 0.0
         grad[1, k] = 0.0
-    dphi1 = np.empty(n_par)
-    dom1 = np.empty(n_par)
-    dphi2 = np.empty(n_par)
-    dom2 = np.empty(n_par)
+    dphi = np.empty((3, n_par))
+    dom = np.empty((3, n_par))
     dh = np.empty(n_par)
+    coef = np.empty((2, 3, 2))  # (functional, stage, d/dphi or d/domega)
+    h_fixed = np.empty(2)  # dI/dh at fixed stages, per functional
     moving = code == POWER_LAW  # only the power law's steps move with a parameter (tau0)
     for n in range(N - 1, -1, -1):
-        h = grid[n + 1] - grid[n]
+        t0 = nodes[n]
+        h = nodes[n + 1] - t0
         hk = h * kappa
-        mid = grid[n] + 0.5 * h
-        angle_partials(code, params, grid[n] + h / 3.0, mid, dphi1, dom1)
-        angle_partials(code, params, grid[n + 1], mid, dphi2, dom2)
-        J11, J12, J21, J22 = jac[n, 0], jac[n, 1], jac[n, 2], jac[n, 3]
-        det = J11 * J22 - J12 * J21
+        mid = t0 + 0.5 * h
+        angle_partials(code, params, t0 + C1 * h, mid, dphi[0], dom[0])
+        angle_partials(code, params, t0 + C2 * h, mid, dphi[1], dom[1])
+        angle_partials(code, params, t0 + h, mid, dphi[2], dom[2])
+        J = jac[n]
+        JT = (J[0], J[3], J[6], J[1], J[4], J[7], J[2], J[5], J[8])
         P1 = part[n, 0]
         P2 = part[n, 1]
-        # l_n from J_n^T l_n = g_n + e_2 sigma_{n+1}; q = A^T l; then
+        P3 = part[n, 2]
+        # l_n from J_n^T l_n = g_n + e_3 sigma_{n+1}; q = A^T l; then
         # dI/dtheta = dI/dtheta|_x + d(h kappa)/dtheta (q.F) + h kappa sum_j q_j dF_j/dtheta,
         # collected as coefficients of dphi_j, domega_j and dh for the parameter loop
-        sigma_u, q1, q2 = _transposed_stage_solve(J11, J12, J21, J22, det, h * b1,
-                                                  h * b2 + sigma_u)
-        qF = q1 * P1[0] + q2 * P2[0]
-        h_u = b1 * stages[2 * n] + b2 * stages[2 * n + 1] + kappa * qF
-        phi1_u, om1_u = hk * q1 * P1[2], hk * q1 * P1[3]
-        phi2_u, om2_u = hk * q2 * P2[2], hk * q2 * P2[3]
-        grad[0, n_par] += h * qF
-        grad[0, n_par + 1] += hk * (q1 * P1[4] + q2 * P2[4])
-
-        sigma_p, q1, q2 = _transposed_stage_solve(J11, J12, J21, J22, det, h * b1 * P1[6],
-                                                  h * b2 * P2[6] + sigma_p)
-        qF = q1 * P1[0] + q2 * P2[0]
-        h_p = b1 * P1[5] + b2 * P2[5] + kappa * qF
-        phi1_p, om1_p = hk * q1 * P1[2] + h * b1 * P1[7], hk * q1 * P1[3] + h * b1 * P1[8]
-        phi2_p, om2_p = hk * q2 * P2[2] + h * b2 * P2[7], hk * q2 * P2[3] + h * b2 * P2[8]
-        grad[1, n_par] += h * qF
-        grad[1, n_par + 1] += hk * (q1 * P1[4] + q2 * P2[4]) + h * (b1 * P1[9] + b2 * P2[9])
-
-        for k in range(n_par):
-            grad[0, k] += phi1_u * dphi1[k] + om1_u * dom1[k] + phi2_u * dphi2[k] + om2_u * dom2[k]
-            grad[1, k] += phi1_p * dphi1[k] + om1_p * dom1[k] + phi2_p * dphi2[k] + om2_p * dom2[k]
+        for f in range(2):
+            if f == 0:
+                r1, r2, r3 = h * A31, h * A32, h * A33 + sigma_u
+            else:
+                r1, r2, r3 = h * A31 * P1[6], h * A32 * P2[6], h * A33 * P3[6] + sigma_p
+            l1, l2, l3 = solve3(JT, r1, r2, r3)
+            if f == 0:
+                sigma_u = l1 + l2 + l3
+            else:
+                sigma_p = l1 + l2 + l3
+            q1 = A11 * l1 + A21 * l2 + A31 * l3
+            q2 = A12 * l1 + A22 * l2 + A32 * l3
+            q3 = A13 * l1 + A23 * l2 + A33 * l3
+            qF = q1 * P1[0] + q2 * P2[0] + q3 * P3[0]
+            grad[f, n_par] += h * qF
+            grad[f, n_par + 1] += hk * (q1 * P1[4] + q2 * P2[4] + q3 * P3[4])
+            coef[f, 0, 0], coef[f, 0, 1] = hk * q1 * P1[2], hk * q1 * P1[3]
+            coef[f, 1, 0], coef[f, 1, 1] = hk * q2 * P2[2], hk * q2 * P2[3]
+            coef[f, 2, 0], coef[f, 2, 1] = hk * q3 * P3[2], hk * q3 * P3[3]
+            if f == 0:
+                h_fixed[0] = (A31 * stages[3 * n] + A32 * stages[3 * n + 1]
+                              + A33 * stages[3 * n + 2] + kappa * qF)
+            else:
+                # I_Pi depends on the parameters at fixed stages through Pi itself
+                h_fixed[1] = A31 * P1[5] + A32 * P2[5] + A33 * P3[5] + kappa * qF
+                grad[1, n_par + 1] += h * (A31 * P1[9] + A32 * P2[9] + A33 * P3[9])
+                coef[1, 0, 0] += h * A31 * P1[7]
+                coef[1, 0, 1] += h * A31 * P1[8]
+                coef[1, 1, 0] += h * A32 * P2[7]
+                coef[1, 1, 1] += h * A32 * P2[8]
+                coef[1, 2, 0] += h * A33 * P3[7]
+                coef[1, 2, 1] += h * A33 * P3[8]
+        for f in range(2):
+            for k in range(n_par):
+                acc = 0.0
+                for j in range(3):
+                    acc += coef[f, j, 0] * dphi[j, k] + coef[f, j, 1] * dom[j, k]
+                grad[f, k] += acc
         if moving:
             step_length_partials(code, params, h, mid, dh)
             for k in range(n_par):
-                grad[0, k] += h_u * dh[k]
-                grad[1, k] += h_p * dh[k]
+                grad[0, k] += h_fixed[0] * dh[k]
+                grad[1, k] += h_fixed[1] * dh[k]
     return one_minus_M
 
 
@@ -588,15 +704,20 @@ class FixedGrid:
         return self.closing.size - 1 + max(self.opening.size - 1, 0)
 
 
+#: the finest grid ``adaptive_grid`` allows by default (steps per period)
+MAX_STEPS_PER_PERIOD = 2 ** 17
+
+
 def adaptive_grid(kinematics, physics, *, rtol=1e-6, max_steps_per_period=None):
-    """The final grid of the order-3 engine (``_solve.solve_order3``) at ``rtol`` (one point)
-    as a ``FixedGrid``: the grid of the discretisation this module differentiates."""
-    from ._solve import solve_order3
-    res = solve_order3(kinematics, physics, rtol=rtol, return_series=True,
-                       max_steps_per_period=max_steps_per_period)
-    if not res.converged[0]:
-        raise RuntimeError(f"adaptive solve did not converge (status {res.status[0]})")
-    return FixedGrid.from_nodes(kinematics, np.append(res.tau[0], 1.0))
+    """The step sequence of the order-5 engine's converged solve at ``rtol`` (one point) as a
+    ``FixedGrid``: its adaptive steps, with the corners of phi, the other kinematic stops and
+    the state events as step ends (``_radau5_solve.solve(..., return_series=True)``)."""
+    max_steps = MAX_STEPS_PER_PERIOD if max_steps_per_period is None else int(max_steps_per_period)
+    out = _radau5_solve.solve(kinematics, physics, rtol, max_steps, True)
+    status = int(out["status"][0])
+    if status != CONVERGED:
+        raise RuntimeError(f"adaptive solve did not converge (status {status})")
+    return FixedGrid.from_nodes(kinematics, np.append(out["series"][0][1], 1.0))
 
 
 @dataclass(frozen=True)
@@ -650,10 +771,12 @@ class DiscreteSolution:
     the adjoint sweep, so a line search can solve at trial points and differentiate only
     the one it accepts.
 
-    stages : ndarray, shape (2 N,)
-        Radau stages (U1_0, U2_0, U1_1, ...) of the converged sweep.
-    stage_kinematics : ndarray, shape (4, 2 N)
-        phi, dphi/dtau, sin phi and cos phi at the stage times.
+    stages : ndarray, shape (3 N,)
+        Radau IIA stages (U1_0, U2_0, U3_0, U1_1, ...) of the converged sweep [link lengths
+        per period]; U3_n = u_{n+1}.
+    stage_kinematics : ndarray, shape (4, 3 N)
+        phi [rad], dphi/dtau [rad per period], sin phi and cos phi at the stage times
+        tau_n + c_i h_n.
     int_u, int_pi : float
         The Radau-weighted period integrals I_u, I_Pi.
     status : int
@@ -689,12 +812,13 @@ def discrete_solution(kinematics, physics, grid, *, rtol=1e-13, u0=None):
     N = nodes.size - 1
     if u0 is None:
         u0 = float(fast_limit_velocity(kinematics, physics)[0])
-    stages = np.empty(2 * N)
-    stage_kinematics = np.empty((4, 2 * N))
-    status, u0, int_u, int_pi = _forward(
-        code, params, nodes, N, float(physics.inertia_factor[0]), float(physics.mu_n[0]),
-        float(physics.mu_s[0]), float(physics.p[0]), float(physics.delta_tau[0]), u0, 0.0, rtol,
-        stages, stage_kinematics)
+    phys = PointPhysics(float(physics.inertia_factor[0]), float(physics.mu_n[0]),
+                        float(physics.mu_s[0]), float(physics.p[0]), float(physics.delta_tau[0]))
+    W = new_workspace(N)
+    stage_kinematics = np.empty((4, 3 * N))
+    status, u0, int_u, int_pi = _forward(code, params, nodes, N, phys, float(u0), float(rtol), W,
+                                         stage_kinematics)
+    stages = np.ascontiguousarray(W[STAGE:STAGE + 3, :N].T).reshape(-1)
     return DiscreteSolution(kinematics, physics, nodes, stages, stage_kinematics, int_u, int_pi,
                             int(status), u0)
 

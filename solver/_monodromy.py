@@ -2,8 +2,8 @@
 log and sign, without cancellation at M ~ 1), the node weights of int u (the discrete
 adjoint of the shooting) and the output arrays of a batched solve.
 
-Moved here from ``_periodic`` so that the explicit march (``_march``) does not depend on
-the implicit engine; ``_periodic`` re-exports them under their old names.
+Shared by the engine's shooting (``_radau5_solve``), its adjoint (``_gradient``) and the
+explicit march (``_march``), which thus do not depend on each other.
 """
 from __future__ import annotations
 

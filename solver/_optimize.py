@@ -12,9 +12,11 @@ evaluation and the gradient is the exact one along it (``speed_at_power``).
 Every evaluation is the discretised problem on a fixed grid (``FixedGrid``),
 so f is smooth and its gradient (``objective_gradient``, adjoint method) is exact
 for it.  Smooth but stiff: with Coulomb friction its curvature still changes
-visibly over parameter steps of 1e-7 (``HESSIAN_STEP``).  The grid is the adaptive grid of ``solve_periodic`` at
-the start; after convergence it is re-adapted at the optimum and the search is
-repeated from there while the grid changes (``grid_rounds``).
+visibly over parameter steps of 1e-7 (``HESSIAN_STEP``).  The discretisation is the
+order-5 engine's 3-stage Radau IIA on the step sequence of its converged solve at the start
+(``adaptive_grid``: corners of phi and state events are step ends); after convergence it is
+re-adapted at the optimum and the search is repeated from there while the grid changes
+(``grid_rounds``).
 
 Iteration (explicit state: ``initial_state``, ``optimizer_step``, ``_terminate``).
 - BFGS on the free variables (those not held at a bound by an outward gradient),
@@ -484,9 +486,9 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
     max_iterations : int
         Accepted steps per grid round.
     grid : FixedGrid or int, optional
-        A fixed grid (no re-adaptation), or a number of uniform steps; default: the adaptive
-        grid of ``solve_periodic`` at ``grid_rtol``, re-adapted at the optimum up to
-        ``grid_rounds`` times.
+        A fixed grid (no re-adaptation), or a number of uniform steps; default: the step
+        sequence of the order-5 engine's solve at ``grid_rtol`` (``adaptive_grid``),
+        re-adapted at the optimum up to ``grid_rounds`` times.
     max_step : float
         Longest step in the variables (the damping of the line search).
     newton_switch : float

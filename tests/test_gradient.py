@@ -1,9 +1,10 @@
 """Adjoint gradients of the discretised problem against central differences of the same problem.
 
-The differences are taken on the same FixedGrid (which moves with tau0 for the power
-law), with nonlinear tolerances at rounding level, along random directions, and
-Richardson-extrapolated (steps eps and eps/2) so that their own error (~1e-10) is far
-below the asserted 1e-6.
+The discretisation is the order-5 engine's 3-stage Radau IIA on a fixed grid (uniform, or
+the step sequence of the engine's converged solve).  The differences are taken on the same
+FixedGrid (which moves with tau0 for the power law), with nonlinear tolerances at rounding
+level, along random directions, and Richardson-extrapolated (steps eps and eps/2) so that
+their own error (~1e-10) is far below the asserted 1e-6.
 """
 import dataclasses
 import math
@@ -13,6 +14,8 @@ import numpy as np
 import pytest
 
 import solver
+from solver import _radau5_solve
+from solver._radau5 import RADAU5_C, PointPhysics
 from solver._gradient import (POWER_ROOT_RTOL, FixedGrid, adaptive_grid, discrete_objective,
                               discrete_solution,
                               family_parameters, force_partials, force_partials_quadrature,
@@ -232,21 +235,25 @@ def test_gradient_matches_central_differences(case, p):
     kinematics = make()
     physics = solver.Physics.from_scaled(2.0 ** ratio_log2, 2.0, p=p)
     grid = FixedGrid.uniform(kinematics, 64)
+    # the clapping case sticks at p = 0 (delta_tau 2e-5): its curvature changes over
+    # parameter steps of 1e-4 (the Richardson differences there were 3e-5 off in A3, exact
+    # at 1e-5), so its differences take the smaller step
+    eps = 1e-5 if (case, p) == ("fourier_clapping", 0.0) else 1e-4
     for seed in range(2):
-        adjoint, fd = directional_check(kinematics, physics, grid, seed=seed)
+        adjoint, fd = directional_check(kinematics, physics, grid, seed=seed, eps=eps)
         assert abs(adjoint - fd) <= 1e-6 * abs(fd), (adjoint, fd)
 
 
 def test_gradient_sticking_case_on_the_adaptive_grid():
     kinematics, physics = _sticking(), solver.Physics.from_scaled(2.0 ** -8, 2.0)
-    grid = adaptive_grid(kinematics, physics, rtol=1e-5)  # nonuniform fractions in both phases
-    # it does stick: the friction rate h T^2 dF/du is ~1e6 over a long part of the period
-    tau = grid.nodes(kinematics)[:-1]
-    res = solver.solve_periodic(kinematics, physics, rtol=1e-5, return_series=True)
-    phi, omega = kinematics.angle(tau)[0], kinematics.angle_rate(tau)[0]
-    rate = np.array([solver.force_and_slope(u, a, b, physics.mu_n[0], physics.mu_s[0], 0.0,
+    # the engine's step sequence: nonuniform fractions in both phases, state events as nodes
+    grid = adaptive_grid(kinematics, physics, rtol=1e-5)
+    # it does stick: the friction rate T^2 dF/du is ~1e6 over a long part of the period
+    sol = discrete_solution(kinematics, physics, grid)
+    u, phi, omega = sol.stages[2::3], sol.stage_kinematics[0, 2::3], sol.stage_kinematics[1, 2::3]
+    rate = np.array([solver.force_and_slope(a, b, c, physics.mu_n[0], physics.mu_s[0], 0.0,
                                             physics.delta_tau[0])[1]
-                     for u, a, b in zip(res.u[0], phi, omega)]) * physics.inertia_factor[0]
+                     for a, b, c in zip(u, phi, omega)]) * physics.inertia_factor[0]
     h = np.diff(grid.nodes(kinematics))
     assert h[np.abs(rate) > 1e5].sum() > 0.2
     for seed in range(3):
@@ -278,14 +285,34 @@ def test_fixed_grid_moves_with_duty_cycle():
     assert new.size == nodes.size and 0.4 in new
 
 
-def test_discrete_objective_matches_the_solver_on_one_grid():
-    # the same discretisation as solve_fixed_grid, so the gradient is of the solver's numbers
-    kinematics, physics = _clapping(), solver.Physics.from_scaled(2.0 ** -3, 2.0)
-    iu, ip, st = solver.solve_fixed_grid(kinematics, physics, 64, rtol=1e-13)
-    res = objective_gradient(kinematics, physics, FixedGrid.uniform(kinematics, 64))
-    assert st[0] == 0
-    np.testing.assert_allclose(res.U, iu[0] / physics.period[0], rtol=1e-11)
-    np.testing.assert_allclose(res.P, ip[0] * physics.period[0] ** -1.0, rtol=1e-11)
+def _engine_fixed_grid(kinematics, physics, nodes, rtol=1e-13):
+    """The order-5 engine's own fixed-grid solve (``fixed_grid_point``) on ``nodes``."""
+    code, params = kinematics.kernel_encoding()
+    phys = PointPhysics(physics.inertia_factor[0], physics.mu_n[0], physics.mu_s[0],
+                        physics.p[0], physics.delta_tau[0])
+    return _radau5_solve.fixed_grid_point(code, params[0], nodes, phys, rtol,
+                                          solver.kinematic_speed(kinematics)[0],
+                                          solver.fast_limit_velocity(kinematics, physics)[0])
+
+
+@pytest.mark.parametrize("case", ["fourier_clapping", "power_law"])
+def test_discrete_objective_matches_the_solver_on_one_grid(case):
+    # the same discretisation as the engine's fixed-grid solve, so the gradient is of the
+    # solver's numbers: on a uniform grid and on the engine's own adaptive step sequence
+    make, ratio_log2 = GRADIENT_CASES[case]
+    kinematics, physics = make(), solver.Physics.from_scaled(2.0 ** ratio_log2, 2.0)
+    for grid in (FixedGrid.uniform(kinematics, 64), adaptive_grid(kinematics, physics)):
+        nodes = grid.nodes(kinematics)
+        iu, ip, st = _engine_fixed_grid(kinematics, physics, nodes)
+        res = objective_gradient(kinematics, physics, grid)
+        assert st == 0 and res.status == 0
+        np.testing.assert_allclose(res.U, iu / physics.period[0], rtol=1e-12)
+        np.testing.assert_allclose(res.P, ip * physics.period[0] ** -1.0, rtol=1e-12)
+    # ... and the adaptive grid is the engine's converged solve: its integrals agree with it
+    # to its nonlinear tolerances (1e-3 rtol of V)
+    out = _radau5_solve.solve(kinematics, physics, 1e-6, 2 ** 17, False)
+    assert out["n_tau"][0] == grid.n_steps
+    np.testing.assert_allclose(res.U * physics.period[0], out["int_u"][0], rtol=1e-7)
 
 
 def test_with_period_checks_the_period_and_keeps_the_rest():
@@ -311,7 +338,8 @@ def test_gradient_from_a_stored_solution_uses_its_stage_kinematics():
     stored = discrete_solution(kinematics, physics, grid)
     nodes = grid.nodes(kinematics)
     h = np.diff(nodes)
-    t = np.stack([nodes[:-1] + h / 3.0, nodes[1:]], axis=1).ravel()
+    t = (nodes[:-1, None] + RADAU5_C[None, :] * h[:, None]).ravel()  # the 3 stages of each step
+    assert stored.stages.shape == (3 * 128,) and stored.stage_kinematics.shape == (4, 3 * 128)
     np.testing.assert_allclose(stored.stage_kinematics[0], 1.2 + 0.4 * np.cos(2 * np.pi * t),
                                rtol=0, atol=1e-14)
     np.testing.assert_allclose(stored.stage_kinematics[1],
@@ -359,7 +387,9 @@ def test_speed_at_power_gradient_matches_central_differences(case, p):
     grid = FixedGrid.uniform(kinematics, 64)
     # a target 30% above the start's power: the root has to move the period
     power = 1.3 * objective_gradient(kinematics, physics, grid).P
-    adjoint, fd, res = constrained_check(kinematics, physics, grid, power, seed=1)
+    # (the clapping case sticks at p = 0: see test_gradient_matches_central_differences)
+    eps = 1e-5 if (case, p) == ("fourier_clapping", 0.0) else 1e-4
+    adjoint, fd, res = constrained_check(kinematics, physics, grid, power, seed=1, eps=eps)
     assert abs(adjoint - fd) <= 1e-6 * abs(fd), (adjoint, fd)
     assert abs(res.at.P / power - 1.0) <= 10 * POWER_ROOT_RTOL
     assert res.period != physics.period[0] and res.root_iterations >= 1
