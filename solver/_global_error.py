@@ -9,7 +9,7 @@ to max(|int u|, 1e-3 V), P relative).  A step whose share is above its length ti
 tolerance asks for refinement: its ceiling for the next adaptive sweep is its length times
 share^(-1/ERROR_ORDER) (``refinement_ceiling``).
 
-The node weights are the discrete adjoint of the shooting (``_periodic.node_weights``): for
+The node weights are the discrete adjoint of the shooting: for
 int u, lambda_n, the change of int u of the periodic solution when u jumps by 1 at node n,
 is q_n + m_n lambda_{n+1} with q_n = d(int_step n u)/du_n and m_n = du_{n+1}/du_n, closed
 around the period by 1 / (1 - M); for int Pi the same with q_n = d(int_step n Pi)/du_n.
@@ -38,7 +38,8 @@ from ._sweep import (ACCEPT_STEP, ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q
 @njit(cache=True, error_model="numpy")
 def node_weights(W, N, one_minus_M):
     """lambda (int u) and mu (int Pi) at the N nodes into W[LAMBDA], W[MU] (node N is node
-    0), by the backward recursion of ``_periodic.node_weights``."""
+    0), by the backward recursion lambda_n = q_n + m_n lambda_{n+1}, started from lambda_0
+    summed over the period and divided by 1 - M."""
     for row, q_row in ((LAMBDA, Q_U), (MU, Q_P)):
         total = 0.0
         carried = 1.0

@@ -34,7 +34,7 @@ where g_n = h_n b (I_u) or h_n b diag(Pi_u) (I_Pi), s_n = J_n^-1 1 = dU_n/du_n,
 c_n = s_n . g_n and m_n = (s_n)_3 = du_{n+1}/du_n, the step derivative whose product over
 the period is the monodromy M.  So the adjoint is one backward sweep:
 sigma_0 = (sum_n (prod_{k<n} m_k) c_n) / (1 - M), with m_n - 1 = (J_n^-1 h_n kappa A F_u)_3
-formed without cancellation and 1 - M accumulated as -expm1(sum log m_n) (``_monodromy``),
+formed without cancellation and 1 - M accumulated as -expm1(sum log m_n) (``_shooting``),
 then l_n and sigma_n step by step backward by 3 x 3 transposed solves (``_radau5.solve3``,
 pivoted: stiff stages make J_n's columns differ by ~1e10; |m_n| <~ 1, so the backward
 recursion is stable; it is O(N), both functionals in the same sweep).  With q_n = A^T l_n,
@@ -105,7 +105,7 @@ from ._force import E_FLOOR, link_moments, link_setup_sc, radial_power
 from ._kinematics import FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, period_grid
 from ._limits import fast_limit_velocity
 from ._kinematics import angle_and_rate
-from ._monodromy import monodromy_factor, one_minus_monodromy
+from ._shooting import monodromy_factor, one_minus_monodromy
 from ._radau5 import (A11, A12, A13, A21, A22, A23, A31, A32, A33, C1, C2, PointPhysics, solve3,
                       stage_matrix)
 from ._radau5_solve import BAND_SHARE, frozen_newton

@@ -21,7 +21,6 @@ from numba import njit, prange
 
 from ._force import force_and_slope, power_density
 from ._kinematics import angle_and_rate
-from ._monodromy import batch_outputs, monodromy_factor, node_weights, one_minus_monodromy
 from ._status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
 
 #: Heun's method (explicit trapezoidal RK2).
@@ -210,51 +209,3 @@ def march_level(code, params, grids, kappa, mu_n, mu_s, p, dtau, u_init, vscale,
                 stiffness[i] = max(stiffness[i], band_stiffness(phi, h, kappa[i], mu_n[i],
                                                                 mu_s[i], p[i], dtau[i]))
     return int_u, int_pi, u0, status, periods, evaluations, chatter_mass, stiffness, nodes_out
-
-
-# ---- the old implicit engine's refinement loop (``_solve._Refinement``) calls the march
-# through ``march_points``: its pseudo-stages and node weights feed that loop's event and
-# turning-point checks.  Delete both with that loop.
-
-@njit(cache=True, error_model="numpy")
-def _check_inputs(nodes, ms, hs, N, stages, weights, step_weights):
-    """Pseudo-stages (u_n + (u_{n+1} - u_n) / 3, u_{n+1}), on which the old checks'
-    quadratic through theta = 0, 1/3, 1 is the linear interpolant of the march, and node
-    and step weights (``_monodromy.node_weights``) of a marched period: the trapezoidal
-    integral h_n (u_n + u_{n+1}) / 2 has d/du_n = h_n (1 + m_n) / 2."""
-    log_m = 0.0
-    sign_m = 1.0
-    for n in range(N):
-        stages[2 * n] = nodes[n] + (nodes[n + 1] - nodes[n]) / 3.0
-        stages[2 * n + 1] = nodes[n + 1]
-        weights[n] = 0.5 * hs[n] * (1.0 + ms[n])
-        step_weights[n] = weights[n]
-        log_m, sign_m = monodromy_factor(log_m, sign_m, ms[n] - 1.0)
-    node_weights(weights[:N], ms[:N], one_minus_monodromy(log_m, sign_m))
-
-
-@njit(cache=True, parallel=True, error_model="numpy")
-def march_points(code, params, grids, n_steps, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
-                 max_steps):
-    """Batched ``_march_point`` for the old refinement loop; ``grids`` row i valid up to
-    ``n_steps[i]`` steps."""
-    n, m = grids.shape
-    int_u, int_pi, u0_out, status, periods, _, step_u, step_pi, step_m, nodes = \
-        batch_outputs(n, m)
-    stiff = np.zeros((n, m - 1), dtype=np.bool_)
-    stages = np.full((n, 2 * (m - 1)), np.nan)
-    weights = np.full((n, m - 1), np.nan)
-    step_weights = np.full((n, m - 1), np.nan)
-    for i in prange(n):
-        N = n_steps[i]
-        row_nodes = np.empty(N + 1)
-        int_u[i], int_pi[i], u0_out[i], status[i], periods[i], _ = _march_point(
-            code, params[i], grids[i], N, kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
-            u_init[i], vscale[i], rtol, max_steps, row_nodes, step_m[i], step_u[i],
-            step_pi[i], stiff[i])
-        if status[i] == CONVERGED:
-            nodes[i, :N] = row_nodes[:N]
-            hs = np.diff(grids[i, :N + 1])
-            _check_inputs(row_nodes, step_m[i], hs, N, stages[i], weights[i], step_weights[i])
-    return (int_u, int_pi, u0_out, status, periods, step_u, step_pi, step_m, nodes, stiff,
-            stages, weights, step_weights)

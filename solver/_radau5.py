@@ -27,7 +27,7 @@ an embedded method of order 3, filtered by (I - h gamma0 J0)^-1 so that it stays
 where the problem is stiff; applied to the augmented state it also estimates the local
 errors of the two quadratures (``embedded_error``).
 
-The stage Newton keeps the old engine's safeguards (``_periodic.radau_step``), each measured
+The stage Newton keeps the former order-3 engine's safeguards, each measured
 there: a line search on the residual, a cut of sign flips where F has an infinite slope in
 u (0 < p < 1 with delta = 0), and no convergence claimed from a line search that bottomed
 out.
@@ -41,7 +41,6 @@ import numpy as np
 from numba import njit
 
 from ._force import force_slope_power_sc
-from ._periodic import flip_cut
 
 _S6 = math.sqrt(6.0)
 #: Radau IIA, 3 stages (Butcher tableau): nodes, matrix and weights (= last row).
@@ -156,6 +155,17 @@ class StepError(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
+def flip_cut(flipped, U, x):
+    """The factor (<= 1) a Newton step x of stage value U is cut by: where the previous
+    iterate flipped U's sign (``flipped``) and x flips it again keeping more than half of
+    |U|, the step is cut to land halfway to zero (where F has an infinite slope, 0 < p < 1
+    with delta = 0, the plain iteration oscillates between the two signs)."""
+    if flipped and U * (U + x) < 0.0 and abs(U + x) > 0.5 * abs(U):
+        return -0.5 * U / x
+    return 1.0
+
+
+@njit(cache=True, error_model="numpy")
 def solve3(J, r0, r1, r2):
     """x with J x = r for a 3 x 3 ``J`` (tuple of 9, row-major), Gaussian elimination with
     partial pivoting (the stiff stages make the rows differ by up to ~1e10 in size)."""
@@ -248,7 +258,7 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.n
     rounds = 1
     previous = math.inf
     flipped1 = flipped2 = flipped3 = False
-    # the sign-flip cut only where F has an infinite slope at u = 0 (see _periodic.radau_step)
+    # the sign-flip cut only where F has an infinite slope at u = 0 (``flip_cut``)
     singular = 0.0 < p < 1.0 and dtau == 0.0
     observed = math.nan
     first_size = math.nan

@@ -13,7 +13,7 @@ threads by ``solve_points``):
    solution's node weights, then Newton on u(0) by frozen-grid sweeps (``frozen_sweep``:
    on one step sequence the discrete period map is smooth and its monodromy exact) until
    the fixed point is within 1e-3 rtol V (the converged sweep is then shifted to it to first
-   order along the stage sensitivities, as in ``_periodic``).  Where the frozen steps do not
+   order along the stage sensitivities).  Where the frozen steps do not
    carry Newton there (a stage solve fails on them, or MAX_FROZEN_SWEEPS run out), the next
    round starts here again with an adaptive sweep, which places its steps anew.
 4. **Estimate.** Every step's local error from its defect (``_sweep.estimate_sweep``), or,
@@ -38,7 +38,7 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from ._global_error import combine, local_error_estimate, node_weights, refinement_ceiling
-from ._periodic import (bracketed_newton_update, monodromy_factor, one_minus_monodromy,
+from ._shooting import (bracketed_newton_update, monodromy_factor, one_minus_monodromy,
                         stage_tolerance)
 from ._radau5 import ERROR_ORDER, PointPhysics
 from ._status import (CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED,
@@ -94,7 +94,7 @@ class PointSolution(NamedTuple):
 
 @njit(cache=True, error_model="numpy")
 def _stage_atol(rtol, scale, phys):
-    """The stage Newton's tolerance: ``_periodic.stage_tolerance`` of the scale, and for p = 0
+    """The stage Newton's tolerance: ``_shooting.stage_tolerance`` of the scale, and for p = 0
     at most BAND_SHARE delta_tau: where the body sticks F rises by O(mu) across a band of
     u ~delta_tau wide, and stages solved only to a tolerance wider than it land anywhere on
     the saturated force (measured: delta 1e-10, tolerance 4e-8 V, u chattering +-1e-6 around
@@ -120,7 +120,7 @@ def _largest_weight(model, scale_u, scale_p):
 @njit(cache=True, error_model="numpy")
 def _period_map(W, N, u0):
     """(g = u(1) - u(0), 1 - M) of a sweep: the shooting residual and one minus the
-    monodromy (``_periodic.one_minus_monodromy``)."""
+    monodromy (``_shooting.one_minus_monodromy``)."""
     log_m = 0.0
     sign_m = 1.0
     for n in range(N):

@@ -49,4 +49,4 @@ def status_reason(status, method="periodic"):
     """One line saying what ``status`` means, naming the engine (method) that gave it."""
     status = int(status)
     text = _ENGINE_REASONS.get(method, {}).get(status, STATUS_REASONS.get(status, "unknown"))
-    return f"{method}: {text}"
+    return f"{text} (method {method})"

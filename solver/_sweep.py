@@ -185,7 +185,7 @@ def start_values(code, params, t, side, u, phys):
 def solve_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.nan):
     """``radau5_step`` from the predicted stages (with the carried Newton ``rate`` and
     ``slope``); where its Newton fails, again from u_n, then from rest (a step into a stop
-    can defeat a prediction; see ``_periodic._radau_step_retrying``).  Returns
+    can defeat a prediction: the former engine measured it at a burst-and-coast corner).  Returns
     (StepSolution, iterations summed)."""
     sol = radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate, slope)
     its = sol.iterations

@@ -1,17 +1,18 @@
-"""Switching functions of the ``radau5`` engine: where F(u(tau), tau) is not smooth.
+"""Switching functions of the engine (``_radau5_solve``): where F(u(tau), tau) is not smooth.
 
 With the link velocity of ``_force`` (normal w(s) = a + b s, a = -S g, b = omega,
 tangential c = C g, g = u + omega S / 4, S = sin phi, C = cos phi) the force integrand has
 a kink where w = 0.  F(u(tau), tau) has a corner in tau (for p = 0 a jump of dF/dtau over a
-width ~ delta_tau) where (``_events`` docstring):
+width ~ delta_tau; a corner of the integrand at an end of the link is a corner of its
+integral) where:
 
 - the kink crosses the link's inner end, w(0) = a = 0: S = 0 or g = 0;
 - it crosses the outer end, w(1/2) = 0: ``outer_end_velocity`` = -S g + omega / 2 = 0;
 - the tangential velocity vanishes, c = 0: C = 0 or g = 0.
 
 And the solution itself changes fast where the links stop rotating, omega = 0 (a turning
-point of phi, ``_turning`` docstring): across a window ~ |u| / |phi''| the force changes by
-O(mu).  A step whose stages do not sample such a feature does not see it, nor does its
+point of phi): the whole body then slides one way and feels the full friction, so across a
+window ~ |u| / |phi''| the force changes by O(mu) (``_sweep.trap_ceiling``).  A step whose stages do not sample such a feature does not see it, nor does its
 embedded error estimate.  So every one of them is a step end (diffrax ``JumpStepWrapper``,
 DifferentialEquations.jl ``tstops``):
 
@@ -30,7 +31,6 @@ import math
 import numpy as np
 from numba import njit
 
-from ._events import illinois_update
 from ._force import force_slope_power_sc
 from ._kinematics import FOURIER, angle_and_rate, rate_slope
 from ._radau5 import dense_value
@@ -258,6 +258,22 @@ def _is_corner(t, ends, m):
         if ends[j] == t:
             return True
     return False
+
+
+@njit(cache=True, error_model="numpy")
+def illinois_update(a, b, fa, fb, c, fc, last):
+    """One bracket update of Illinois regula falsi: the new point c (value fc) replaces the
+    end of [a, b] on its side, and the other end's value is halved when the same end was kept
+    twice running (``last``: -1 when b was replaced, 1 when a was, 0 at the start).
+
+    Returns (a, b, fa, fb, last)."""
+    if fc * fa < 0.0:
+        if last == -1:
+            fa *= 0.5
+        return a, c, fa, fc, -1
+    if last == 1:
+        fb *= 0.5
+    return c, b, fc, fb, 1
 
 
 @njit(cache=True, error_model="numpy")

@@ -52,12 +52,14 @@ def test_fixed_grid_order_is_two(case):
 
 
 def test_richardson_error_rule():
-    """|d2| in the order-2 regime (a margin of 3 over |d2| / 3), the geometric tail at a
-    lower observed order, and max(|d1|, |d2|) where there is no asymptotic regime."""
-    d1 = np.array([4.0, 2.0, 1.6, -1.0, 40.0, np.nan])
-    d2 = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0])
-    np.testing.assert_allclose(_march_solve.richardson_error(d1, d2),
-                               [1.0, 1.0, 1.0 / 0.6, 1.0, 40.0, np.inf])
+    """|d2| max(1, 1 / (r2 - 1)) where two successive ratios show geometric convergence (a
+    margin of 3 over |d2| / 3 at order 2), else max(|d1|, |d2|): a single ratio, an erratic
+    one, or none yet."""
+    d0 = np.array([16.0, 4.0, 2.56, -4.0, 16.0, np.nan, 4.0])
+    d1 = np.array([4.0, 2.0, 1.6, 4.0, 40.0, 4.0, np.nan])
+    d2 = np.ones(7)
+    np.testing.assert_allclose(_march_solve.richardson_error(d0, d1, d2),
+                               [1.0, 1.0, 1.0 / 0.6, 4.0, 40.0, 4.0, np.inf])
 
 
 NON_STIFF = [c for c in AGREEMENT_CASES if not c.stiff]

@@ -153,7 +153,7 @@ def test_section_states_provenance_failures_and_errors(site):
     grid = _view(html, "scene-harmonic_grid")
     n_failed = len(range(0, 9 * 64 * 64, 997))
     assert f"<b>{n_failed:,} failures</b>" in grid
-    assert "finest grid reached before the error estimate fell below rtol" in grid
+    assert "its refinement rounds ran out before the error estimate fell below rtol" in grid
     # Axis labels in the paper's notation, powers of two on log2 axes.
     assert "μ<sub>n</sub>/μ<sub>s</sub>" in html and "(μ<sub>n</sub>μ<sub>s</sub>)<sup>1/4</sup> T" in html
     assert "2<sup>-4</sup>" in html and "λ/λ<sub>ub</sub>" in html and "A<sub>1</sub>/A<sub>0</sub>" in html
