@@ -438,7 +438,7 @@ def _start_chunks(scene: OptimaScene) -> tuple[int, ...]:
 
 
 def status_meanings() -> dict[str, str]:
-    from solver._optimize import STOP_REASONS
+    from solver.adjoint.optimize import STOP_REASONS
 
     reasons = {**STOP_REASONS, "error": "the optimiser raised (e.g. no periodic solution at the start)"}
     out = {str(NOT_COMPUTED): "not computed yet"}

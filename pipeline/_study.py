@@ -14,8 +14,8 @@ only; ``pipeline.kind`` names the study kind)::
     fixed_*                                            accuracy: (point, method, n_steps) fixed grids
     baseline_*                                         accuracy: (point, baseline_tol) scipy LSODA
 
-Errors are in the solver's own norm (``solver._solve``): for U, |U - U_ref| T / max(|U_ref| T,
-1e-3 V) (``solver.bench.relative_u_error``); for P, |P - P_ref| / |P_ref|; ``true_error`` is the
+Errors are in the solver's own norm (``solver.solve``): for U, |U - U_ref| T / max(|U_ref| T,
+1e-3 V) (``solver.tools.bench.relative_u_error``); for P, |P - P_ref| / |P_ref|; ``true_error`` is the
 larger, the quantity ``error_estimate`` claims to bound by rtol.
 """
 
@@ -128,7 +128,7 @@ def study_arrays(scene: StudyScene) -> dict[str, tuple[tuple[str, ...], np.dtype
         bl = ("point", "baseline_tol")
         out.update({
             "baseline_status": (bl, i8, NOT_COMPUTED, {
-                "long_name": "scipy LSODA baseline (solver.bench): 0 periodic reached, 1 failed or over the cap, "
+                "long_name": "scipy LSODA baseline (solver.tools.bench): 0 periodic reached, 1 failed or over the cap, "
                              "-2 not applicable (the baseline takes harmonic motions only)"}),
             "baseline_U": (bl, f8, nan, {"long_name": "U of the LSODA baseline"}),
             "baseline_P": (bl, f8, nan, {"long_name": "P of the LSODA baseline"}),
@@ -249,7 +249,7 @@ def create_study_skeleton(store: Path, scene: StudyScene, points_per_chunk: int)
 
 def solver_norm_errors(U, P, U_ref, P_ref, period, vscale):
     """(error of U, error of P) in the solver's norm (module docstring); NaN where U or P is NaN."""
-    from solver.bench import relative_u_error
+    from solver.tools.bench import relative_u_error
 
     with np.errstate(invalid="ignore", divide="ignore"):
         e_u = relative_u_error(np.asarray(U, float), np.asarray(U_ref, float), period, vscale)
@@ -312,8 +312,8 @@ def _reference(case, scene: StudyScene, vscale: float) -> dict:
 
 
 def _baseline(case, tol, cap, vscale):
-    """The scipy LSODA baseline of ``solver.bench`` (any family, phi from the solver's kernel)."""
-    from solver import bench
+    """The scipy LSODA baseline of ``solver.tools.bench`` (any family, phi from the solver's kernel)."""
+    from solver.tools import bench
 
     phys = case.physics()
     U, P, periods, seconds = bench.baseline_point(bench.family_angle(case.kinematics()), phys.mu_n[0],

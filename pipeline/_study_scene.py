@@ -5,7 +5,7 @@ physics each), solved by every method at every tolerance and compared with a fin
 
 * ``accuracy`` (work-precision): the points are the ``[[cases]]``; every method is also run on
   fixed grids (observed order) and harmonic cases also by the scipy LSODA baseline of
-  ``solver.bench``;
+  ``solver.tools.bench``;
 * ``stiffness``: the points are every ``[[motions]]`` entry crossed with every ``[[sweeps]]``
   entry (one parameter varied at a time from the ``[base]`` physics); a method that fails may
   be replaced by another method's converged answer (``fallback``, recorded per point).

@@ -1,7 +1,7 @@
 """Motions of an optimum: u(tau) from the solver, body snapshots with the force along the body,
 the body's path, and a Plotly animation of the body sliding over a few periods.
 
-Geometry (paper, section "Model"; ``solver/_force.py``).  Lengths are in body lengths L, time in
+Geometry (paper, section "Model"; ``solver/model/force.py``).  Lengths are in body lengths L, time in
 periods (tau = t/T).  The upper link, 0 <= s <= 1/2 from the apex, is at
 
     x(s) = x_cm + (s - 1/4) cos(phi),    y(s) = s sin(phi),

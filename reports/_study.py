@@ -278,7 +278,7 @@ def _accuracy_body(site, sd) -> list[str]:
     parts = [_timing_note(sd), site.guarded(f"{sd.name} reference", lambda: _reference_table(sd)),
              "<h4>Status of the adaptive solves</h4>", site.guarded(f"{sd.name} status", lambda: _status_table(sd))]
     if "baseline_tol" in sd.ds:
-        parts.append("<p class='note'>The scipy baseline is <code>solver.bench.baseline_point</code> (LSODA, "
+        parts.append("<p class='note'>The scipy baseline is <code>solver.tools.bench.baseline_point</code> (LSODA, "
                      "period by period from rest until periodic, serial, wall-time cap "
                      f"{sd.science.get('baseline', {}).get('cap_seconds')} s, phi from the solver's kinematics "
                      "kernel); a point that hits the cap has no baseline value.</p>")

@@ -11,16 +11,16 @@ from ._cache import restore_cache_dir, use_source_keyed_cache
 
 _numba_cache_dir = use_source_keyed_cache()  # before any kernel is decorated
 
-from ._force import force_and_slope, power_density  # noqa: E402
-from ._gradient import (DiscreteSolution, FixedGrid, GradientResult, adaptive_grid,
+from .model.force import force_and_slope, power_density  # noqa: E402
+from .adjoint.gradient import (DiscreteSolution, FixedGrid, GradientResult, adaptive_grid,
                         discrete_objective, discrete_solution, family_parameters,
                         force_partials, objective_gradient, with_family_parameters)
-from ._kinematics import Fourier, Harmonic, PowerLaw, period_grid
-from ._limits import fast_limit_velocity, kinematic_speed, quasi_static_velocity
-from ._physics import Physics, physical_from_scaled, scaled_from_physical
-from ._optimize import OptimizeResult, optimize_motion
-from ._solve import ENGINES, METHODS, Engine, SolveResult, solve_fixed_grid, solve_periodic
-from ._status import STATUS_REASONS, status_reason  # noqa: E402
+from .model.kinematics import Fourier, Harmonic, PowerLaw, period_grid
+from .model.limits import fast_limit_velocity, kinematic_speed, quasi_static_velocity
+from .model.physics import Physics, physical_from_scaled, scaled_from_physical
+from .adjoint.optimize import OptimizeResult, optimize_motion
+from .solve import ENGINES, METHODS, Engine, SolveResult, solve_fixed_grid, solve_periodic
+from .status import STATUS_REASONS, status_reason  # noqa: E402
 from ._warmup import KERNEL_SETS, kernel_cache, warm_up  # noqa: E402  (compile ahead: pipeline's driver)
 
 restore_cache_dir(_numba_cache_dir)  # other packages' kernels keep their own

@@ -11,7 +11,7 @@ import math
 import sys
 import time
 
-from . import _solve
+from . import solve as _solve
 
 
 class _UsageError(Exception):

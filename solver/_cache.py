@@ -1,7 +1,7 @@
 """numba's on-disk cache for the solver's kernels, keyed on the solver's sources.
 
 numba (``cache=True``) invalidates a cached kernel only when its own file changes, not when
-a kernel it calls, in another module, does: a stale cached ``_gradient._forward`` kept the
+a kernel it calls, in another module, does: a stale cached ``adjoint.gradient._forward`` kept the
 old ``_periodic.radau_step`` compiled into it, and once loaded its copy was linked into
 freshly compiled kernels of the same signature too (measured: a test of ``radau_step``'s
 new behaviour failed after the gradient tests had run, and passed alone or after the cache
@@ -34,10 +34,13 @@ KEEP_CACHES = 4
 
 
 def source_digest(package=Path(__file__).parent):
-    """Short hash of the contents of the package's ``*.py`` files."""
+    """Short hash of the contents of every ``*.py`` file of the package, its subpackages'
+    included (a kernel in ``periodic/`` calls kernels in ``model/``)."""
     digest = hashlib.sha256()
-    for path in sorted(package.glob("*.py")):
-        digest.update(path.name.encode())
+    for path in sorted(package.rglob("*.py")):
+        if "__pycache__" in path.parts:
+            continue
+        digest.update(path.relative_to(package).as_posix().encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._solve import METHODS
+from .solve import METHODS
 
 #: kernel sets by name, and the calls that compile them: one per method of ``solve_periodic``
 KERNEL_SETS = {
@@ -75,10 +75,10 @@ def kernel_cache() -> KernelCache:
 
 
 def _solve(kernel_set: str) -> None:
-    from ._kinematics import Fourier, Harmonic, PowerLaw
-    from ._optimize import optimize_motion
-    from ._physics import Physics
-    from ._solve import solve_fixed_grid, solve_periodic
+    from .model.kinematics import Fourier, Harmonic, PowerLaw
+    from .adjoint.optimize import optimize_motion
+    from .model.physics import Physics
+    from .solve import solve_fixed_grid, solve_periodic
 
     # Batches of four points whose grids differ in size: a batch's kernels see strided views of
     # its arrays (numba compiles those apart from contiguous ones), as a chunk of a scene does.

@@ -69,8 +69,8 @@ def radau_reference(code, params, physics, t0, t1, u0, side=None):
     the solver's re-solved steps; ``side`` selects the side of a corner of phi (default:
     the evaluation point itself).  physics = (T^(2-p), mu_n, mu_s, p, delta_tau)."""
     from scipy.integrate import solve_ivp
-    from solver._force import force_and_slope
-    from solver._kinematics import angle_and_rate
+    from solver.model.force import force_and_slope
+    from solver.model.kinematics import angle_and_rate
     kappa, mu_n, mu_s, p, dtau = physics
 
     def rhs(t, y):
@@ -90,7 +90,7 @@ def radau_reference(code, params, physics, t0, t1, u0, side=None):
 
 def random_harmonic(n, seed):
     """``n`` random harmonic points for the march's honesty checks: scaled period
-    2^U(-2, 2), mu_n/mu_s 2^U(-4, 4), delta 1e-5, amplitudes as ``solver.bench.draw_points``
+    2^U(-2, 2), mu_n/mu_s 2^U(-4, 4), delta 1e-5, amplitudes as ``solver.tools.bench.draw_points``
     (A0 in (0, pi/2], A1 / A0 in (0, 1]).  Returns (Harmonic, Physics)."""
     import numpy as np
     rng = np.random.default_rng(seed)

@@ -14,7 +14,7 @@ import pytest
 
 import solver
 from references import reference
-from solver.bench import solution_error
+from solver.tools.bench import solution_error
 
 REGRESSIONS = {
     # a corner of F sat in a blind spot of the step/bisection pair (70 rtol off, no events)

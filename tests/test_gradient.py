@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 import solver
-from solver import _radau5_solve
-from solver._radau5 import RADAU5_C, PointPhysics
-from solver._gradient import (POWER_ROOT_RTOL, FixedGrid, adaptive_grid, discrete_objective,
+from solver.periodic import driver as periodic_driver
+from solver.periodic.radau import RADAU5_C, PointPhysics
+from solver.adjoint.gradient import (POWER_ROOT_RTOL, FixedGrid, adaptive_grid, discrete_objective,
                               discrete_solution,
                               family_parameters, force_partials, force_partials_quadrature,
                               objective_gradient,
@@ -290,7 +290,7 @@ def _engine_fixed_grid(kinematics, physics, nodes, rtol=1e-13):
     code, params = kinematics.kernel_encoding()
     phys = PointPhysics(physics.inertia_factor[0], physics.mu_n[0], physics.mu_s[0],
                         physics.p[0], physics.delta_tau[0])
-    return _radau5_solve.fixed_grid_point(code, params[0], nodes, phys, rtol,
+    return periodic_driver.fixed_grid_point(code, params[0], nodes, phys, rtol,
                                           solver.kinematic_speed(kinematics)[0],
                                           solver.fast_limit_velocity(kinematics, physics)[0])
 
@@ -310,7 +310,7 @@ def test_discrete_objective_matches_the_solver_on_one_grid(case):
         np.testing.assert_allclose(res.P, ip * physics.period[0] ** -1.0, rtol=1e-12)
     # ... and the adaptive grid is the engine's converged solve: its integrals agree with it
     # to its nonlinear tolerances (1e-3 rtol of V)
-    out = _radau5_solve.solve(kinematics, physics, 1e-6, 2 ** 17, False)
+    out = periodic_driver.solve(kinematics, physics, 1e-6, 2 ** 17, False)
     assert out["n_tau"][0] == grid.n_steps
     np.testing.assert_allclose(res.U * physics.period[0], out["int_u"][0], rtol=1e-7)
 

@@ -1,4 +1,4 @@
-"""The explicit march's own driver (``solver._march_solve``): order, honesty of its
+"""The explicit march's own driver (``solver.march.driver``): order, honesty of its
 Richardson estimate against the engine (method "periodic"), and honest failures (UNSTABLE, NO_MOTION)."""
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import pytest
 
 import solver
 from cases import AGREEMENT_CASES, Case, random_harmonic
-from solver import _march_solve
-from solver._status import CONVERGED, NO_MOTION, UNSTABLE
+from solver.march import driver as march_driver
+from solver.status import CONVERGED, NO_MOTION, UNSTABLE
 
 MAX_STEPS = 2 ** 17
 
@@ -44,7 +44,7 @@ def test_fixed_grid_order_is_two(case):
     grids = [128, 256, 512, 1024]
     errors = []
     for N in grids:
-        iu, ip, st = _march_solve.fixed_grid(case.kinematics, case.physics, N)
+        iu, ip, st = march_driver.fixed_grid(case.kinematics, case.physics, N)
         assert st[0] == CONVERGED
         errors.append(abs(iu[0] - ref_u[0]) + abs(ip[0] - ref_pi[0]))
     slope = -np.polyfit(np.log(grids), np.log(errors), 1)[0]
@@ -58,7 +58,7 @@ def test_richardson_error_rule():
     d0 = np.array([16.0, 4.0, 2.56, -4.0, 16.0, np.nan, 4.0])
     d1 = np.array([4.0, 2.0, 1.6, 4.0, 40.0, 4.0, np.nan])
     d2 = np.ones(7)
-    np.testing.assert_allclose(_march_solve.richardson_error(d0, d1, d2),
+    np.testing.assert_allclose(march_driver.richardson_error(d0, d1, d2),
                                [1.0, 1.0, 1.0 / 0.6, 4.0, 40.0, 4.0, np.inf])
 
 
@@ -71,7 +71,7 @@ def test_agrees_with_the_engine_within_its_estimate(case):
     1e-10, and within its own estimate; the cases of UNIFORM_HARD may fail instead, but only
     with NaN and a failure status."""
     rtol = 1e-6
-    out = _march_solve.solve(case.kinematics, case.physics, rtol, MAX_STEPS, False)
+    out = march_driver.solve(case.kinematics, case.physics, rtol, MAX_STEPS, False)
     status = out["status"][0]
     if status != CONVERGED:
         assert case.name in UNIFORM_HARD, solver.STATUS_REASONS[int(status)]
@@ -93,7 +93,7 @@ def test_stiff_sticking_point_is_unstable_not_wrong():
     long enough to matter and the march converges.)"""
     kin = solver.Harmonic(1.0, 0.5)
     phys = solver.Physics.from_scaled(2.0 ** -8, 2.0 ** 1.5, delta=1e-8)
-    out = _march_solve.solve(kin, phys, 1e-5, MAX_STEPS, False)
+    out = march_driver.solve(kin, phys, 1e-5, MAX_STEPS, False)
     assert out["status"][0] == UNSTABLE
     assert np.isnan(out["int_u"][0]) and np.isnan(out["int_pi"][0])
     assert out["evaluations"][0, 0] < 2 * 2 * MAX_STEPS * 64
@@ -102,7 +102,7 @@ def test_stiff_sticking_point_is_unstable_not_wrong():
 def test_constant_phi_is_still():
     kin = solver.Harmonic([0.7, 0.7], [0.0, 0.5])
     phys = solver.Physics.from_scaled(1.0, 1.0)
-    out = _march_solve.solve(kin, phys, 1e-4, MAX_STEPS, True)
+    out = march_driver.solve(kin, phys, 1e-4, MAX_STEPS, True)
     assert out["still"].tolist() == [True, False]
     assert out["status"][0] == NO_MOTION and np.isnan(out["int_u"][0])
     assert out["status"][1] == CONVERGED
@@ -114,7 +114,7 @@ def test_cost_counts_on_a_smooth_case():
     """harmonic_p1 at rtol 1e-6: N stops at a few thousand steps, and the warm-started
     grids march few periods each (counts, not seconds)."""
     case = next(c for c in AGREEMENT_CASES if c.name == "harmonic_p1")
-    out = _march_solve.solve(case.kinematics, case.physics, 1e-6, MAX_STEPS, False)
+    out = march_driver.solve(case.kinematics, case.physics, 1e-6, MAX_STEPS, False)
     assert out["status"][0] == CONVERGED
     assert out["n_tau"][0] <= 8192
     assert out["iterations"][0] <= 100
@@ -126,7 +126,7 @@ def test_honest_on_random_harmonic_points(rtol):
     """40 random harmonic points (``cases.random_harmonic``): every converged solve within
     10 rtol of the engine at 1e-10, and at least 95 % within rtol."""
     kin, phys = random_harmonic(40, 2024)
-    out = _march_solve.solve(kin, phys, rtol, MAX_STEPS, False)
+    out = march_driver.solve(kin, phys, rtol, MAX_STEPS, False)
     ref_u, ref_pi = _reference(kin, phys)
     ok = out["status"] == CONVERGED
     failed = ~ok

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 import solver
-from solver._gradient import (FixedGrid, discrete_objective, objective_gradient, speed_at_power,
+from solver.adjoint.gradient import (FixedGrid, discrete_objective, objective_gradient, speed_at_power,
                               with_period)
-from solver._optimize import optimize_motion
+from solver.adjoint.optimize import optimize_motion
 
 
 def test_harmonic_converges_to_gtol():
@@ -123,7 +123,7 @@ def test_a_direction_that_does_not_descend_fails_the_line_search():
     # halving or interpolating, the search must stop while x + alpha d still differs from
     # x: below that Armijo "holds" at f itself and the step would be taken as no progress
     from types import SimpleNamespace
-    from solver._optimize import State, optimizer_step
+    from solver.adjoint.optimize import State, optimizer_step
     x = np.array([1.0])
     state = State(x=x, f=2.0, g=np.array([-2.0]), hinv=np.eye(1),
                   result=SimpleNamespace(u0=0.0), first_gradient_norm=2.0)
@@ -134,7 +134,7 @@ def test_a_direction_that_does_not_descend_fails_the_line_search():
 
 
 def test_a_stalled_bfgs_takes_a_newton_step_that_converges_quadratically():
-    from solver._optimize import Problem, initial_state, optimizer_step, variables
+    from solver.adjoint.optimize import Problem, initial_state, optimizer_step, variables
     from dataclasses import replace
     physics = solver.Physics.from_scaled(2.0 ** -4, 2.0)
     template = solver.Harmonic(1.0, 0.5)
@@ -166,7 +166,7 @@ def test_a_stalled_bfgs_takes_a_newton_step_that_converges_quadratically():
 
 def test_a_failed_bfgs_step_close_to_the_optimum_asks_for_newton():
     from types import SimpleNamespace
-    from solver._optimize import State, optimizer_step
+    from solver.adjoint.optimize import State, optimizer_step
     state = State(x=np.array([1.0]), f=2.0, g=np.array([-2.0]), hinv=np.eye(1),
                   result=SimpleNamespace(u0=0.0), first_gradient_norm=2.0)
     out = optimizer_step(_WrongGradient(), state, max_step=0.5, newton_switch=np.inf, max_condition=1e12)

@@ -78,7 +78,7 @@ def test_slope_matches_central_differences(p):
 def test_power_carried_by_the_stage_iterations(p):
     # the stage Newton iterations evaluate F, dF/du, Pi and dPi/du together: the first three
     # are the standalone kernels' to the bit, dPi/du matches central differences of Pi
-    from solver._force import force_slope_power_sc
+    from solver.model.force import force_slope_power_sc
     rng = np.random.default_rng(11)
     for _ in range(40):
         u, phi, omega = rng.normal(), rng.uniform(-1, 4), rng.normal() * 3
@@ -95,7 +95,7 @@ def test_power_carried_by_the_stage_iterations(p):
 
 def _uses_quadrature(u, phi, omega, delta_tau):
     """Whether ``link_moments`` takes its Gauss-Legendre branch (the rule of _force)."""
-    from solver._force import SWITCH_RATIO, link_setup
+    from solver.model.force import SWITCH_RATIO, link_setup
     _, _, a, b, _, e2 = link_setup(u, phi, omega, delta_tau, 0.0)
     h = 0.25 * abs(b)
     gap = max(abs(a + 0.25 * b) - h, 0.0)
@@ -143,7 +143,7 @@ def test_link_moments_in_the_closed_form_regime(p):
     """All six moments (dF/du needs the j = 1 ones) where the closed forms are used, down to
     e ~ 1e-12 with the kink off the link: at p = 0, m_0^1 = [w/r] / e^2 once lost every digit
     there (w/r -> sign(w) cancels)."""
-    from solver._force import SWITCH_RATIO, link_moments
+    from solver.model.force import SWITCH_RATIO, link_moments
 
     rng = np.random.default_rng(int(10 * p))
     checked = 0
@@ -166,7 +166,7 @@ def test_coulomb_moments_with_the_kink_on_the_link_match_the_reference():
     (asinh(w2/e) - asinh(w1/e)) / b as one log of a product (``_moments_closed_coulomb``),
     against 30 digits, over 12 decades of e / |b|; and a |u| ~ 1e100 iterate, whose product
     overflows, by the asinh form (finite, not inf)."""
-    from solver._force import SWITCH_RATIO, link_moments
+    from solver.model.force import SWITCH_RATIO, link_moments
 
     rng = np.random.default_rng(7)
     checked = 0
@@ -193,7 +193,7 @@ def test_link_moments_of_a_nan_iterate_at_zero_rate_are_nan_not_an_exception():
     """omega = 0 (b = 0) with a NaN stage iterate (a diverged Newton step, delta 1e-10 at
     power-law corners) took the closed forms and their 1 / b, which raised
     ZeroDivisionError out of the compiled solver; it must give NaN for the Newton to report."""
-    from solver._force import link_moments
+    from solver.model.force import link_moments
 
     for p in (0.0, 0.5):
         moments = link_moments(math.nan, 0.0, 1e-20, p)
@@ -207,7 +207,7 @@ def test_power_law_corners_at_tiny_delta_solve_without_an_exception():
                           1.1104818468195743, True, 11.514216747091353, False)
     phys = solver.Physics(0.29019658422967287, 6.195989242315322, 0.16139472824945048, 0.0,
                           1e-10)
-    from solver.bench import relative_u_error
+    from solver.tools.bench import relative_u_error
 
     ref = solver.solve_periodic(kin, phys, rtol=1e-7)
     res = solver.solve_periodic(kin, phys, rtol=1e-3)

@@ -1,4 +1,4 @@
-"""The honesty harness (``solver.honesty``): its judging logic, its point sets, and a small
+"""The honesty harness (``solver.tools.honesty``): its judging logic, its point sets, and a small
 honesty subset of every periodic engine in ``solver.METHODS`` (but the march).
 
 The subset: the first points of several of the harder sets (the paper's power-law grids
@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 import solver
-from solver import bench, honesty
+from solver.tools import bench
+from solver.tools import honesty
 
 #: (set, first points) judged against the frozen references
 SUBSET = (("stress_powerlaw_22", 6), ("fourier_clapping", 6), ("harmonic_extreme", 6),

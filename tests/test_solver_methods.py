@@ -8,7 +8,7 @@ import solver
 from references import reference
 from cases import AGREEMENT_CASES, Case
 
-#: the march's order here; the engine's (5) is tests/test_radau5.py's
+#: the march's order here; the engine's (5) is tests/test_engine.py's
 METHOD_ORDERS = {"march": 2}
 
 
@@ -51,11 +51,11 @@ def test_methods_agree_within_rtol(case):
     b = solver.solve_periodic(case.kinematics, case.physics, method="march", rtol=rtol)
     assert a.converged[0], solver.STATUS_REASONS[int(a.status[0])]
     if (case.stiff or case.name in MARCH_GIVES_UP) and not b.converged[0]:
-        from solver._status import UNSTABLE
+        from solver.status import UNSTABLE
         assert b.status[0] == UNSTABLE and np.isnan(b.U[0])  # says so, never a number
         return
     assert b.converged[0], solver.STATUS_REASONS[int(b.status[0])]
-    scale_u = max(abs(a.U[0]), solver._solve.U_FLOOR_FRACTION * solver.kinematic_speed(case.kinematics)[0] / case.physics.period[0])
+    scale_u = max(abs(a.U[0]), solver.solve.U_FLOOR_FRACTION * solver.kinematic_speed(case.kinematics)[0] / case.physics.period[0])
     # each is within rtol of the truth (estimated), so they agree within 2 rtol
     assert abs(a.U[0] - b.U[0]) <= 2 * rtol * scale_u
     assert abs(a.P[0] - b.P[0]) <= 2 * rtol * a.P[0]
@@ -209,9 +209,9 @@ def test_bad_arguments_name_themselves():
 
 @pytest.mark.parametrize("name", ["power_law_corners_p1.5", "linear_two_phase", "clapping_fourier"])
 def test_scipy_lsoda_baseline_agrees_on_every_family(name):
-    """A third, independent method (scipy LSODA marching, ``solver.bench.baseline_point``,
+    """A third, independent method (scipy LSODA marching, ``solver.tools.bench.baseline_point``,
     phi from the kinematics kernel) agrees with ``periodic`` on non-harmonic families."""
-    from solver import bench
+    from solver.tools import bench
 
     case = {c.name: c for c in AGREEMENT_CASES}[name]
     kin, phys = case.kinematics, case.physics
@@ -252,7 +252,7 @@ def test_stage_newton_retries_from_rest_where_a_step_stops_the_body():
     collocation guess and from u_n alike (60 iterations each; STAGE_SOLVE_FAILED), while
     from rest it converges.  The solution must not depend on the nonlinear tolerance beyond
     it, and int Pi must equal the Radau rule over power_density at the returned stages."""
-    from solver._gradient import FixedGrid, discrete_solution
+    from solver.adjoint.gradient import FixedGrid, discrete_solution
     kin = solver.PowerLaw(1.2, 0.35, 0.8, 10.0, False, 3.0, True)
     phys = solver.Physics.from_scaled(2.0 ** -8, 2.0 ** 4, p=0.0, delta=1e-8)
     grid = FixedGrid.uniform(kin, 64)
@@ -266,7 +266,7 @@ def test_stage_newton_retries_from_rest_where_a_step_stops_the_body():
     pi = [solver.power_density(u, a, w, phys.mu_n[0], phys.mu_s[0], 0.0, phys.delta_tau[0])
           for u, a, w in zip(tight.stages, phi, omega)]
     # (discrete_solution is the order-5 engine's 3-stage Radau IIA: weights RADAU5_B)
-    from solver._radau5 import RADAU5_B
+    from solver.periodic.radau import RADAU5_B
     pi = np.reshape(pi, (-1, 3))
     assert np.isclose(np.sum(h * (pi @ RADAU5_B)), tight.int_pi, rtol=1e-12, atol=0.0)
 
@@ -291,7 +291,7 @@ def test_outputs_beyond_the_float_range_fail_loudly():
     """p = 1.99 and sqrt(mu_n mu_s) = 1e-2 put T at 1e200 (the scaling exponent is 1/(2-p) =
     100): P = T^-(p+1) int Pi underflows to 0 (1e2: overflows), which must not come back as a
     converged 0 or inf.  A large but representable scale keeps every scaled output."""
-    from solver._status import OUT_OF_RANGE
+    from solver.status import OUT_OF_RANGE
     kin = solver.Harmonic(1.2, 0.3)
     unit = solver.solve_periodic(kin, solver.Physics.from_scaled(0.1, 1.0, p=1.99, delta=0.0),
                                  rtol=1e-6)
@@ -316,10 +316,10 @@ def test_long_period_power_law_with_singular_corners_converges():
     with the steps next to the corners held at MIN_STEP (2^-26) the estimate stayed at
     2.8e-6 from 11,000 to 219,000 steps and the solve failed at rtol 1e-6 (9 of 300 such
     points at 1e-6, 25 at 1e-8).  The corner steps may now be split to CORNER_MIN_STEP.
-    The answer is checked against the scipy LSODA march (``solver.bench.baseline_point``,
+    The answer is checked against the scipy LSODA march (``solver.tools.bench.baseline_point``,
     tol 1e-10), an independent method, which resolves U here to ~1e-7 in the solver's
     norm."""
-    from solver import bench
+    from solver.tools import bench
 
     kin = solver.PowerLaw(1.0597919352438694, 0.49812427732542985, 0.3186763827140434,
                           1.0534083570390707, True, 1.104202936986926, False)

@@ -1,12 +1,94 @@
-"""The solver's modules import each other without cycles and without private names (the rule
-and the checks of ``test_pipeline_structure``, applied to ``solver/``)."""
+"""The solver's modules import each other without cycles and without private names, across
+its subpackages (the rule and the checks of ``test_pipeline_structure``, applied to
+``solver/`` and every folder in it), and its layout shows its architecture: one folder per
+concept."""
+from __future__ import annotations
 
-from test_pipeline_structure import REPO, import_cycles, private_imports, sibling_imports
+import ast
+from pathlib import Path
+
+from test_pipeline_structure import REPO, import_cycles, private_imports
+
+#: the subpackages of solver/ and the modules each must hold (a newcomer finds the step
+#: kernel, the controller, the events, the estimator and the driver by their file names)
+LAYOUT = {
+    "model": {"kinematics", "force", "physics", "limits"},
+    "periodic": {"radau", "control", "switching", "sweep", "global_error", "shooting", "driver"},
+    "march": {"heun", "driver"},
+    "adjoint": {"gradient", "optimize"},
+    "tools": {"bench", "bench_optimize", "honesty"},
+}
+
+
+def package_imports(package_dir: Path) -> dict[str, dict[str, set[str]]]:
+    """{module: {imported module: names imported from it}} over every ``*.py`` under
+    ``package_dir``, modules named by their dotted path inside the package ("periodic.sweep",
+    "solve"), relative imports of any level and absolute ones resolved, at any depth of the
+    file.  ``from .pkg import module`` counts as an import of that module."""
+    package = package_dir.name
+    paths = sorted(package_dir.rglob("*.py"))
+
+    def dotted(path):
+        parts = list(path.relative_to(package_dir).with_suffix("").parts)
+        return ".".join(parts)
+
+    modules = {dotted(p) for p in paths}
+    graph: dict[str, dict[str, set[str]]] = {m: {} for m in modules}
+    for path in paths:
+        me = dotted(path)
+        here = me.split(".")[:-1] if not me.endswith("__init__") else me.split(".")[:-1]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = here[:len(here) - (node.level - 1)] if node.level > 1 else here
+                    target = base + (node.module.split(".") if node.module else [])
+                elif node.module and node.module.split(".")[0] == package:
+                    target = node.module.split(".")[1:]
+                else:
+                    continue
+                name = ".".join(target)
+                if name in modules:
+                    graph[me].setdefault(name, set()).update(a.name for a in node.names)
+                else:  # from .pkg import module
+                    for a in node.names:
+                        sub = ".".join(target + [a.name])
+                        if sub in modules:
+                            graph[me].setdefault(sub, set())
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    parts = a.name.split(".")
+                    if parts[0] == package and ".".join(parts[1:]) in modules:
+                        graph[me].setdefault(".".join(parts[1:]), set())
+    return {m: {n: names for n, names in deps.items() if not n.endswith("__init__")}
+            for m, deps in graph.items()}
 
 
 def test_solver_has_no_import_cycles():
-    assert import_cycles(sibling_imports(REPO / "solver")) == []
+    assert import_cycles(package_imports(REPO / "solver")) == []
 
 
 def test_solver_imports_no_private_names_across_modules():
-    assert private_imports(sibling_imports(REPO / "solver")) == []
+    assert private_imports(package_imports(REPO / "solver")) == []
+
+
+def test_solver_is_laid_out_by_concept():
+    for folder, modules in LAYOUT.items():
+        present = {p.stem for p in (REPO / "solver" / folder).glob("*.py")} - {"__init__"}
+        assert present == modules, (folder, present ^ modules)
+        assert (REPO / "solver" / folder / "__init__.py").read_text().startswith('"""')
+
+
+def test_the_checks_walk_subpackages(tmp_path):
+    """A cycle and a private name planted across two subpackages are found."""
+    pkg = tmp_path / "solver"
+    (pkg / "a").mkdir(parents=True)
+    (pkg / "b").mkdir()
+    for d in (pkg, pkg / "a", pkg / "b"):
+        (d / "__init__.py").write_text("")
+    (pkg / "a" / "x.py").write_text("from ..b.y import helper\n")
+    (pkg / "b" / "y.py").write_text("def helper():\n    from ..a.x import _secret\n")
+    (pkg / "top.py").write_text("from .a import x\nimport solver.b.y\n")
+    graph = package_imports(pkg)
+    assert import_cycles(graph) == [["a.x", "b.y", "a.x"]]
+    assert private_imports(graph) == ["b.y: from a.x import _secret"]
+    assert set(graph["top"]) == {"a.x", "b.y"}

@@ -328,7 +328,7 @@ def test_registry_tolerances_are_honest(method, registry_references):
     within rtol, all within 10 rtol.  The march may give up (UNSTABLE, NaN) only on stiff cases
     and the listed ones, and never converges to a wrong answer; a reference that is not
     confirmed must be listed."""
-    from solver._status import TOLERANCE_NOT_REACHED, UNSTABLE
+    from solver.status import TOLERANCE_NOT_REACHED, UNSTABLE
     ratios, unconfirmed = [], set()
     for case in AGREEMENT_CASES:
         ref, check = registry_references[case.name]
@@ -453,7 +453,7 @@ def test_march_reports_unstable_on_burst_and_coast_at_high_anisotropy():
     so (UNSTABLE, NaN outputs), not return a number with a small estimate (before the chatter
     check it returned status 0 with an estimate far below its true error).  A march that
     learns to converge here must then be checked against a reference."""
-    from solver._status import UNSTABLE
+    from solver.status import UNSTABLE
     kin = solver.PowerLaw(1.2, 0.35, 0.8, 10.0, False, 3.0, True)
     phys = solver.Physics.from_scaled(64.0, 2.0, p=0.0, delta=1e-5)
     r = solver.solve_periodic(kin, phys, method="march", rtol=1e-4)
@@ -486,11 +486,11 @@ LSODA_REFERENCE_ERROR = 2e-6
 
 @pytest.mark.parametrize("name", sorted(TURNING_POINT_CASES))
 def test_periodic_is_honest_at_short_scaled_period_next_to_turning_points(name):
-    """Against scipy's LSODA marching period by period at tol 1e-10 (``solver.bench``'s
+    """Against scipy's LSODA marching period by period at tol 1e-10 (``solver.tools.bench``'s
     baseline), independent of the engine; the march, which served before, cannot resolve
     the turning point's window on uniform grids (point B: TOLERANCE_NOT_REACHED at rtol 1e-5
     on 2^21 steps)."""
-    from solver import bench
+    from solver.tools import bench
 
     kin, phys = TURNING_POINT_CASES[name]
     V = solver.kinematic_speed(kin)

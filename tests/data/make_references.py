@@ -19,7 +19,7 @@ deduplicated, the tightest rtol kept) with this provenance.
     solver.solve_periodic = _recording
 
 To add a point today, compute it with two independent methods that agree (the engine at
-rtol 1e-10 and the march, or scipy's LSODA shooting of ``solver.bench``), and record both.
+rtol 1e-10 and the march, or scipy's LSODA shooting of ``solver.tools.bench``), and record both.
 """
 import json
 import sys

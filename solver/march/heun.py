@@ -19,9 +19,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._force import force_and_slope, power_density
-from ._kinematics import angle_and_rate
-from ._status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
+from ..model.force import force_and_slope, power_density
+from ..model.kinematics import angle_and_rate
+from ..status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
 
 #: Heun's method (explicit trapezoidal RK2).
 HEUN_C = np.array([0.0, 1.0])
@@ -172,7 +172,7 @@ def march_level(code, params, grids, kappa, mu_n, mu_s, p, dtau, u_init, vscale,
     of N steps), one thread per point.
 
     Returns (int_u, int_pi, u0, status, periods, evaluations, chatter_mass, stiffness,
-    nodes): per point the period integrals, the periodic u(0), the ``_status`` code,
+    nodes): per point the period integrals, the periodic u(0), the ``status`` code,
     the periods marched and the force evaluations; ``chatter_mass`` = sum of |u_n| h_n
     over the chattering steps (0: none), ``stiffness`` the largest ``band_stiffness`` of
     a chattering step (0: none); ``nodes`` (n, N) u at the nodes without tau = 1.

@@ -1,6 +1,6 @@
 """Throughput benchmark of the periodic engines against a scipy baseline.
 
-Run as ``python -m solver.bench [--points 2000] [--baseline-points 20] [--seed 0]
+Run as ``python -m solver.tools.bench [--points 2000] [--baseline-points 20] [--seed 0]
 [--baseline-cap 20] [--repeats 3] [--methods M ...]``.  Everything is measured in one run, on
 one machine, so the ratios printed are like for like.
 
@@ -37,7 +37,7 @@ What is measured
    as a user's loop over points would be.
 4. Matching accuracy.  The error of U is measured against a ``periodic``
    reference at rtol = 1e-8 on the subsample, in the solver's own norm:
-   |U - U_ref| T / max(|U_ref| T, 1e-3 V) (see ``solver._solve``).  The
+   |U - U_ref| T / max(|U_ref| T, 1e-3 V) (see ``solver.solve``).  The
    baseline tolerance tol is lowered 1e-5, 1e-6, ... until the baseline's
    median error is no larger than that of each engine at rtol = 1e-4; for each
    engine the first such tolerance's run (or the tightest's) is its timed baseline.
@@ -82,7 +82,7 @@ import time
 import numpy as np
 
 import solver
-from solver._solve import U_FLOOR_FRACTION
+from solver.solve import U_FLOOR_FRACTION
 
 RTOLS = (1e-4, 1e-7)
 DEFAULT_POINTS = 2000
@@ -182,7 +182,7 @@ def harmonic_angle(A0, A1):
 
 def family_angle(kinematics):
     """phi(tau), dphi/dtau of a one-point family (any kind), through the solver's kernel."""
-    from ._kinematics import angle_and_rate
+    from ..model.kinematics import angle_and_rate
 
     code, params = kinematics.kernel_encoding()
     row = params[0].copy()
@@ -406,7 +406,7 @@ def interpreted_rate(n, seed):
 def no_jit_rate(n, seed):
     """The same Python loop in a subprocess with NUMBA_DISABLE_JIT=1 (nothing compiled)."""
     env = dict(os.environ, NUMBA_DISABLE_JIT="1")
-    cmd = [sys.executable, "-m", "solver.bench", "--interpreted-kernel-rate", str(n),
+    cmd = [sys.executable, "-m", "solver.tools.bench", "--interpreted-kernel-rate", str(n),
            "--seed", str(seed)]
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
     return float(out.stdout.strip().splitlines()[-1])
@@ -427,7 +427,7 @@ def force_kernel_rates(seed):
 # ----------------------------------------------------------------------------- main
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="python -m solver.bench",
+    parser = argparse.ArgumentParser(prog="python -m solver.tools.bench",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--points", type=int, default=DEFAULT_POINTS)
     parser.add_argument("--baseline-points", type=int, default=20)

@@ -1,12 +1,12 @@
-"""One period of the ``radau5`` engine: an adaptive sweep and a frozen-grid sweep.
+"""One period of the engine: an adaptive sweep and a frozen-grid sweep.
 
 A sweep integrates eq. (Newtonu) over one period from u(0) with the Radau IIA step of
-``_radau5`` and records every step in a ``Workspace`` row set (one float64 array of shape
+``periodic.radau`` and records every step in a ``Workspace`` row set (one float64 array of shape
 (N_FIELDS, capacity + 1), fields by the index constants below), which is what the
 shooting, the adjoint weights and the error estimators read.
 
 - ``adaptive_sweep`` chooses the steps (diffrax's loop: the step kernel proposes, the
-  controller ``_step_control.predict_factor`` decides).  The error of a step is its
+  controller ``periodic.control.predict_factor`` decides).  The error of a step is its
   embedded estimate weighted by the sensitivities of int u and int Pi of the periodic
   solution to it, lambda and mu (the node weights of the previous sweep, ``WeightModel``),
   per unit length and relative to the norm of U and P: a step is accepted when
@@ -15,8 +15,8 @@ shooting, the adjoint weights and the error estimators read.
           <= target h,
 
   so the accepted steps' weighted errors sum to at most ``target`` over the period.  Steps
-  end at every kinematic stop (``_switching.kinematic_stops``: corners of phi, zeros of
-  sin phi, cos phi, omega) and at every state event (``_switching.locate_state_event``),
+  end at every kinematic stop (``periodic.switching.kinematic_stops``: corners of phi, zeros of
+  sin phi, cos phi, omega) and at every state event (``periodic.switching.locate_state_event``),
   and never exceed the previous estimators' ceilings (``WeightModel.max_step``).
 - ``frozen_sweep`` solves the same steps again from another u(0) (the shooting's Newton
   iterations: on a fixed step sequence the period map is smooth and its derivative, the
@@ -31,15 +31,15 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ._force import force_slope_power_sc
-from ._kinematics import angle_and_rate
-from ._radau5 import (C1, C2, StepError, THETA_LATE, THETA_MID, SampleKinematics, StageKinematics,
+from ..model.force import force_slope_power_sc
+from ..model.kinematics import angle_and_rate
+from .radau import (C1, C2, StepError, THETA_LATE, THETA_MID, SampleKinematics, StageKinematics,
                       StepSolution, defect_error, dense_value, embedded_error, estimate_floor, radau5_step, step_integrals,
                       step_weights)
-from ._status import CONVERGED, NON_FINITE, STAGE_SOLVE_FAILED, STEP_BUDGET_EXCEEDED, \
+from ..status import CONVERGED, NON_FINITE, STAGE_SOLVE_FAILED, STEP_BUDGET_EXCEEDED, \
     TOLERANCE_NOT_REACHED
-from ._step_control import MIN_FACTOR, predict_factor
-from ._switching import (N_STATE_FUNCTIONS, SIMPLE_TURNING, STOP, TANGENTIAL, exit_functions,
+from .control import MIN_FACTOR, predict_factor
+from .switching import (N_STATE_FUNCTIONS, SIMPLE_TURNING, STOP, TANGENTIAL, exit_functions,
                          locate_exit, locate_state_event, rate_slope, state_function)
 
 # ---------------------------------------------------------------- workspace fields
@@ -57,13 +57,13 @@ ERR = 16         # embedded estimate (u, int u, int Pi): rows ERR .. ERR + 2
 SIN = 19         # sin phi at the stages: rows SIN .. SIN + 2
 COS = 22         # cos phi at the stages
 OMEGA = 25       # dphi/dtau at the stages
-LAMBDA = 28      # node weight of int u (``_global_error.node_weights``)
+LAMBDA = 28      # node weight of int u (``periodic.global_error.node_weights``)
 MU = 29          # node weight of int Pi
 END_KIND = 30    # what ends step n: ORDINARY, KINEMATIC_STOP, CORNER_STOP, STATE_EVENT
 PU_STAGE = 31    # dPi/du at the stages: rows PU_STAGE .. PU_STAGE + 2
 SLOPE = 34       # dF/du at the stages: rows SLOPE .. SLOPE + 2
 F_END = 37       # F at the step's end (its last stage)
-FLOOR = 38       # the floor of the step's estimate of u's error (``_radau5.estimate_floor``)
+FLOOR = 38       # the floor of the step's estimate of u's error (``periodic.radau.estimate_floor``)
 N_FIELDS = 39
 
 ORDINARY = 0.0
@@ -81,7 +81,7 @@ ACCEPT_STEP = 2.0 ** -36
 #: next to a turning point of phi a step may change u by friction at most this share of u
 #: (``trap_ceiling``)
 TRAP_SHARE = 0.1
-#: ... but at a simple turning point (``_switching.SIMPLE_TURNING``: a simple zero of omega,
+#: ... but at a simple turning point (``periodic.switching.SIMPLE_TURNING``: a simple zero of omega,
 #: no corner) never below this step: where the body comes to rest at the turning point with
 #: the links (u -> 0 there) the cap shrinks with u and the steps approached the turning point
 #: geometrically (45 % of the bench's steps at rtol 1e-4).  An empirical floor, not a bound:
@@ -90,7 +90,7 @@ TRAP_SHARE = 0.1
 #: 0.6) on a sin^3 Fourier motion whose flat inflections are near-tangencies
 #: (``test_a_flat_inflection_keeps_the_trap_cap``), which keep the cap
 TRAP_FLOOR = 1e-3
-#: a step whose defect model does not fit (``_radau5.defect_error``) is judged by this many
+#: a step whose defect model does not fit (``periodic.radau.defect_error``) is judged by this many
 #: times its error estimate (measured: the fallback estimates were up to 12x too small next
 #: to turning points at scaled period 0.01)
 FIT_DISTRUST = 16.0
@@ -164,7 +164,7 @@ def stage_kinematics(code, params, t0, h):
 
 @njit(cache=True, error_model="numpy")
 def sample_kinematics(code, params, t0, h):
-    """sin phi, cos phi, dphi/dtau at the defect estimate's samples (``_radau5``)."""
+    """sin phi, cos phi, dphi/dtau at the defect estimate's samples (``periodic.radau``)."""
     side = t0 + 0.5 * h
     phi_m, om_m = angle_and_rate(code, params, t0 + THETA_MID * h, side)
     phi_l, om_l = angle_and_rate(code, params, t0 + THETA_LATE * h, side)
@@ -202,11 +202,11 @@ def solve_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.na
 def weighted_error(err, lam, mu, scale_u, scale_p, floor=0.0, h=0.0, pi_u=0.0):
     """A step's error in the norm of U and P: its local error in u carried to the period
     integrals by the node weights lam, mu, plus its own quadrature errors (absolute values:
-    no cancellation is counted on).  ``floor`` (``_radau5.estimate_floor``) is taken off u's
+    no cancellation is counted on).  ``floor`` (``periodic.radau.estimate_floor``) is taken off u's
     error, h floor off int u's and h floor ``pi_u`` (max |dPi/du|) off int Pi's: the stage
     values' own error, which no smaller step reduces.  This is the one rule of a step's
     error, for the step-size control (floor: the stage tolerance's) and the global estimate
-    (floor: rounding only, ``_global_error.local_error_estimate``)."""
+    (floor: rounding only, ``periodic.global_error.local_error_estimate``)."""
     e_u, e_v, e_w = floored_errors(err, floor, h, pi_u)
     return max((abs(lam) * e_u + e_v) / scale_u, (abs(mu) * e_u + e_w) / scale_p)
 
@@ -367,7 +367,7 @@ def step_turning(stops, stop_is_turning, n_stops, j_end, j_start):
 @njit(cache=True, error_model="numpy")
 def trap_limit(code, params, phys, turning, i, stop_is_corner, stop_is_turning, side, u):
     """``trap_ceiling`` at the turning point of stop i, floored at TRAP_FLOOR where it is
-    simple (``_switching.SIMPLE_TURNING``: a simple zero of omega, no corner of phi)."""
+    simple (``periodic.switching.SIMPLE_TURNING``: a simple zero of omega, no corner of phi)."""
     cap = trap_ceiling(code, params, phys, turning, side, u)
     if stop_is_turning[i] == SIMPLE_TURNING and not stop_is_corner[i]:
         cap = max(cap, TRAP_FLOOR)
@@ -483,9 +483,9 @@ def clear_exit_memo(memo):
 
 @njit(cache=True, error_model="numpy")
 def held_exits(code, params, t, side, phys, band, memo):
-    """``_switching.exit_functions`` at t, from ``memo`` where it holds t, else evaluated and
+    """``periodic.switching.exit_functions`` at t, from ``memo`` where it holds t, else evaluated and
     put in it: a held body's steps evaluate them at both ends, and a step's start is the last
-    accepted step's end (or a rejected attempt's start), which gave ~9 % of a radau5 solve's
+    accepted step's end (or a rejected attempt's start), which gave ~9 % of an engine solve's
     time at rtol 1e-4 to repeated evaluations.  The memo must be cleared where ``side``
     crosses a corner of phi (``clear_exit_memo``); it is keyed on tau alone."""
     if memo[0] == t:
@@ -512,7 +512,7 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
       stop is not put before the line of g from the step's start, whose slope kappa F(u_n)
       + (omega S / 4)' is the slipping body's;
     - for p = 0, an exit: a step that starts in the band, where one of the exit functions
-      (``_switching.exit_functions``) turns positive; their values at the step's ends come
+      (``periodic.switching.exit_functions``) turns positive; their values at the step's ends come
       from ``memo`` (``held_exits``) where it has them.
     """
     theta = 2.0
@@ -569,7 +569,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     stops : (n_stops,) sorted step ends in [0, 1), stops[0] = 0; stop_is_corner : whether
         phi has a corner there (the next step's start values are re-evaluated on its side);
         stop_is_turning : whether the links (nearly) stop rotating there (``trap_ceiling``;
-        ``_switching.turning_stops``' codes).
+        ``periodic.switching.turning_stops``' codes).
     h_first : float
         The first step's size (the controller's proposal carried from an earlier sweep).
     target : float
@@ -789,7 +789,7 @@ def frozen_sweep(code, params, phys, u0, atol, W, N):
 
 @njit(cache=True, error_model="numpy")
 def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
-    """The defect estimate (``_radau5.defect_error``) of every recorded step of ``W``, in
+    """The defect estimate (``periodic.radau.defect_error``) of every recorded step of ``W``, in
     place (rows ERR), from its stored stages: two evaluations of F per step, and the start
     values where phi has a corner (``corner_nodes``, (N,)) or at tau = 0; and the estimate's
     floor (rows FLOOR) for rounding alone (the stage tolerance ``atol`` is set so that the

@@ -1,6 +1,6 @@
 """Benchmark: one Kmax = 7 optimisation, adjoint BFGS/Newton against scipy BFGS with differences.
 
-``python -m solver.bench_optimize [--seed S] [--seeds N] [--kmax K] [--ratio-log2 R]
+``python -m solver.tools.bench_optimize [--seed S] [--seeds N] [--kmax K] [--ratio-log2 R]
 [--repeats 3]``
 
 Both optimisers see the same objective: -|lambda| of the discretised problem on one
@@ -28,10 +28,10 @@ import sys
 import numpy as np
 import scipy.optimize
 
-from ._gradient import adaptive_grid, discrete_objective, with_family_parameters, with_period
-from ._kinematics import Fourier
-from ._optimize import Problem, optimize_motion, variables
-from ._physics import Physics
+from ..adjoint.gradient import adaptive_grid, discrete_objective, with_family_parameters, with_period
+from ..model.kinematics import Fourier
+from ..adjoint.optimize import Problem, optimize_motion, variables
+from ..model.physics import Physics
 from .bench import repeat_timed
 
 
@@ -103,7 +103,7 @@ def compare(seed, kmax, ratio_log2, gtol, repeats=1):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog="python -m solver.bench_optimize", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m solver.tools.bench_optimize", description=__doc__)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--seeds", type=int, default=1,
                         help="number of starts (seed, seed + 1, ...)")

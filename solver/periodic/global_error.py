@@ -1,10 +1,10 @@
-"""The global error of the ``radau5`` engine's period integrals: one estimate behind one rule.
+"""The global error of the engine's period integrals: one estimate behind one rule.
 
-Every estimator takes a converged periodic solution (the ``_sweep`` workspace) and returns
+Every estimator takes a converged periodic solution (the ``periodic.sweep`` workspace) and returns
 its errors of int u and int Pi (absolute) and, per step, the share of the tolerance it
 finds there; ``combine`` is the one rule that adds them up: the estimators' errors add (they
 count different errors: no cancellation is assumed between them), and the estimate is the
-larger of U's and P's relative errors in the solver's norm (``_solve`` docstring: U relative
+larger of U's and P's relative errors in the solver's norm (``solve`` docstring: U relative
 to max(|int u|, 1e-3 V), P relative).  A step whose share is above its length times the
 tolerance asks for refinement: its ceiling for the next adaptive sweep is its length times
 share^(-1/ERROR_ORDER) (``refinement_ceiling``).
@@ -18,8 +18,8 @@ lambda_{n+1} e, to first order.
 
 Estimators here:
 
-- ``local_error_estimate``: each step's local error from its defect (``_radau5.defect_error``,
-  or the split re-solve of ``_sweep.event_split_errors``) weighted by the node weights, plus
+- ``local_error_estimate``: each step's local error from its defect (``periodic.radau.defect_error``,
+  or the split re-solve of ``periodic.sweep.event_split_errors``) weighted by the node weights, plus
   its own quadrature errors.
 """
 from __future__ import annotations
@@ -29,9 +29,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ._radau5 import ERROR_ORDER
-from ._radau5 import StepError
-from ._sweep import (ACCEPT_STEP, ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q_P, Q_U, T,
+from .radau import ERROR_ORDER
+from .radau import StepError
+from .sweep import (ACCEPT_STEP, ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q_P, Q_U, T,
                      floored_errors)
 
 
@@ -55,10 +55,10 @@ def node_weights(W, N, one_minus_M):
 
 @njit(cache=True, error_model="numpy")
 def local_error_estimate(W, N, shares, scale_u, scale_p):
-    """The steps' local errors (``_sweep.estimate_sweep``) carried to the period integrals:
+    """The steps' local errors (``periodic.sweep.estimate_sweep``) carried to the period integrals:
     returns (error of int u, error of int Pi) and adds each step's weighted error (in the
     norm: the larger of U's and P's relative shares) to ``shares``.  Each step's errors are
-    counted above their rounding floor (``_sweep.floored_errors``, rows FLOOR)."""
+    counted above their rounding floor (``periodic.sweep.floored_errors``, rows FLOOR)."""
     e_u = 0.0
     e_p = 0.0
     for n in range(N):
@@ -96,7 +96,7 @@ def refinement_ceiling(W, N, shares, target, ceilings):
     """Per step, the largest step the next adaptive sweep may take inside it: inf where the
     step's share is within ``target`` times its length, else its length times
     (target h / share)^(1 / ERROR_ORDER) but at least 1 / MAX_REFINEMENT, and at least
-    ``_sweep.ACCEPT_STEP``.  Returns how many steps ask for refinement."""
+    ``periodic.sweep.ACCEPT_STEP``.  Returns how many steps ask for refinement."""
     asked = 0
     for n in range(N):
         h = W[T, n + 1] - W[T, n]

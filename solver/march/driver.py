@@ -3,9 +3,9 @@ the error of the period integrals estimated by Richardson extrapolation.
 
 For each parameter point:
 
-1. **Grid.** ``_kinematics.period_grid(kinematics, N)``: N steps per period, uniform
+1. **Grid.** ``model.kinematics.period_grid(kinematics, N)``: N steps per period, uniform
    inside each phase of phi, its corners on nodes; doubling N bisects every step.
-2. **March.** The discrete periodic state on that grid by ``_march.march_level``: Heun's
+2. **March.** The discrete periodic state on that grid by ``march.heun.march_level``: Heun's
    explicit RK2 (order 2) marched period by period until the change of u(0) over a period,
    divided by one minus the observed contraction, is below 1e-5 rtol V (Aitken jumps
    where the contraction is slow).  The first grid starts from rest, every later one from
@@ -35,11 +35,11 @@ For each parameter point:
    does not chatter (below); otherwise N doubles.
 4. **Stiffness.** The explicit step is stable only while h T^(2-p) |dF/du| stays below
    about 2; across a sticking band (|dF/du| ~ mu / delta_tau) a larger step chatters
-   (``_march.step_jumps`` on consecutive steps), u stalls at ~h T^(2-p) mu instead of
+   (``march.heun.step_jumps`` on consecutive steps), u stalls at ~h T^(2-p) mu instead of
    ~delta_tau, and that error falls only like h.  A grid whose chatter carries more than
    CHATTER_SHARE rtol of int u is not accepted.  The point is UNSTABLE when the finest grid
    still chatters, or earlier when two grids in turn chattered, resolving the band would
-   need more than HOPELESS times ``max_steps`` steps (``_march.band_stiffness``), and the
+   need more than HOPELESS times ``max_steps`` steps (``march.heun.band_stiffness``), and the
    chatter's mass does not fall fast enough to become negligible by then (``_hopeless``).
 
 Statuses: CONVERGED; UNSTABLE (chatter, or the march left every bound on the finest grid);
@@ -53,12 +53,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kinematics import period_grid
-from ._limits import kinematic_speed
-from ._march import march_level
-from ._status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
+from ..model.kinematics import period_grid
+from ..model.limits import kinematic_speed
+from .heun import march_level
+from ..status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
 
-#: steps per period of the first grid (a multiple of 8: ``_kinematics.phase_steps``)
+#: steps per period of the first grid (a multiple of 8: ``model.kinematics.phase_steps``)
 FIRST_STEPS = 16
 #: periods marched on one grid before STEP_BUDGET_EXCEEDED: MAX_PERIODS, but at most
 #: MARCH_STEP_BUDGET steps, and never fewer than MIN_PERIODS (a coarse grid can settle on a
@@ -71,13 +71,13 @@ MIN_PERIODS = 64
 #: outside these ratios of successive differences no geometric tail is assumed at all (a
 #: ratio far above 4 is as likely a change of sign passing through zero as fast convergence)
 RATIO_FLOOR, RATIO_CEILING = 1.5, 8.0
-#: the u floor of int u's norm, as a share of V (as ``_solve.U_FLOOR_FRACTION``)
+#: the u floor of int u's norm, as a share of V (as ``solve.U_FLOOR_FRACTION``)
 U_FLOOR_FRACTION = 1e-3
 #: chatter matters when the |u| stalled in it carries this share of rtol of int u
 CHATTER_SHARE = 0.1
 #: give up on chatter when resolving the band needs this many times ``max_steps``
 HOPELESS = 4
-#: a step chatters from h T^(2-p) |dF/du| above about this (``_march.JUMP_LIMIT``)
+#: a step chatters from h T^(2-p) |dF/du| above about this (``march.heun.JUMP_LIMIT``)
 CHATTER_STIFFNESS = 1.5
 
 
@@ -148,7 +148,7 @@ def fixed_grid(kinematics, physics, n_steps, *, rtol=1e-10):
 
 def solve(kinematics, physics, rtol, max_steps, return_series):
     """The periodic steady state of eq. (Newtonu) by the explicit march with Richardson error
-    control (module docstring), for ``_solve.solve_periodic(method="march")``.
+    control (module docstring), for ``solve.solve_periodic(method="march")``.
 
     Parameters
     ----------
@@ -168,7 +168,7 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
     dict with, each of shape (n_points,) unless noted:
         int_u, int_pi : int_0^1 u dtau and int_0^1 Pi dtau on the returned grid (2N steps:
             the finer of the last pair), NaN unless converged;
-        status : int8 ``_status`` code;
+        status : int8 ``status`` code;
         estimate : e of the returned value (inf where none was formed);
         n_tau : steps per period of the returned (or last tried) grid;
         iterations : periods marched, summed over grids;

@@ -2,8 +2,8 @@
 (its log and sign, without cancellation at M ~ 1), the bracketed Newton update of u(0), and
 the stage solve's tolerance relative to the speed scale.
 
-Shared by the engine's shooting (``_radau5_solve``), its adjoint (``_gradient``) and the
-explicit march (``_march``), which thus do not depend on each other.
+Shared by the engine's shooting (``periodic.driver``), its adjoint (``adjoint.gradient``) and the
+explicit march (``march.heun``), which thus do not depend on each other.
 """
 from __future__ import annotations
 

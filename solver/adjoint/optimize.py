@@ -57,10 +57,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ._gradient import (FixedGrid, adaptive_grid, discrete_solution, family_parameters,
+from .gradient import (FixedGrid, adaptive_grid, discrete_solution, family_parameters,
                         objective_gradient, speed_at_power, with_family_parameters,
                         with_period)
-from ._kinematics import Fourier, Harmonic, PowerLaw
+from ..model.kinematics import Fourier, Harmonic, PowerLaw
 
 STOP_REASONS = {
     "gradient_tolerance": "projected gradient norm below gtol",
@@ -477,7 +477,7 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         Maximise |lambda| (eq. lambdap), |U| (eq. U), or |U| subject to P = ``power``
         (eq. powerp), keeping the sign of the start.  "speed_at_power" eliminates the
         constraint exactly: the variables are the family's parameters only and T(theta)
-        solves P(theta, T) = power (``speed_at_power`` in ``_gradient``); the gradient is
+        solves P(theta, T) = power (``speed_at_power`` in ``adjoint.gradient``); the gradient is
         the exact one along the constraint.  At fixed P, maximising |U| is maximising
         |lambda| = |U|^(p+1)/P on that surface, a different problem from the unconstrained
         maximum of |lambda| (which picks its own P).

@@ -1,9 +1,9 @@
-"""Step-size control of the ``radau5`` engine: the policy apart from the step (scipy
+"""Step-size control of the engine: the policy apart from the step (scipy
 ``radau.py``'s ``predict_factor``; diffrax ``adapt_step_size``).
 
 The error of a step is measured per unit length: ``ratio`` = weighted local error /
 (tolerance x h), so that steps whose ratio is <= 1 keep the sum of their errors over the
-period below the tolerance.  With an estimate of order ERROR_ORDER (``_radau5``), the
+period below the tolerance.  With an estimate of order ERROR_ORDER (``periodic.radau``), the
 error per unit length scales like h^ERROR_ORDER, so a step's ratio of r asks for the factor
 r^(-1 / ERROR_ORDER); Gustafsson's predictive controller (Hairer & Wanner IV.8, eq. (8.21))
 corrects it by the last two steps' history.
@@ -14,7 +14,7 @@ import math
 
 from numba import njit
 
-from ._radau5 import ERROR_ORDER
+from .radau import ERROR_ORDER
 
 #: the factor is multiplied by this (a step sized exactly at the tolerance fails half the time)
 SAFETY = 0.9
@@ -22,7 +22,7 @@ SAFETY = 0.9
 #: 23 % of the target sweep's attempts were rejected, most right after a step whose error
 #: sat below the noise floor, which asks for the largest growth; 3: bench evaluations per
 #: solve 2,803 -> 2,571 at rtol 1e-4, 8,129 -> 7,669 at 1e-7; its earlier worst case was
-#: a missed int u error of ``_radau5.defect_error``, since fixed; docs/validation.md)
+#: a missed int u error of ``periodic.radau.defect_error``, since fixed; docs/validation.md)
 MIN_FACTOR = 0.2
 MAX_FACTOR = 3.0
 _EXPONENT = 1.0 / ERROR_ORDER

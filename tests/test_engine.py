@@ -12,16 +12,16 @@ import pytest
 import solver
 from references import reference
 from cases import AGREEMENT_CASES, radau_reference
-from solver import _radau5, _sweep, _switching
-from solver._kinematics import angle_and_rate
-from solver._radau5 import PointPhysics
-from solver.bench import solution_error
+from solver.periodic import radau, sweep, switching
+from solver.model.kinematics import angle_and_rate
+from solver.periodic.radau import PointPhysics
+from solver.tools.bench import solution_error
 from test_solver_methods import ORDER_CASES
 
 
 def _error(res, ref, kin, physics):
     """The first point's error of ``res`` against ``ref`` in the solver's norm (the quantity
-    ``error_estimate`` bounds: ``solver.bench.solution_error``)."""
+    ``error_estimate`` bounds: ``solver.tools.bench.solution_error``)."""
     return float(solution_error(res.U, res.P, ref.U, ref.P, physics.period,
                                 solver.kinematic_speed(kin))[0])
 
@@ -55,13 +55,13 @@ def _step_against_scipy(kin, physics, t0, u_n, h):
     code, params = kin.kernel_encoding()
     params = params[0]
     phys = _point_physics(physics)
-    f0, J0, P0, Pu0 = _sweep.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)
-    kin3 = _sweep.stage_kinematics(code, params, t0, h)
-    step = _radau5.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
-    err, used = _radau5.defect_error(u_n, f0, J0, P0, Pu0, step, h,
-                                     _sweep.sample_kinematics(code, params, t0, h), phys)
+    f0, J0, P0, Pu0 = sweep.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)
+    kin3 = sweep.stage_kinematics(code, params, t0, h)
+    step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
+    err, used = radau.defect_error(u_n, f0, J0, P0, Pu0, step, h,
+                                     sweep.sample_kinematics(code, params, t0, h), phys)
     int_ref, u_ref = radau_reference(code, params, tuple(phys), t0, t0 + h, u_n)
-    int_u, _ = _radau5.step_integrals(h, step)
+    int_u, _ = radau.step_integrals(h, step)
     return step, err, used, u_ref - step.U3, int_ref - int_u
 
 
@@ -91,9 +91,9 @@ def test_embedded_estimate_is_the_fallback_and_larger():
     code, params = kin.kernel_encoding()
     phys = _point_physics(physics)
     h, t0, u_n = 0.05, 0.2, 0.05
-    f0, J0, P0, Pu0 = _sweep.start_values(code, params[0], t0, t0 + 0.5 * h, u_n, phys)
+    f0, J0, P0, Pu0 = sweep.start_values(code, params[0], t0, t0 + 0.5 * h, u_n, phys)
     step, err, used, du, dv = _step_against_scipy(kin, physics, t0, u_n, h)
-    embedded = _radau5.embedded_error(u_n, f0, J0, P0, Pu0, step, h)
+    embedded = radau.embedded_error(u_n, f0, J0, P0, Pu0, step, h)
     assert abs(embedded.u) > 10 * abs(du) and abs(embedded.int_u) > 10 * abs(dv)
 
 
@@ -110,7 +110,7 @@ def test_an_event_in_the_first_sixth_of_a_step_is_found():
     params = params[0]
     phys = _point_physics(physics)
     from scipy.integrate import solve_ivp
-    from solver._force import force_and_slope
+    from solver.model.force import force_and_slope
 
     def rhs(t, y):
         phi, om = angle_and_rate(code, params, t, t)
@@ -118,7 +118,7 @@ def test_an_event_in_the_first_sixth_of_a_step_is_found():
 
     def g(t, y):
         phi, om = angle_and_rate(code, params, t, t)
-        return _switching.state_function(_switching.TANGENTIAL, y[0], math.sin(phi), om)
+        return switching.state_function(switching.TANGENTIAL, y[0], math.sin(phi), om)
 
     sol = solve_ivp(rhs, (0.018645, 0.03), [0.031723], method="Radau", rtol=1e-12,
                     atol=1e-15, events=g, dense_output=True)
@@ -127,18 +127,18 @@ def test_an_event_in_the_first_sixth_of_a_step_is_found():
     h = 0.02
     t0 = t_c - 0.1 * h
     u_n = sol.sol(t0)[0]
-    kin3 = _sweep.stage_kinematics(code, params, t0, h)
-    step = _radau5.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
+    kin3 = sweep.stage_kinematics(code, params, t0, h)
+    step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
     phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
-    f0 = _sweep.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)[0]
-    theta = _sweep.find_event(code, params, phys, t0, h, u_n, step, kin3, math.sin(phi0), om0,
-                              f0, 1e-14, True, _sweep.new_exit_memo())
+    f0 = sweep.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)[0]
+    theta = sweep.find_event(code, params, phys, t0, h, u_n, step, kin3, math.sin(phi0), om0,
+                              f0, 1e-14, True, sweep.new_exit_memo())
     assert abs(theta - 0.1) < 1e-2, theta
     h = theta * h
-    kin3 = _sweep.stage_kinematics(code, params, t0, h)
-    step = _radau5.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
-    cut = _sweep.find_event(code, params, phys, t0, h, u_n, step, kin3, math.sin(phi0), om0,
-                            f0, 1e-14, False, _sweep.new_exit_memo())
+    kin3 = sweep.stage_kinematics(code, params, t0, h)
+    step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
+    cut = sweep.find_event(code, params, phys, t0, h, u_n, step, kin3, math.sin(phi0), om0,
+                            f0, 1e-14, False, sweep.new_exit_memo())
     true = (t_c - t0) / h
     assert abs(true - 1.0) < 0.05  # the cut step ends near the true crossing ...
     if cut > 0:                    # ... and any crossing left in it is located to 1e-6
@@ -152,8 +152,8 @@ def test_kinematic_stops_are_the_zeros_of_the_kinematic_functions():
     omega on a fine sampling has a stop within the sampling's width."""
     kin = solver.Fourier([[0.3, 1.1, 0.0, 0.2]], [[0.0, -0.1, 0.05]])
     code, params = kin.kernel_encoding()
-    out = np.empty(_switching.MAX_STOPS)
-    count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], out)
+    out = np.empty(switching.MAX_STOPS)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out)
     stops = out[:count]
     tau = np.linspace(0.0, 1.0, 200001)
     phi = kin.angle(tau)[0]
@@ -173,11 +173,11 @@ def test_a_corner_next_to_a_zero_stays_a_stop():
     kin = solver.PowerLaw([math.pi / 2 + 0.5 - 2e-12], [0.5], [0.5], [2.0], [False], [2.0],
                           [True])
     code, params = kin.kernel_encoding()
-    out = np.empty(_switching.MAX_STOPS)
-    count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], out)
+    out = np.empty(switching.MAX_STOPS)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out)
     stops = out[:count]
     assert 0.5 in stops, stops
-    near = stops[np.abs(stops - 0.5) <= _switching.STOP_GAP]
+    near = stops[np.abs(stops - 0.5) <= switching.STOP_GAP]
     assert list(near) == [0.5], near  # (the root merged into the corner)
 
 
@@ -185,7 +185,7 @@ def test_rate_slope_is_the_derivative_of_omega():
     """``rate_slope`` (phi'', used by the exit functions and the stop reach): analytic for a
     Fourier motion, a central difference of omega for a power law; both against a
     Richardson-extrapolated central difference of the analytic omega (error ~h^4)."""
-    from solver._kinematics import rate_slope
+    from solver.model.kinematics import rate_slope
 
     def richardson(code, row, t, side, h=1e-3):
         def d(step):
@@ -228,7 +228,7 @@ def test_agrees_with_the_march_and_is_honest(case):
 def test_agrees_with_lsoda():
     """The bench's scipy baseline (LSODA marching period by period, tol 1e-10) on a
     burst-and-coast power law and a clapping Fourier motion."""
-    from solver.bench import baseline_point, family_angle
+    from solver.tools.bench import baseline_point, family_angle
     cases = [c for c in AGREEMENT_CASES if c.name in ("linear_two_phase", "clapping_fourier")]
     for case in cases:
         res = solver.solve_periodic(case.kinematics, case.physics, rtol=1e-8)
@@ -271,9 +271,9 @@ def test_power_floor_does_not_erase_the_power_error():
     """The floor taken off int Pi's error scales with dPi/du, not with int u's error (a
     reviewer's find: with int u's error below its floor, P's own quadrature error of 1e-6
     counted as 0)."""
-    err = _radau5.StepError(0.0, 1e-20, 1e-6)
-    assert _sweep.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1.0) >= 0.99e-6
-    assert _sweep.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1e12) == 0.0
+    err = radau.StepError(0.0, 1e-20, 1e-6)
+    assert sweep.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1.0) >= 0.99e-6
+    assert sweep.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1e12) == 0.0
 
 
 def test_a_body_passing_a_turning_point_is_not_trapped():
@@ -283,7 +283,7 @@ def test_a_body_passing_a_turning_point_is_not_trapped():
     (u(0) = -6e-12) whose every step is locally consistent, 103 rtol off at rtol 1e-3 with an
     estimate of 0.17 (measured with ``trap_ceiling`` off).  Against the periodic engine at
     rtol 1e-8 (the two engines agree there to 1e-9)."""
-    from solver.honesty import SETS
+    from solver.tools.honesty import SETS
 
     kin, physics = SETS["short_period_harmonic"].sample()
     kin, physics = kin.take([93]), physics.take([93])
@@ -315,13 +315,13 @@ def _flat_inflection_errors(scaled_period, rtols):
 
 
 def test_the_trap_clip_never_lengthens_a_step():
-    """``_sweep.trap_clip``: a step next to a turning point is cut to its ceiling, not below
+    """``periodic.sweep.trap_clip``: a step next to a turning point is cut to its ceiling, not below
     ACCEPT_STEP, and never made longer (a step already ending on a stop closer than
     ACCEPT_STEP keeps its length: it must not cross the stop)."""
-    accept = _sweep.ACCEPT_STEP
+    accept = sweep.ACCEPT_STEP
     for h in (1e-14, 0.3 * accept, accept, 3.0 * accept, 1e-6, 0.1):
         for cap in (0.0, 1e-15, 0.5 * accept, 2.0 * accept, 1e-7, 1e-3, 1.0):
-            clipped = _sweep.trap_clip(h, cap)
+            clipped = sweep.trap_clip(h, cap)
             assert clipped <= h
             assert clipped >= min(h, accept)
             if accept <= cap < h:
@@ -336,7 +336,7 @@ def test_a_flat_inflection_keeps_the_trap_cap():
 
 
 def test_flat_inflections_are_honest_at_tight_tolerances():
-    """A scan over rtol 2e-6 .. 3e-5 at two scaled periods.  Before ``_sweep.trapped_steps``
+    """A scan over rtol 2e-6 .. 3e-5 at two scaled periods.  Before ``periodic.sweep.trapped_steps``
     5 of 15 converged solves were 2.5 .. 10.0 rtol off with estimates of 0.2 .. 0.9 (and one
     failed): the frozen Newton had moved u at tau = 0 into the friction's band, where the step
     into that turning point, judged by the adaptive sweep's u, exceeded its trap ceiling 10 ..
@@ -352,7 +352,7 @@ def test_flat_inflections_are_honest_at_tight_tolerances():
 
 
 def test_exponential_moments_match_quadrature():
-    """Both branches of ``_radau5.exponential_moments`` (the power series from tables for
+    """Both branches of ``periodic.radau.exponential_moments`` (the power series from tables for
     |z| <= 1, the recurrence beyond) against adaptive quadrature of their definitions."""
     from scipy.integrate import quad
 
@@ -360,7 +360,7 @@ def test_exponential_moments_match_quadrature():
     for _ in range(60):
         z = rng.choice([-1.0, 1.0]) * 10.0 ** rng.uniform(-6.0, 1.5)
         q = rng.normal(size=5)
-        s_i, s_g = _radau5.exponential_moments(z, *q)
+        s_i, s_g = radau.exponential_moments(z, *q)
         ref_i = sum(q[k - 1] * quad(lambda x, k=k: x ** k * np.exp(z * x), 0.0, 1.0,
                                     epsabs=0.0, epsrel=1e-13)[0] for k in range(1, 6))
         ref_g = sum(q[k - 1] * quad(lambda x, k=k: x ** k * np.expm1(z * x) / z, 0.0, 1.0,
@@ -418,8 +418,8 @@ def test_a_near_tangency_on_a_sample_is_a_stop():
     kin = solver.Fourier([[2.112571090023332, 0.0, 0.0, 0.0, 0.0]],
                          [[0.8814484713883943, 0.0, -0.29377653802312464, 0.0]])
     code, params = kin.kernel_encoding()
-    stops = np.empty(_switching.MAX_STOPS)
-    count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
+    stops = np.empty(switching.MAX_STOPS)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
     assert np.any(np.abs(stops[:count] - 0.5) < 1e-12), stops[:count]
 
 
@@ -470,13 +470,13 @@ def test_former_harness_failures_converge_within_rtol(motion, friction, rtol):
 
 
 def test_a_round_refines_a_step_at_most_max_refinement_times():
-    """``_global_error.refinement_ceiling``: a share 2^5 above its step's target asks for a
+    """``periodic.global_error.refinement_ceiling``: a share 2^5 above its step's target asks for a
     step half as long; one far above it (an estimate out of its regime), for at most
     MAX_REFINEMENT times shorter, not for ACCEPT_STEP; within the target, for nothing."""
-    from solver._global_error import MAX_REFINEMENT, refinement_ceiling
+    from solver.periodic.global_error import MAX_REFINEMENT, refinement_ceiling
 
-    W = _sweep.new_workspace(4)
-    W[_sweep.T, :4] = [0.0, 0.25, 0.5, 1.0]
+    W = sweep.new_workspace(4)
+    W[sweep.T, :4] = [0.0, 0.25, 0.5, 1.0]
     target = 1e-4
     shares = np.array([0.5 * target * 0.25, 32.0 * target * 0.25, 3e291])
     ceilings = np.empty(3)
@@ -497,8 +497,8 @@ def test_a_linear_phase_has_no_turning_stops():
     kin = solver.PowerLaw([0.3141592653589793], [0.05235987755982988], [0.3], [10.0], [True],
                           [1.0], [False])
     code, params = kin.kernel_encoding()
-    stops = np.empty(_switching.MAX_STOPS)
-    count, _ = _switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
+    stops = np.empty(switching.MAX_STOPS)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
     assert list(stops[:count]) == [0.0, 0.3], stops[:count]
     physics = solver.Physics.from_scaled(2.0 ** -6, 0.125, p=0.0, delta=1e-5)
     ref = reference(kin, physics)
@@ -510,16 +510,16 @@ def test_a_linear_phase_has_no_turning_stops():
 
 def _step_kinematics(phi, omega, h):
     """StageKinematics of phi = phi + omega (tau - tau_n) at the three stages of a step."""
-    c = _radau5.RADAU5_C
+    c = radau.RADAU5_C
     angles = phi + omega * h * c
-    return _radau5.StageKinematics(*np.sin(angles), *np.cos(angles), omega, omega, omega)
+    return radau.StageKinematics(*np.sin(angles), *np.cos(angles), omega, omega, omega)
 
 
 def _stage_residual_root(u_n, stages, h, kin, phys):
     """The 3-stage Radau IIA equations U - u_n - h kappa A F(U) = 0 solved to rounding by
     scipy's hybrid Powell method from ``stages`` (an independent iteration), or None."""
     from scipy.optimize import root
-    from solver._force import force_and_slope_sc
+    from solver.model.force import force_and_slope_sc
 
     S = (kin.S1, kin.S2, kin.S3)
     C = (kin.C1, kin.C2, kin.C3)
@@ -528,7 +528,7 @@ def _stage_residual_root(u_n, stages, h, kin, phys):
     def residual(U):
         F = [force_and_slope_sc(U[i], S[i], C[i], om[i], phys.mu_n, phys.mu_s, phys.p,
                                 phys.dtau)[0] for i in range(3)]
-        return U - u_n - h * phys.kappa * _radau5.RADAU5_A @ np.array(F)
+        return U - u_n - h * phys.kappa * radau.RADAU5_A @ np.array(F)
 
     sol = root(residual, np.asarray(stages, dtype=float), method="hybr", tol=1e-15)
     if not sol.success or np.max(np.abs(residual(sol.x))) > 1e-13 * max(1.0, abs(u_n)):
@@ -551,14 +551,14 @@ def test_stage_newton_stops_within_its_tolerance():
                             rng.choice([0.0, 0.5, 1.5]), 10.0 ** rng.uniform(-8, -2))
         h = 10.0 ** rng.uniform(-4, -1)
         kin = _step_kinematics(phi, omega, h)
-        first = _radau5.radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, 1e-15)
+        first = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, 1e-15)
         if not first.ok:
             continue
         ref = _stage_residual_root(u_n, (first.U1, first.U2, first.U3), h, kin, phys)
         if ref is None:
             continue
         for atol in (1e-6, 1e-9, 1e-12):
-            sol = _radau5.radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, atol)
+            sol = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, atol)
             assert sol.ok
             worst = max(worst, *(abs(U - r) / atol for U, r in zip((sol.U1, sol.U2, sol.U3), ref)))
             checked += 1
@@ -570,7 +570,7 @@ def _newton_correction(u_n, stages, h, kin, phys):
     """The full Newton correction J^-1 R of the 3-stage equations at ``stages`` (exact
     Jacobian J = I - h kappa A diag(dF/du)): the stages' distance to the root, to first
     order.  With F decreasing in u the root is unique (algebraic stability of Radau IIA)."""
-    from solver._force import force_and_slope_sc
+    from solver.model.force import force_and_slope_sc
 
     S = (kin.S1, kin.S2, kin.S3)
     C = (kin.C1, kin.C2, kin.C3)
@@ -578,15 +578,15 @@ def _newton_correction(u_n, stages, h, kin, phys):
     U = np.asarray(stages, dtype=float)
     F, dF = np.array([force_and_slope_sc(U[i], S[i], C[i], om[i], phys.mu_n, phys.mu_s,
                                          phys.p, phys.dtau) for i in range(3)]).T
-    R = U - u_n - h * phys.kappa * _radau5.RADAU5_A @ F
-    J = np.eye(3) - h * phys.kappa * _radau5.RADAU5_A * dF
+    R = U - u_n - h * phys.kappa * radau.RADAU5_A @ F
+    J = np.eye(3) - h * phys.kappa * radau.RADAU5_A * dF
     return np.linalg.solve(J, R)
 
 
 def test_stage_newton_at_an_infinite_slope_converges_to_the_roots():
-    """The sweeps' step solve (``_sweep.solve_step``: ``radau5_step`` from the prediction,
+    """The sweeps' step solve (``periodic.sweep.solve_step``: ``radau5_step`` from the prediction,
     then from u_n and from rest) at omega = 0 (F = -K |u|^p sign u, p = 0.5, delta = 0: an infinite
-    slope at u = 0) from many starts: the sign-flip cut (``_radau5.flip_cut``) must lead
+    slope at u = 0) from many starts: the sign-flip cut (``periodic.radau.flip_cut``) must lead
     Newton to the stage roots, not accept unconverged stages (the former engine's first cut
     accepted 348 of 1,064 such cases up to 6e7 atol off): the full Newton correction at the
     returned stages is below 10 atol."""
@@ -595,10 +595,10 @@ def test_stage_newton_at_an_infinite_slope_converges_to_the_roots():
     atol = 1e-10
     cases = 0
     for h in (0.05, 1.0, 3.0):
-        kin = _radau5.StageKinematics(S, S, S, C, C, C, 0.0, 0.0, 0.0)
+        kin = radau.StageKinematics(S, S, S, C, C, C, 0.0, 0.0, 0.0)
         for u_n in (*np.geomspace(1e-8, 1.0, 7), *-np.geomspace(1e-8, 1.0, 7)):
             for guess in (u_n, 0.3, -0.3, 1e-3, -1e-3):
-                sol, _ = _sweep.solve_step(u_n, guess, guess, guess, h, kin, phys, atol)
+                sol, _ = sweep.solve_step(u_n, guess, guess, guess, h, kin, phys, atol)
                 assert sol.ok, (h, u_n, guess)
                 dx = _newton_correction(u_n, (sol.U1, sol.U2, sol.U3), h, kin, phys)
                 assert np.max(np.abs(dx)) <= 10 * atol, (h, u_n, guess, dx)

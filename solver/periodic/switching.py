@@ -1,6 +1,6 @@
-"""Switching functions of the engine (``_radau5_solve``): where F(u(tau), tau) is not smooth.
+"""Switching functions of the engine (``periodic.driver``): where F(u(tau), tau) is not smooth.
 
-With the link velocity of ``_force`` (normal w(s) = a + b s, a = -S g, b = omega,
+With the link velocity of ``model.force`` (normal w(s) = a + b s, a = -S g, b = omega,
 tangential c = C g, g = u + omega S / 4, S = sin phi, C = cos phi) the force integrand has
 a kink where w = 0.  F(u(tau), tau) has a corner in tau (for p = 0 a jump of dF/dtau over a
 width ~ delta_tau; a corner of the integrand at an end of the link is a corner of its
@@ -12,7 +12,7 @@ integral) where:
 
 And the solution itself changes fast where the links stop rotating, omega = 0 (a turning
 point of phi): the whole body then slides one way and feels the full friction, so across a
-window ~ |u| / |phi''| the force changes by O(mu) (``_sweep.trap_ceiling``).  A step whose stages do not sample such a feature does not see it, nor does its
+window ~ |u| / |phi''| the force changes by O(mu) (``periodic.sweep.trap_ceiling``).  A step whose stages do not sample such a feature does not see it, nor does its
 embedded error estimate.  So every one of them is a step end (diffrax ``JumpStepWrapper``,
 DifferentialEquations.jl ``tstops``):
 
@@ -31,9 +31,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ._force import force_slope_power_sc
-from ._kinematics import FOURIER, angle_and_rate, rate_slope
-from ._radau5 import dense_value
+from ..model.force import force_slope_power_sc
+from ..model.kinematics import FOURIER, angle_and_rate, rate_slope
+from .radau import dense_value
 
 #: samples per wavenumber (and period) in the search for the zeros of the kinematic
 #: switching functions of a Fourier motion (a function of wavenumber K has at most 2K zeros)
@@ -143,7 +143,7 @@ def _refine_root(k, code, params, a, b, fa, fb, side):
 
 @njit(cache=True, error_model="numpy")
 def stop_speed(code, params, stops, n_stops):
-    """V = (1/4) int_0^1 |dphi/dtau| dtau (``_limits.kinematic_speed``) from phi at the
+    """V = (1/4) int_0^1 |dphi/dtau| dtau (``model.limits.kinematic_speed``) from phi at the
     ``kinematic_stops``: phi is monotone between them (they hold every zero of omega and
     every corner), so a quarter of the sum of |phi| differences across them is exact."""
     total = 0.0
@@ -305,7 +305,7 @@ def turning_stops(code, params, stops, n_stops, omax):
     near-tangencies, flat inflections, and the power law's corners where a phase starts or
     ends with omega = 0; SIMPLE_TURNING where moreover |omega'| there is at least
     SIMPLE_SHARE of 2 pi omax (a harmonic motion's turning points: omega' = 2 pi omax),
-    so that omega grows away from it like a simple zero (``_sweep.TRAP_FLOOR``); 0 else."""
+    so that omega grows away from it like a simple zero (``periodic.sweep.TRAP_FLOOR``); 0 else."""
     out = np.zeros(n_stops, dtype=np.int8)
     for j in range(n_stops):
         t = stops[j]

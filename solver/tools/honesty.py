@@ -1,11 +1,11 @@
 """Honesty harness: is each periodic engine's error estimate true?
 
-Run as ``python -m solver.honesty [--method M ...] [--set S ...] [--rtol R ...] [--points N]
+Run as ``python -m solver.tools.honesty [--method M ...] [--set S ...] [--rtol R ...] [--points N]
 [--refresh] [--reuse-references] [--reference-method periodic] [--reference-rtol 1e-9] [--check-method M]
 [--check-rtol R] [--agreement 0.1] [--cache-dir out/honesty]``.
 
 A solve that returns status 0 claims an error of at most ``rtol`` in the solver's norm
-(``error_estimate`` <= rtol, see ``solver._solve``).  This harness solves seeded sets of
+(``error_estimate`` <= rtol, see ``solver.solve``).  This harness solves seeded sets of
 parameter points with each engine at each rtol, on the same points in one run, and measures
 the true error against references.  Everything is batched: one ``solve_periodic`` call per
 (set, method, rtol).
@@ -21,12 +21,12 @@ generator's parameters, printed above its table.  400 points each, seeded:
 ``fourier_clapping`` (K = 4; phi leaves (0, pi) on 60 % of the points), ``p0.5_harmonic``
 and ``p1.5_fourier`` (half of them at delta = 0), ``short_period_harmonic`` (scaled period
 2^-7 .. 2^-1), ``flat_inflection_fourier`` (sin^3 motions: omega vanishes at tau = 0, 1/2
-without changing sign; scaled period 2^-7 .. 1); and ``bench``, the 2,000 points of
-``python -m solver.bench``.
+without changing sign; scaled period 2^-7 .. 1); and ``tools.bench``, the 2,000 points of
+``python -m solver.tools.bench``.
 
 Error norm
 ----------
-The solver's own (``solver.bench.solution_error``): e = max(e_U, e_P) with
+The solver's own (``solver.tools.bench.solution_error``): e = max(e_U, e_P) with
 e_U = |U - U_ref| T / max(|U_ref| T, 1e-3 V) (``relative_u_error``, V =
 ``solver.kinematic_speed``) and e_P = |P - P_ref| / |P_ref|; ``error_estimate`` promises
 that maximum.
@@ -37,7 +37,7 @@ By default the harness judges against frozen references (``--reference-method fr
 ``honesty_references.npz`` beside this module holds, for every point of every set, U, P and
 status of the reference (the former order-3 engine, then ``periodic``, at rtol 1e-9) and of
 its cross-check (the order-5 engine, now ``periodic``, at rtol 1e-9), with the commit,
-seeds, settings and each set's largest disagreement (``freeze``; ``python -m solver.honesty
+seeds, settings and each set's largest disagreement (``freeze``; ``python -m solver.tools.honesty
 --freeze`` made it, in 2 h 20 min on 2 shared cores).  So the engine never checks itself,
 and a fresh clone judges in minutes.  A set whose generator changed is refused (its points'
 digest no longer matches) until it is frozen again.
@@ -105,7 +105,7 @@ from typing import Callable
 import numpy as np
 
 import solver
-from solver.bench import (DEFAULT_POINTS as BENCH_POINTS, DEFAULT_SEED as BENCH_SEED,
+from solver.tools.bench import (DEFAULT_POINTS as BENCH_POINTS, DEFAULT_SEED as BENCH_SEED,
                           draw_points, json_value, solution_error, status_counts)
 
 RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
@@ -119,8 +119,6 @@ MARCH_CHECK_RTOL = 1e-7
 AGREEMENT = 0.1
 SET_POINTS = 400
 WARMUP_POINTS = 4
-#: files of the solver package that hold no engine code (not in the references' key)
-HARNESS_FILES = ("honesty.py", "bench.py", "bench_optimize.py", "__main__.py")
 DEFAULT_CACHE = Path("out") / "honesty"
 #: the frozen references (``freeze``): every set's every point, committed with the package
 REFERENCE_FILE = Path(__file__).with_name("honesty_references.npz")
@@ -252,7 +250,7 @@ class PointSet:
     """A seeded set of parameter points: ``draw(n, rng)`` -> (kinematics, physics).
 
     ``points`` is the default size; a smaller ``n`` takes the first n of those (so a subset
-    is a prefix of the full set, and the ``bench`` set is the benchmark's points), a larger
+    is a prefix of the full set, and the ``tools.bench`` set is the benchmark's points), a larger
     one draws n."""
 
     name: str
@@ -305,7 +303,7 @@ SETS = {s.name: s for s in [
              "U(0.1, 0.9), A0 ~ U(0, pi/2], A1/A0 ~ U(0, 1]; mu_n/mu_s 2^U(-6, 6), scaled "
              "period 2^U(-3, 3), delta 1e-5, p = 0"),
     PointSet("bench", BENCH_SEED, _bench,
-             "the points of python -m solver.bench (its draw_points, seed "
+             "the points of python -m solver.tools.bench (its draw_points, seed "
              f"{BENCH_SEED}): Harmonic, mu_n/mu_s 2^U(-8, 8), scaled period 2^U(-3, 3), "
              "delta 1e-5, p = 0", BENCH_POINTS),
 ]}
@@ -332,12 +330,15 @@ def describe_point(kinematics, physics, i):
 # ----------------------------------------------------------------------------- references
 
 def engine_digest(package=Path(solver.__file__).parent):
-    """Short hash of the solver's engine sources (every ``*.py`` but ``HARNESS_FILES``)."""
+    """Short hash of the solver's engine sources (every ``*.py`` of the package and its
+    subpackages but ``tools/`` and ``__main__.py``)."""
     digest = hashlib.sha256()
-    for path in sorted(package.glob("*.py")):
-        if path.name not in HARNESS_FILES:
-            digest.update(path.name.encode())
-            digest.update(path.read_bytes())
+    for path in sorted(package.rglob("*.py")):
+        relative = path.relative_to(package)
+        if relative.parts[0] in ("tools", "__pycache__") or relative.name == "__main__.py":
+            continue
+        digest.update(relative.as_posix().encode())
+        digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
 
 
@@ -625,7 +626,7 @@ def frozen_references(point_set, kinematics, physics, path=REFERENCE_FILE):
     stored = meta["sets"].get(point_set.name)
     if stored is None:
         raise ValueError(f"--set: {point_set.name!r} has no frozen references in {path} "
-                         "(python -m solver.honesty --freeze makes them)")
+                         "(python -m solver.tools.honesty --freeze makes them)")
     full_kin, full_phys = point_set.sample(stored["points"])
     n = len(kinematics)
     if set_digest(full_kin, full_phys) != stored["digest"] or n > stored["points"]:
@@ -765,7 +766,7 @@ def warm_up(methods, point_set, settings):
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="python -m solver.honesty",
+    parser = argparse.ArgumentParser(prog="python -m solver.tools.honesty",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--method", nargs="+", default=None,
                         help="engines to judge (default: solver.METHODS but the march)")

@@ -1,4 +1,4 @@
-"""The 3-stage Radau IIA step: the pure kernel of the ``radau5`` engine.
+"""The 3-stage Radau IIA step: the pure kernel of the engine.
 
 Method as data (scipy ``integrate/_ivp/rk.py``, diffrax ``_solver``): the Butcher tableau
 is module constants, and ``radau5_step`` is one implicit step of eq. (Newtonu),
@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ._force import force_slope_power_sc
+from ..model.force import force_slope_power_sc
 
 _S6 = math.sqrt(6.0)
 #: Radau IIA, 3 stages (Butcher tableau): nodes, matrix and weights (= last row).
@@ -66,7 +66,7 @@ MAX_STAGE_ITERATIONS = 40
 #: Newton's first correction is taken as the last where the quadratic constant carried from
 #: the previous step predicts the next correction below this share of the tolerance
 #: (``radau5_step``'s ``rate``).  A prediction, not a bound (stages up to 3.7e5 atol off were
-#: measured), so ``_sweep.adaptive_sweep`` uses it in the loose sweeps only (bench: 857 ->
+#: measured), so ``periodic.sweep.adaptive_sweep`` uses it in the loose sweeps only (bench: 857 ->
 #: 601 evaluations per solve there; docs/validation.md)
 FIRST_CORRECTION_SHARE = 0.1
 #: ... and only where dF/du at the predicted stages is within this share of ``slope``

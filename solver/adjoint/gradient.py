@@ -2,7 +2,7 @@
 
 The discrete problem (one parameter point, a fixed grid tau_0 = 0 < ... < tau_N = 1, by
 default the step sequence of the order-5 engine's converged solve, ``adaptive_grid``).
-The method is the engine's 3-stage Radau IIA (order 5, ``_radau5``: nodes
+The method is the engine's 3-stage Radau IIA (order 5, ``periodic.radau``: nodes
 c = ((4 - sqrt 6)/10, (4 + sqrt 6)/10, 1), matrix A, weights b = last row of A =
 ((16 - sqrt 6)/36, (16 + sqrt 6)/36, 1/9)).  The unknowns are the stages
 x_n = (U1_n, U2_n, U3_n) of every step, U_i at tau_n + c_i h_n; the method is stiffly
@@ -13,12 +13,12 @@ corner) and kappa = T^(2-p) the residuals are
     R_i,n = U_i,n - U3_{n-1} - h_n kappa sum_j a_ij F_j,n        (i = 1, 2, 3; n - 1 mod N)
 
 and the objectives are built from the Radau-weighted period integrals (the engine's own,
-``_radau5.step_integrals``)
+``periodic.radau.step_integrals``)
 
     I_u = sum_n h_n b . U_n,   I_Pi = sum_n h_n b . Pi(U_n)   [Pi: eq. powerp's integrand],
     U = I_u / T,  P = T^-(p+1) I_Pi,  lambda = sign(U) |U|^(p+1) / P   (eqs. U, powerp, lambdap).
 
-The forward solve is the engine's fixed-grid solve (``_radau5_solve.fixed_grid_point``:
+The forward solve is the engine's fixed-grid solve (``periodic.driver.fixed_grid_point``:
 frozen sweeps, Newton on u(0), the converged sweep shifted onto the fixed point), with the
 nonlinear tolerances at rounding level (rtol 1e-13), so I_u and I_Pi are the engine's
 numbers on that grid (tests/test_gradient.py: equal to ``fixed_grid_point``'s).
@@ -34,8 +34,8 @@ where g_n = h_n b (I_u) or h_n b diag(Pi_u) (I_Pi), s_n = J_n^-1 1 = dU_n/du_n,
 c_n = s_n . g_n and m_n = (s_n)_3 = du_{n+1}/du_n, the step derivative whose product over
 the period is the monodromy M.  So the adjoint is one backward sweep:
 sigma_0 = (sum_n (prod_{k<n} m_k) c_n) / (1 - M), with m_n - 1 = (J_n^-1 h_n kappa A F_u)_3
-formed without cancellation and 1 - M accumulated as -expm1(sum log m_n) (``_shooting``),
-then l_n and sigma_n step by step backward by 3 x 3 transposed solves (``_radau5.solve3``,
+formed without cancellation and 1 - M accumulated as -expm1(sum log m_n) (``periodic.shooting``),
+then l_n and sigma_n step by step backward by 3 x 3 transposed solves (``periodic.radau.solve3``,
 pivoted: stiff stages make J_n's columns differ by ~1e10; |m_n| <~ 1, so the backward
 recursion is stable; it is O(N), both functionals in the same sweep).  With q_n = A^T l_n,
 
@@ -101,18 +101,18 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ._force import E_FLOOR, link_moments, link_setup_sc, radial_power
-from ._kinematics import FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, period_grid
-from ._limits import fast_limit_velocity
-from ._kinematics import angle_and_rate
-from ._shooting import monodromy_factor, one_minus_monodromy
-from ._radau5 import (A11, A12, A13, A21, A22, A23, A31, A32, A33, C1, C2, PointPhysics, solve3,
+from ..model.force import E_FLOOR, link_moments, link_setup_sc, radial_power
+from ..model.kinematics import FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, period_grid
+from ..model.limits import fast_limit_velocity
+from ..model.kinematics import angle_and_rate
+from ..periodic.shooting import monodromy_factor, one_minus_monodromy
+from ..periodic.radau import (A11, A12, A13, A21, A22, A23, A31, A32, A33, C1, C2, PointPhysics, solve3,
                       stage_matrix)
-from ._radau5_solve import BAND_SHARE, frozen_newton
-from ._sweep import (COS, END_KIND, ERR, INT_P, INT_U, M_MINUS_1, OMEGA, Q_P, Q_U, SENS, SIN,
+from ..periodic.driver import BAND_SHARE, frozen_newton
+from ..periodic.sweep import (COS, END_KIND, ERR, INT_P, INT_U, M_MINUS_1, OMEGA, Q_P, Q_U, SENS, SIN,
                      STAGE, T as W_T, U as W_U, frozen_sweep, new_workspace)
-from . import _radau5_solve
-from ._status import CONVERGED
+from ..periodic import driver as periodic_driver
+from ..status import CONVERGED
 
 _x10, _w10 = np.polynomial.legendre.leggauss(10)
 GL10_NODES = 0.5 * (_x10 + 1.0)
@@ -211,7 +211,7 @@ def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
     Parameters as ``force_and_slope``; returns as ``force_partials_quadrature``
     (``force_partials_into`` without the allocation, from sin and cos of phi).
 
-    Closed forms from the link moments of ``_force`` (the forward solve's own): for
+    Closed forms from the link moments of ``model.force`` (the forward solve's own): for
     theta in (u, phi, delta_tau) the normal velocity's derivative w_theta is constant
     along the link (w_u = -S, w_phi = -u C - omega S C / 2, w_delta = 0), so with
     q_theta = c c_theta + delta_tau delta_theta
@@ -219,7 +219,7 @@ def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
         d m_k^0 / d theta = k w_theta m_(k-1)^0 + (p - 1) (w_theta m_(k+1)^1 + q_theta m_k^1),
         m_3^1 = m_1^0 - e^2 m_1^1,
 
-    and F, Pi (``_force``) differentiate term by term.  omega enters w as omega s and
+    and F, Pi (``model.force``) differentiate term by term.  omega enters w as omega s and
     has no such form; it follows from homogeneity: scaling (u, omega, delta_tau) by
     lambda scales F by lambda^p and Pi by lambda^(p+1), so
 
@@ -406,7 +406,7 @@ def step_length_partials(code, params, h, tau_phase, dh):
 
 @njit(cache=True, error_model="numpy")
 def _stage_atol(rtol, vscale, dtau, p):
-    """The engine's stage Newton tolerance (``_radau5_solve._stage_atol``, copied: private
+    """The engine's stage Newton tolerance (``periodic.driver._stage_atol``, copied: private
     there): max(1e-5 rtol, 1e-14) V, and for p = 0 at most BAND_SHARE delta_tau."""
     atol = max(1e-5 * rtol, 1e-14) * vscale
     if p == 0.0:
@@ -417,7 +417,7 @@ def _stage_atol(rtol, vscale, dtau, p):
 @njit(cache=True, error_model="numpy")
 def _shift_onto_fixed_point(W, N, shift):
     """The converged sweep, ``shift`` short of the fixed point, moved onto it to first order
-    along the stage sensitivities (``_radau5_solve._shift``, copied: private there)."""
+    along the stage sensitivities (``periodic.driver._shift``, copied: private there)."""
     for n in range(N):
         W[W_U, n] += shift
         for i in range(3):
@@ -432,9 +432,9 @@ def _shift_onto_fixed_point(W, N, shift):
 def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     """Periodic solution of the 3-stage Radau IIA discretisation on ``nodes`` (N steps).
 
-    The engine's own fixed-grid solve (``_radau5_solve.fixed_grid_point``: a frozen sweep,
+    The engine's own fixed-grid solve (``periodic.driver.fixed_grid_point``: a frozen sweep,
     Newton on u(0) by frozen sweeps, the converged sweep shifted onto the fixed point), on
-    the workspace ``W`` (``_sweep.new_workspace(N)``), which holds the converged stages
+    the workspace ``W`` (``periodic.sweep.new_workspace(N)``), which holds the converged stages
     afterwards (rows STAGE .. STAGE + 2).  Writes phi, dphi/dtau, sin phi, cos phi at the
     stage times tau_n + c_i h_n (each on its step's side of a corner) into
     ``stage_kinematics`` (4, 3N).  The first sweep starts every stage at its step's start
@@ -484,7 +484,7 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     _shift_onto_fixed_point(W, N, shift)
     int_u = 0.0
     int_pi = 0.0
-    for n in range(N):  # summed in order, as ``_radau5_solve._integrals``
+    for n in range(N):  # summed in order, as ``periodic.driver._integrals``
         int_u += W[INT_U, n]
         int_pi += W[INT_P, n]
     return CONVERGED, fn.u0 + shift, int_u, int_pi
@@ -711,9 +711,9 @@ MAX_STEPS_PER_PERIOD = 2 ** 17
 def adaptive_grid(kinematics, physics, *, rtol=1e-6, max_steps_per_period=None):
     """The step sequence of the order-5 engine's converged solve at ``rtol`` (one point) as a
     ``FixedGrid``: its adaptive steps, with the corners of phi, the other kinematic stops and
-    the state events as step ends (``_radau5_solve.solve(..., return_series=True)``)."""
+    the state events as step ends (``periodic.driver.solve(..., return_series=True)``)."""
     max_steps = MAX_STEPS_PER_PERIOD if max_steps_per_period is None else int(max_steps_per_period)
-    out = _radau5_solve.solve(kinematics, physics, rtol, max_steps, True)
+    out = periodic_driver.solve(kinematics, physics, rtol, max_steps, True)
     status = int(out["status"][0])
     if status != CONVERGED:
         raise RuntimeError(f"adaptive solve did not converge (status {status})")
@@ -780,7 +780,7 @@ class DiscreteSolution:
     int_u, int_pi : float
         The Radau-weighted period integrals I_u, I_Pi.
     status : int
-        0 converged (else the ``_status`` code; the other fields are then nan).
+        0 converged (else the ``status`` code; the other fields are then nan).
     u0 : float
         u(0), the warm start of the next solve.
     """

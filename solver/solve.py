@@ -3,12 +3,12 @@
 Two methods, each a driver that returns the period integrals int_0^1 u dtau and
 int_0^1 Pi dtau of every point with an error estimate and a status:
 
-- ``"periodic"``, the engine (``_radau5_solve``): event-driven 3-stage Radau IIA (order 5,
+- ``"periodic"``, the engine (``periodic.driver``): event-driven 3-stage Radau IIA (order 5,
   L-stable, stiffly accurate), steps ending at the corners of phi and at the state events
   of the friction, Newton on u(0) by frozen-grid sweeps with the exact monodromy, and one
   pass of error control from the collocation polynomial's defect carried to the period
   integrals by the node weights (the discrete adjoint of the shooting);
-- ``"march"``, the independent check (``_march_solve``): explicit Heun RK2 from rest, period
+- ``"march"``, the independent check (``march.driver``): explicit Heun RK2 from rest, period
   by period, on uniformly doubled corner-aligned grids, with a Richardson estimate; it
   reports UNSTABLE on stiff sticking rather than a wrong number.
 
@@ -27,10 +27,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from . import _march_solve, _radau5_solve
-from ._kinematics import period_grid
-from ._limits import fast_limit_velocity, kinematic_speed
-from ._status import CONVERGED, NO_MOTION, OUT_OF_RANGE
+from .march import driver as march_driver
+from .periodic import driver as periodic_driver
+from .model.kinematics import period_grid
+from .model.limits import fast_limit_velocity, kinematic_speed
+from .status import CONVERGED, NO_MOTION, OUT_OF_RANGE
 
 #: the public methods of ``solve_periodic``: the engine, and the march, its independent check
 METHODS = ("periodic", "march")
@@ -54,9 +55,9 @@ class Engine:
 #: bump a version with every change of its engine's discretisation or error control
 ENGINES = {
     "periodic": Engine("periodic", "event-driven 3-stage Radau IIA (order 5) with one-pass "
-                       "error control (_radau5_solve)", "5.1"),
+                       "error control (periodic.driver)", "5.1"),
     "march": Engine("march", "explicit Heun RK2 (order 2) from rest, period by period, on "
-                    "doubled uniform grids with a Richardson estimate (_march_solve)", "2.1"),
+                    "doubled uniform grids with a Richardson estimate (march.driver)", "2.1"),
 }
 #: the u floor of U's error norm, as a share of V (module docstring)
 U_FLOOR_FRACTION = 1e-3
@@ -156,7 +157,7 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
 
     For convergence studies (order tests, work-precision): the engine's 3-stage Radau IIA
     (``method="periodic"``) or the march's Heun steps (``"march"``; ``n_steps`` a multiple of
-    8) on ``_kinematics.period_grid``'s grid, uniform inside each phase of phi with its
+    8) on ``model.kinematics.period_grid``'s grid, uniform inside each phase of phi with its
     corners on nodes.  ``rtol`` only sets the tolerances of the nonlinear iterations
     (shooting, stage Newton, periodicity).
 
@@ -171,12 +172,12 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
     if len(physics) == 1 and n > 1:
         physics = physics.take(np.zeros(n, dtype=int))
     if method == "march":
-        return _march_solve.fixed_grid(kinematics, physics, n_steps, rtol=rtol)
+        return march_driver.fixed_grid(kinematics, physics, n_steps, rtol=rtol)
     code, params = kinematics.kernel_encoding()
     vscale = kinematic_speed(kinematics)
     u0 = fast_limit_velocity(kinematics, physics)
     grids = period_grid(kinematics, n_steps)
-    return _radau5_solve.fixed_grid_points(
+    return periodic_driver.fixed_grid_points(
         code, params, grids, physics.inertia_factor, physics.mu_n, physics.mu_s, physics.p,
         physics.delta_tau, float(rtol), np.maximum(vscale, 1e-300), u0)
 
@@ -193,7 +194,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         T, mu_n, mu_s, p, delta; length 1 or n_points.
     method : {"periodic", "march"}
         "periodic": the engine: event-driven 3-stage Radau IIA (order 5, L-stable) with
-        one-pass error control, Newton on u(0) (``_radau5_solve``).
+        one-pass error control, Newton on u(0) (``periodic.driver``).
         "march": explicit RK2 (Heun, order 2) from rest until periodic: the independent
         check (reports UNSTABLE on stiff sticking instead of a wrong number).
     rtol : float
@@ -217,15 +218,15 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     if len(physics) == 1 and n > 1:
         physics = physics.take(np.zeros(n, dtype=int))
     start = time.perf_counter()
-    driver = _radau5_solve.solve if method == "periodic" else _march_solve.solve
+    driver = periodic_driver.solve if method == "periodic" else march_driver.solve
     out = driver(kinematics, physics, rtol,
                  max_steps_per_period or MAX_STEPS_PER_PERIOD, return_series)
     return _result(out, physics, method, start)
 
 
 def _result(out, physics, method, start):
-    """The ``SolveResult`` of a driver's output dict (``_radau5_solve.solve``,
-    ``_march_solve.solve``: int_u, int_pi, status, estimate, n_tau, iterations, still,
+    """The ``SolveResult`` of a driver's output dict (``periodic.driver.solve``,
+    ``march.driver.solve``: int_u, int_pi, status, estimate, n_tau, iterations, still,
     series, evaluations): the physical outputs, NaN where not converged, phi constant as
     NO_MOTION with U = P = 0, and U or P beyond the float range as OUT_OF_RANGE."""
     status = out["status"]

@@ -16,8 +16,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._force import force_and_slope
-from ._kinematics import angle_and_rate, evaluate_grid, period_grid
+from .force import force_and_slope
+from .kinematics import angle_and_rate, evaluate_grid, period_grid
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 GL4_NODES = 0.5 * (_GL_X + 1.0)

@@ -222,7 +222,7 @@ def _moments_closed_coulomb(a, b, e2):
         # w1, w2 of opposite signs: asinh(x2) - asinh(x1) = sign(w2 - w1) (asinh |x2| +
         # asinh |x1|), one log of a product of two factors >= 1 (no cancellation; the sum is
         # >= asinh(|b| / 2e) > asinh(1/2) where the closed form is used, e < |b|).  Two asinh
-        # calls (each a log or log1p) were ~9 % of a radau5 solve's time (bench, perf)
+        # calls (each a log or log1p) were ~9 % of an engine solve's time (bench, perf)
         both = (abs(w2) + r2) * (abs(w1) + r1) / e2
         if both < math.inf:
             M00 = math.copysign(math.log(both), w2 - w1)
@@ -327,7 +327,7 @@ def force_slope_power_sc(u, S, C, omega, mu_n, mu_s, p, delta_tau):
     needs no separate power pass (it was a quarter of all evaluations).
 
     dPi/du differentiates Pi = 2 (mu_n m_2^0 + mu_s c^2 m_0^0) term by term, with the
-    moment derivatives of ``_gradient.force_partials`` for theta = u (w_u = -S, c_u = C).
+    moment derivatives of ``adjoint.gradient.force_partials`` for theta = u (w_u = -S, c_u = C).
     """
     S, C, a, b, c, e2 = link_setup_sc(u, S, C, omega, delta_tau, p)
     m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)

@@ -1,11 +1,11 @@
-"""The ``radau5`` engine: the periodic steady state of eq. (Newtonu) by event-driven
+"""The engine: the periodic steady state of eq. (Newtonu) by event-driven
 3-stage Radau IIA with one-pass error control.
 
 For each parameter point (``solve_point``, one compiled function, all points batched over
 threads by ``solve_points``):
 
-1. **Stops.** The kinematic step ends of the period (``_switching.kinematic_stops``).
-2. **Loose shooting.** Adaptive sweeps (``_sweep.adaptive_sweep``) at the loose tolerance
+1. **Stops.** The kinematic step ends of the period (``periodic.switching.kinematic_stops``).
+2. **Loose shooting.** Adaptive sweeps (``periodic.sweep.adaptive_sweep``) at the loose tolerance
    LOOSE_RTOL from the fast limit's u(0), each followed by a Newton step on u(0) with the
    sweep's monodromy, until u(0) moves by less than the loose tolerance: this finds the
    periodic orbit's neighbourhood and the node weights cheaply.
@@ -16,17 +16,17 @@ threads by ``solve_points``):
    order along the stage sensitivities).  Where the frozen steps do not
    carry Newton there (a stage solve fails on them, or MAX_FROZEN_SWEEPS run out), the next
    round starts here again with an adaptive sweep, which places its steps anew.
-4. **Estimate.** Every step's local error from its defect (``_sweep.estimate_sweep``), or,
+4. **Estimate.** Every step's local error from its defect (``periodic.sweep.estimate_sweep``), or,
    where the shooting moved a state event off its node, from the step solved again split
-   at the event (``_sweep.event_split_errors``), carried to int u and int Pi by the node
-   weights of the converged solution (``_global_error``).  If the estimate exceeds rtol,
+   at the event (``periodic.sweep.event_split_errors``), carried to int u and int Pi by the node
+   weights of the converged solution (``periodic.global_error``).  If the estimate exceeds rtol,
    the steps that asked for it get ceilings and steps 3-4 run again from the converged
    u(0), so that the new sweep also puts the moved events on nodes (at most MAX_ROUNDS
    times), then TOLERANCE_NOT_REACHED (or the last round's failure).  (Moving nodes onto
    the moved events instead cost more: bench at rtol 1e-7, 9,466 force evaluations per
    solve against 8,592.)
 
-Failures are NaN plus a status code (``_status``), never silent.
+Failures are NaN plus a status code (``status``), never silent.
 """
 from __future__ import annotations
 
@@ -37,16 +37,16 @@ from typing import NamedTuple
 import numpy as np
 from numba import get_num_threads, njit, prange
 
-from ._global_error import combine, local_error_estimate, node_weights, refinement_ceiling
-from ._shooting import (bracketed_newton_update, monodromy_factor, one_minus_monodromy,
+from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
+from .shooting import (bracketed_newton_update, monodromy_factor, one_minus_monodromy,
                         stage_tolerance)
-from ._radau5 import ERROR_ORDER, PointPhysics
-from ._status import (CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED,
+from .radau import ERROR_ORDER, PointPhysics
+from ..status import (CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED,
                       TOLERANCE_NOT_REACHED)
-from ._sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
+from .sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
                      SENS, STAGE, T, U, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
                      event_split_errors, new_workspace, stage_kinematics_into, trapped_steps)
-from ._switching import MAX_STOPS, kinematic_stops, stop_speed, turning_stops
+from .switching import MAX_STOPS, kinematic_stops, stop_speed, turning_stops
 
 #: the stage tolerance is at most this share of delta_tau (p = 0; ``_stage_atol``)
 BAND_SHARE = 0.01
@@ -74,11 +74,11 @@ class PointSolution(NamedTuple):
     """What ``solve_point`` returns besides its workspace.
 
     int_u, int_pi : the period integrals (NaN unless ``status`` is CONVERGED);
-    u0 : the last u(0); status : ``_status`` code; n_steps : the final sweep's steps (its
+    u0 : the last u(0); status : ``status`` code; n_steps : the final sweep's steps (its
     solution is in the workspace's first n_steps columns); sweeps : sweeps made; estimate :
     the global error estimate in rtol's norm (inf: none); evaluations : (N_COSTS,) the
     evaluations of F by phase (COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE);
-    vscale : V = (1/4) int |dphi/dtau| dtau (``_switching.stop_speed``; 0: phi is constant,
+    vscale : V = (1/4) int |dphi/dtau| dtau (``periodic.switching.stop_speed``; 0: phi is constant,
     nothing was solved)."""
 
     int_u: float
@@ -94,7 +94,7 @@ class PointSolution(NamedTuple):
 
 @njit(cache=True, error_model="numpy")
 def _stage_atol(rtol, scale, phys):
-    """The stage Newton's tolerance: ``_shooting.stage_tolerance`` of the scale, and for p = 0
+    """The stage Newton's tolerance: ``periodic.shooting.stage_tolerance`` of the scale, and for p = 0
     at most BAND_SHARE delta_tau: where the body sticks F rises by O(mu) across a band of
     u ~delta_tau wide, and stages solved only to a tolerance wider than it land anywhere on
     the saturated force (measured: delta 1e-10, tolerance 4e-8 V, u chattering +-1e-6 around
@@ -120,7 +120,7 @@ def _largest_weight(model, scale_u, scale_p):
 @njit(cache=True, error_model="numpy")
 def _period_map(W, N, u0):
     """(g = u(1) - u(0), 1 - M) of a sweep: the shooting residual and one minus the
-    monodromy (``_shooting.one_minus_monodromy``)."""
+    monodromy (``periodic.shooting.one_minus_monodromy``)."""
     log_m = 0.0
     sign_m = 1.0
     for n in range(N):
@@ -224,7 +224,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
 
     Parameters
     ----------
-    code, params : the kinematics' kernel encoding (``_kinematics``), one row.
+    code, params : the kinematics' kernel encoding (``model.kinematics``), one row.
     corners : (k,) corners of phi in [0, 1).
     phys : PointPhysics
     rtol : float
@@ -232,7 +232,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         Starting u(0) (the fast limit).
     max_steps : int
         Steps per period before STEP_BUDGET_EXCEEDED.
-    W : workspace (``_sweep.new_workspace``)
+    W : workspace (``periodic.sweep.new_workspace``)
 
     Returns
     -------
@@ -462,19 +462,19 @@ def series_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_gue
     return counts
 
 
-#: the fast limit's u (``_limits.fast_limit_velocity``) that starts the shooting is taken on
+#: the fast limit's u (``model.limits.fast_limit_velocity``) that starts the shooting is taken on
 #: this many steps: it is a guess (bench, rtol 1e-4: 64 steps cost 18.7 ms per 2,000 points
 #: and the loose shooting 605 evaluations per solve, 8 steps 2.8 ms and 604, u = 0 571)
 GUESS_STEPS = 8
 
 
 def solve(kinematics, physics, rtol, max_steps, return_series):
-    """Batched ``solve_point`` for ``_solve.solve_periodic(method="radau5")``.
+    """Batched ``solve_point`` for ``solve.solve_periodic(method="periodic")``.
 
     Returns a dict with int_u, int_pi, status, estimate, n_tau, iterations (sweeps), still
     (phi constant: nothing solved), evaluations and, with ``return_series``, per point
     (u nodes, tau nodes)."""
-    from ._limits import fast_limit_velocity
+    from ..model.limits import fast_limit_velocity
 
     code, params = kinematics.kernel_encoding()
     corners = kinematics.corners()
@@ -490,7 +490,7 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
         u_out = np.empty(offsets[-1])
         counts = series_points(*args, offsets, tau_out, u_out)
         if not np.array_equal(counts, n_steps):
-            raise RuntimeError("radau5: a point's second solve for its series took another grid")
+            raise RuntimeError("periodic: a point's second solve for its series took another grid")
         series = [(u_out[a:b], tau_out[a:b]) for a, b in zip(offsets[:-1], offsets[1:])]
     return dict(int_u=int_u, int_pi=int_pi, status=status, estimate=estimate, n_tau=n_steps,
                 iterations=sweeps, still=vscale == 0.0, series=series, evaluations=evaluations)

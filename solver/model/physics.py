@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._kinematics import as_points
+from .kinematics import as_points
 
 
 @dataclass(frozen=True)
