@@ -80,3 +80,24 @@ def test_regression_point_converges_within_rtol(name):
         error = float(solution_error(res.U, res.P, ref.U, ref.P, phys.period, V)[0])
         assert error <= rtol and res.error_estimate[0] <= rtol, (rtol, error / rtol,
                                                                   res.error_estimate[0] / rtol)
+
+
+def test_a_period_map_that_jumps_over_its_fixed_point_keeps_its_residual():
+    """long_period_powerlaw point 356 of the honesty harness (mu_n/mu_s 62, scaled period
+    205, delta 5.5e-8, U ~ -1.9e-9) at rtol 1e-7: on the frozen steps the period map's
+    residual g jumps from +5.4e-11 to -2.8e-10 across 1e-21 of u(0) (M = 0), so Newton's
+    bisection closed in on the jump and the point failed (NOT_PERIODIC, the only failure of
+    the harness).  The round's start is now kept with |lambda_0 g| counted in the estimate:
+    within rtol of the frozen reference (the former engine at rtol 1e-9)."""
+    from solver.tools import honesty
+
+    point_set = honesty.SETS["long_period_powerlaw"]
+    kin, phys = point_set.sample(357)
+    ref, _, _ = honesty.frozen_references(point_set, kin, phys)
+    index = np.array([356])
+    kin, phys = kin.take(index), phys.take(index)
+    res = solver.solve_periodic(kin, phys, rtol=1e-7)
+    assert res.converged[0], solver.status_reason(res.status[0])
+    error = float(solution_error(res.U, res.P, ref.U[index], ref.P[index], phys.period,
+                                 solver.kinematic_speed(kin))[0])
+    assert error <= 1e-7 and res.error_estimate[0] <= 1e-7, (error, res.error_estimate[0])
