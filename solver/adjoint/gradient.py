@@ -108,7 +108,7 @@ from ..model.kinematics import angle_and_rate
 from ..periodic.shooting import monodromy_factor, one_minus_monodromy
 from ..periodic.radau import (A11, A12, A13, A21, A22, A23, A31, A32, A33, C1, C2, PointPhysics, solve3,
                       stage_matrix)
-from ..periodic.driver import BAND_SHARE, frozen_newton
+from ..periodic.driver import frozen_newton, shift_onto_fixed_point, stage_atol
 from ..periodic.sweep import (COS, END_KIND, ERR, INT_P, INT_U, M_MINUS_1, OMEGA, Q_P, Q_U, SENS, SIN,
                      STAGE, T as W_T, U as W_U, frozen_sweep, new_workspace)
 from ..periodic import driver as periodic_driver
@@ -405,30 +405,6 @@ def step_length_partials(code, params, h, tau_phase, dh):
 
 
 @njit(cache=True, error_model="numpy")
-def _stage_atol(rtol, vscale, dtau, p):
-    """The engine's stage Newton tolerance (``periodic.driver._stage_atol``, copied: private
-    there): max(1e-5 rtol, 1e-14) V, and for p = 0 at most BAND_SHARE delta_tau."""
-    atol = max(1e-5 * rtol, 1e-14) * vscale
-    if p == 0.0:
-        atol = min(atol, BAND_SHARE * dtau)
-    return atol
-
-
-@njit(cache=True, error_model="numpy")
-def _shift_onto_fixed_point(W, N, shift):
-    """The converged sweep, ``shift`` short of the fixed point, moved onto it to first order
-    along the stage sensitivities (``periodic.driver._shift``, copied: private there)."""
-    for n in range(N):
-        W[W_U, n] += shift
-        for i in range(3):
-            W[STAGE + i, n] += W[SENS + i, n] * shift
-        W[INT_U, n] += W[Q_U, n] * shift
-        W[INT_P, n] += W[Q_P, n] * shift
-        shift *= 1.0 + W[M_MINUS_1, n]
-    W[W_U, N] += shift
-
-
-@njit(cache=True, error_model="numpy")
 def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     """Periodic solution of the 3-stage Radau IIA discretisation on ``nodes`` (N steps).
 
@@ -441,7 +417,7 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     value (``fixed_grid_point`` starts it at u0; the two agree to the stage tolerance).
 
     Returns (status, u0, I_u, I_Pi); the speed scale V = (1/4) int |dphi/dtau| dtau (Radau
-    rule) sets the nonlinear tolerances as in the engine (``_stage_atol``).
+    rule) sets the nonlinear tolerances as in the engine (``periodic.driver.stage_atol``).
     """
     vscale = 0.0
     for n in range(N):
@@ -471,7 +447,7 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
         W[ERR, n] = W[ERR + 1, n] = W[ERR + 2, n] = 0.0
         W[END_KIND, n] = 0.0
     vscale = max(vscale, 1e-300)
-    atol = _stage_atol(rtol, vscale, phys.dtau, phys.p)
+    atol = stage_atol(rtol, vscale, phys)
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
     bound = 1e3 * vscale + 10.0 * abs(u0)
     status, _ = frozen_sweep(code, params, phys, u0, atol, W, N)
@@ -481,7 +457,7 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     if fn.status != CONVERGED:
         return fn.status, fn.u0, math.nan, math.nan
     shift = fn.g / fn.one_minus_M
-    _shift_onto_fixed_point(W, N, shift)
+    shift_onto_fixed_point(W, N, shift)
     int_u = 0.0
     int_pi = 0.0
     for n in range(N):  # summed in order, as ``periodic.driver._integrals``

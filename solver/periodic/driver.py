@@ -40,7 +40,7 @@ from numba import get_num_threads, njit, prange
 from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
 from .shooting import (bracketed_newton_update, monodromy_factor, one_minus_monodromy,
                         stage_tolerance)
-from .radau import ERROR_ORDER, PointPhysics
+from .radau import ERROR_ORDER, PointPhysics, runtime_bool
 from ..status import (CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED,
                       TOLERANCE_NOT_REACHED)
 from .sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
@@ -48,7 +48,7 @@ from .sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MIN
                      event_split_errors, new_workspace, stage_kinematics_into, trapped_steps)
 from .switching import MAX_STOPS, kinematic_stops, stop_speed, turning_stops
 
-#: the stage tolerance is at most this share of delta_tau (p = 0; ``_stage_atol``)
+#: the stage tolerance is at most this share of delta_tau (p = 0; ``stage_atol``)
 BAND_SHARE = 0.01
 #: tolerance of the loose shooting (step 2)
 LOOSE_RTOL = 1e-2
@@ -96,7 +96,7 @@ class PointSolution(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
-def _stage_atol(rtol, scale, phys):
+def stage_atol(rtol, scale, phys):
     """The stage Newton's tolerance: ``periodic.shooting.stage_tolerance`` of the scale, and for p = 0
     at most BAND_SHARE delta_tau: where the body sticks F rises by O(mu) across a band of
     u ~delta_tau wide, and stages solved only to a tolerance wider than it land anywhere on
@@ -142,7 +142,7 @@ def _integrals(W, N):
 
 
 @njit(cache=True, error_model="numpy")
-def _shift(W, N, shift):
+def shift_onto_fixed_point(W, N, shift):
     """Move the converged sweep, which starts ``shift`` short of the fixed point, onto it to
     first order along the sensitivities (no force evaluations)."""
     for n in range(N):
@@ -272,8 +272,8 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner,
                                             stop_is_turning, n_stops,
                                             u0, h_first, TARGET_SHARE * loose, vscale, math.inf,
-                                            model, _stage_atol(loose, vscale, phys), W, max_steps,
-                                            True, False)
+                                            model, stage_atol(loose, vscale, phys), W, max_steps,
+                                            runtime_bool(True), runtime_bool(False))
         sweeps += 1
         evals[COST_LOOSE] += e
         if status != CONVERGED:
@@ -292,7 +292,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         if moved <= loose * vscale:
             break
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
-    atol = _stage_atol(rtol, scale_u, phys) / _largest_weight(model, scale_u, scale_p)
+    atol = stage_atol(rtol, scale_u, phys) / _largest_weight(model, scale_u, scale_p)
     h_first = max((W[T, 1] - W[T, 0]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
     estimate = math.inf
     ceilings = np.full(N, math.inf)
@@ -301,7 +301,8 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner,
                                             stop_is_turning, n_stops,
                                             u0, h_first, TARGET_SHARE * rtol, scale_u, scale_p,
-                                            model, atol, W, max_steps, True)
+                                            model, atol, W, max_steps, runtime_bool(True),
+                                            runtime_bool(True))
         sweeps += 1
         evals[COST_ADAPTIVE] += e
         if status != CONVERGED:
@@ -344,7 +345,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
             residual = g
         else:
             shift = g / one_minus_M
-            _shift(W, N, shift)
+            shift_onto_fixed_point(W, N, shift)
             u0 += shift
         evals[COST_ESTIMATE] += estimate_sweep(code, params, phys, corner_nodes, atol, W, N)[1]
         split = np.zeros(N, dtype=np.bool_)
@@ -389,7 +390,7 @@ def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
     u(0) by frozen sweeps.  For order tests.  Returns (int_u, int_pi, status)."""
     N = grid.size - 1
     W = new_workspace(N)
-    phys_atol = _stage_atol(rtol, vscale, phys)
+    phys_atol = stage_atol(rtol, vscale, phys)
     for n in range(N):
         W[T, n] = grid[n]
         W[T, n + 1] = grid[n + 1]
@@ -406,7 +407,7 @@ def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
     fn = frozen_newton(code, params, phys, u_guess, phys_atol, W, N, tol_fix, bound)
     if fn.status != CONVERGED:
         return math.nan, math.nan, fn.status
-    _shift(W, N, fn.g / fn.one_minus_M)
+    shift_onto_fixed_point(W, N, fn.g / fn.one_minus_M)
     int_u, int_p = _integrals(W, N)
     return int_u, int_p, CONVERGED
 

@@ -155,6 +155,25 @@ class StepError(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
+def runtime_bool(flag):
+    """``flag`` as a run-time bool, not a literal.  numba compiles a kernel once per literal
+    argument (a bool or int constant at a call site: ``adaptive_sweep(..., True, False)`` and
+    ``(..., True)`` were two compilations of the sweep, its callees included); the engine
+    passes its constant flags, rows and starting indices through ``runtime_bool`` and
+    ``runtime_int`` so that a kernel has one signature (docs/validation.md).  (An identity
+    function would not do: its return type is the literal again.)"""
+    if flag:
+        return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def runtime_int(value):
+    """``value`` as a run-time int64, not a literal (``runtime_bool``)."""
+    return value + 0
+
+
+@njit(cache=True, error_model="numpy")
 def flip_cut(flipped, U, x):
     """The factor (<= 1) a Newton step x of stage value U is cut by: where the previous
     iterate flipped U's sign (``flipped``) and x flips it again keeping more than half of
@@ -257,7 +276,7 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.n
     ok = False
     rounds = 1
     previous = math.inf
-    flipped1 = flipped2 = flipped3 = False
+    flipped1 = flipped2 = flipped3 = runtime_bool(False)
     # the sign-flip cut only where F has an infinite slope at u = 0 (``flip_cut``)
     singular = 0.0 < p < 1.0 and dtau == 0.0
     observed = math.nan

@@ -33,7 +33,7 @@ from numba import njit
 
 from ..model.force import force_slope_power_sc
 from ..model.kinematics import angle_and_rate
-from .radau import (C1, C2, StepError, THETA_LATE, THETA_MID, SampleKinematics, StageKinematics,
+from .radau import (C1, C2, StepError, runtime_bool, runtime_int, THETA_LATE, THETA_MID, SampleKinematics, StageKinematics,
                       StepSolution, defect_error, dense_value, embedded_error, estimate_floor, radau5_step, step_integrals,
                       step_weights)
 from ..status import CONVERGED, NON_FINITE, STAGE_SOLVE_FAILED, STEP_BUDGET_EXCEEDED, \
@@ -190,10 +190,10 @@ def solve_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.na
     sol = radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate, slope)
     its = sol.iterations
     if not sol.ok:
-        sol = radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, atol)
+        sol = radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, atol, math.inf, math.nan)
         its += sol.iterations
     if not sol.ok and u_n != 0.0:
-        sol = radau5_step(u_n, 0.0, 0.0, 0.0, h, kin, phys, atol)
+        sol = radau5_step(u_n, 0.0, 0.0, 0.0, h, kin, phys, atol, math.inf, math.nan)
         its += sol.iterations
     return sol, its
 
@@ -251,7 +251,9 @@ def _model_at(model, t, k):
     return lam, mu, model.max_step[k], k
 
 
-@njit(cache=True, error_model="numpy")
+# (one explicit signature: called with a constant row each, it had 18 compilations)
+@njit("void(float64[:, ::1], int64, int64, float64, float64, float64)", cache=True,
+      error_model="numpy")
 def _put3(W, row, n, a, b, c):
     """Rows row .. row + 2 of column n: the three stages' values a, b, c."""
     W[row, n] = a
@@ -303,10 +305,10 @@ def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol, dtau):
     noise = EVENT_NOISE * atol
     sharp = CROSSING_BAND * dtau
     for k in range(N_STATE_FUNCTIONS):
-        f0 = state_function(k, u_n, S0, om0)
-        f1 = state_function(k, sol.U1, kin.S1, kin.om1)
-        f2 = state_function(k, sol.U2, kin.S2, kin.om2)
-        f3 = state_function(k, sol.U3, kin.S3, kin.om3)
+        f0 = state_function(k, u_n, S0, om0, 0.0)
+        f1 = state_function(k, sol.U1, kin.S1, kin.om1, 0.0)
+        f2 = state_function(k, sol.U2, kin.S2, kin.om2, 0.0)
+        f3 = state_function(k, sol.U3, kin.S3, kin.om3, 0.0)
         # the span over the step's samples, not of the pair around the sign change: a slow
         # crossing of -3.5 to +4.1 delta_tau in steps of 2 delta_tau was missed (2.5 rtol)
         if max(f0, f1, f2, f3) - min(f0, f1, f2, f3) <= sharp:
@@ -520,14 +522,14 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
                                       phys.dtau)
     if k >= 0:
         theta = locate_state_event(k, code, params, t0, h, u_n, sol.U1, sol.U2, sol.U3, fa, fb,
-                                   a, b)
+                                   a, b, 0.0)
     band = EVENT_BAND * phys.dtau
     if phys.p == 0.0 and band > 0.0:
-        g0 = state_function(TANGENTIAL, u_n, S0, om0)
+        g0 = state_function(runtime_int(TANGENTIAL), u_n, S0, om0, 0.0)
         if abs(g0) > band:
-            g1 = state_function(TANGENTIAL, sol.U1, kin.S1, kin.om1)
-            g2 = state_function(TANGENTIAL, sol.U2, kin.S2, kin.om2)
-            g3 = state_function(TANGENTIAL, sol.U3, kin.S3, kin.om3)
+            g1 = state_function(runtime_int(TANGENTIAL), sol.U1, kin.S1, kin.om1, 0.0)
+            g2 = state_function(runtime_int(TANGENTIAL), sol.U2, kin.S2, kin.om2, 0.0)
+            g3 = state_function(runtime_int(TANGENTIAL), sol.U3, kin.S3, kin.om3, 0.0)
             if abs(g3) <= band:  # the step ends at rest: where did it stop?
                 th_a, f_a, th_b, f_b = 0.0, abs(g0) - band, 1.0, abs(g3) - band
                 if abs(g2) > band:
@@ -536,7 +538,7 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
                     th_a, f_a, th_b, f_b = C1, abs(g1) - band, C2, abs(g2) - band
                 else:
                     th_b, f_b = C1, abs(g1) - band
-                stop = locate_state_event(STOP, code, params, t0, h, u_n, sol.U1, sol.U2,
+                stop = locate_state_event(runtime_int(STOP), code, params, t0, h, u_n, sol.U1, sol.U2,
                                           sol.U3, f_a, f_b, th_a, th_b, band)
                 if first_cut:
                     phi, om = angle_and_rate(code, params, t0, t0 + 0.5 * h)
@@ -550,10 +552,10 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
             up0, down0 = held_exits(code, params, t0, side, phys, band, memo)
             up1, down1 = held_exits(code, params, t0 + h, side, phys, band, memo)
             if up0 <= 0.0 < up1:
-                theta = min(theta, (locate_exit(0, code, params, t0, t0 + h, up0, up1, side,
+                theta = min(theta, (locate_exit(runtime_int(0), code, params, t0, t0 + h, up0, up1, side,
                                                 phys, band) - t0) / h)
             if down0 <= 0.0 < down1:
-                theta = min(theta, (locate_exit(1, code, params, t0, t0 + h, down0, down1,
+                theta = min(theta, (locate_exit(runtime_int(1), code, params, t0, t0 + h, down0, down1,
                                                 side, phys, band) - t0) / h)
     return theta if theta <= 1.0 else -1.0
 
@@ -586,7 +588,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     """
     t = 0.0
     u = u0
-    n = 0
+    n = runtime_int(0)
     f0, J0, P0, Pu0 = start_values(code, params, 0.0, 0.0 + 1e-300, u, phys)
     phi0, om0 = angle_and_rate(code, params, 0.0, 1e-300)
     S0 = math.sin(phi0)
@@ -594,7 +596,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     h_old = 0.0
     ratio_old = 0.0
     next_stop = 1
-    k_model = 0
+    k_model = runtime_int(0)
     have_previous = False
     prev_h = 0.0
     prev_u = 0.0
@@ -777,7 +779,8 @@ def frozen_sweep(code, params, phys, u0, atol, W, N):
         du = u - W[U, n]
         sol, its = solve_step(u, W[STAGE, n] + W[SENS, n] * du,
                               W[STAGE + 1, n] + W[SENS + 1, n] * du,
-                              W[STAGE + 2, n] + W[SENS + 2, n] * du, h, kin, phys, atol)
+                              W[STAGE + 2, n] + W[SENS + 2, n] * du, h, kin, phys, atol,
+                              math.inf, math.nan)
         iterations += 3 * its
         if not sol.ok:
             return (STAGE_SOLVE_FAILED if math.isfinite(sol.U3) else NON_FINITE), iterations
@@ -848,7 +851,7 @@ def _interior_event(code, params, phys, atol, W, N, n, memo):
     kin = StageKinematics(W[SIN, n], W[SIN + 1, n], W[SIN + 2, n], W[COS, n], W[COS + 1, n],
                           W[COS + 2, n], W[OMEGA, n], W[OMEGA + 1, n], W[OMEGA + 2, n])
     theta = find_event(code, params, phys, t0, h, W[U, n], sol, kin, S0, om0, 0.0, atol,
-                       False, memo)
+                       runtime_bool(False), memo)
     return theta if SPLIT_SHARE < theta < 1.0 - SPLIT_SHARE else -1.0
 
 
@@ -876,11 +879,13 @@ def event_split_errors(code, params, phys, atol, W, N, split):
         first, its1 = solve_step(u_n, dense_value(C1 * theta, u_n, U1, U2, U3),
                               dense_value(C2 * theta, u_n, U1, U2, U3),
                               dense_value(theta, u_n, U1, U2, U3), h1,
-                              stage_kinematics(code, params, t0, h1), phys, atol)
+                              stage_kinematics(code, params, t0, h1), phys, atol, math.inf,
+                              math.nan)
         r = 1.0 - theta
         second, its2 = solve_step(first.U3, dense_value(theta + C1 * r, u_n, U1, U2, U3),
                                dense_value(theta + C2 * r, u_n, U1, U2, U3), U3, h2,
-                               stage_kinematics(code, params, t0 + h1, h2), phys, atol)
+                               stage_kinematics(code, params, t0 + h1, h2), phys, atol,
+                               math.inf, math.nan)
         evaluations += 3 * (its1 + its2)
         if not (first.ok and second.ok):
             continue

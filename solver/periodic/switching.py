@@ -33,7 +33,7 @@ from numba import njit
 
 from ..model.force import force_slope_power_sc
 from ..model.kinematics import FOURIER, angle_and_rate, rate_slope
-from .radau import dense_value
+from .radau import dense_value, runtime_int
 
 #: samples per wavenumber (and period) in the search for the zeros of the kinematic
 #: switching functions of a Fourier motion (a function of wavenumber K has at most 2K zeros)
@@ -96,7 +96,7 @@ def exit_functions(code, params, t, side, phys, band):
 @njit(cache=True, error_model="numpy")
 def locate_exit(which, code, params, a, b, fa, fb, side, phys, band):
     """Zero of exit function ``which`` (0 up, 1 down) in [a, b] (fa fb < 0), Illinois."""
-    last = 0
+    last = runtime_int(0)
     c = a
     for _ in range(100):
         c = (a * fb - b * fa) / (fb - fa)
@@ -128,7 +128,7 @@ def _kinematic_function(k, code, params, t, side):
 @njit(cache=True, error_model="numpy")
 def _refine_root(k, code, params, a, b, fa, fb, side):
     """Zero of kinematic function k in [a, b] (fa fb < 0) by Illinois regula falsi."""
-    last = 0
+    last = runtime_int(0)
     c = a
     for _ in range(200):
         c = (a * fb - b * fa) / (fb - fa)
@@ -195,7 +195,7 @@ def kinematic_stops(code, params, corners, out):
             values[j, 0, i] = math.sin(phi)
             values[j, 1, i] = math.cos(phi)
             values[j, 2, i] = om
-            values[j, 3, i] = _kinematic_function(3, code, params, t, side)
+            values[j, 3, i] = _kinematic_function(runtime_int(3), code, params, t, side)
     for j in range(m - 1):
         a, b = ends[j], ends[j + 1]
         side = 0.5 * (a + b)
@@ -282,7 +282,7 @@ def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b, 
     [a, b] (0 <= a < b <= 1), where its values are f_a, f_b of opposite signs: Illinois
     regula falsi to 1e-13 of the step.  Returns theta."""
     side = t0 + 0.5 * h
-    last = 0
+    last = runtime_int(0)
     c = a
     for _ in range(100):
         c = (a * f_b - b * f_a) / (f_b - f_a)
