@@ -45,7 +45,7 @@ from ..status import (CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, STAGE_SOLV
                       TOLERANCE_NOT_REACHED)
 from .sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
                      SENS, STAGE, T, U, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
-                     event_split_errors, new_workspace, stage_kinematics_into, trapped_steps)
+                     event_split_errors, new_workspace, stage_kinematics_into, trapped_steps, Stops)
 from .switching import MAX_STOPS, kinematic_stops, stop_speed, turning_stops
 
 #: the stage tolerance is at most this share of delta_tau (p = 0; ``stage_atol``)
@@ -254,6 +254,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
             if stops[j] == c:
                 stop_is_corner[j] = True
     stop_is_turning = turning_stops(code, params, stops, n_stops, omax)
+    point_stops = Stops(stops, stop_is_corner, stop_is_turning, n_stops)
     tol_fix = max(1e-3 * rtol, 1e-13) * vscale
     loose = max(LOOSE_RTOL, rtol)
     u0 = u_guess
@@ -269,13 +270,13 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
     lo, hi = -bound, bound
     scale_u = scale_p = 1.0
     for _ in range(MAX_LOOSE_SWEEPS):
-        W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner,
-                                            stop_is_turning, n_stops,
-                                            u0, h_first, TARGET_SHARE * loose, vscale, math.inf,
-                                            model, stage_atol(loose, vscale, phys), W, max_steps,
-                                            runtime_bool(True), runtime_bool(False))
+        sweep = adaptive_sweep(code, params, phys, point_stops, u0, h_first,
+                               TARGET_SHARE * loose, vscale, math.inf, model,
+                               stage_atol(loose, vscale, phys), W, max_steps, runtime_bool(True),
+                               runtime_bool(False))
+        W, N, status = sweep.W, sweep.N, sweep.status
         sweeps += 1
-        evals[COST_LOOSE] += e
+        evals[COST_LOOSE] += sweep.evaluations
         if status != CONVERGED:
             return W, PointSolution(nan, nan, u0, status, N, sweeps, math.inf, evals, vscale)
         int_u, int_p = _integrals(W, N)
@@ -298,13 +299,12 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
     ceilings = np.full(N, math.inf)
     failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
     for _ in range(MAX_ROUNDS):
-        W, N, status, _, e = adaptive_sweep(code, params, phys, stops, stop_is_corner,
-                                            stop_is_turning, n_stops,
-                                            u0, h_first, TARGET_SHARE * rtol, scale_u, scale_p,
-                                            model, atol, W, max_steps, runtime_bool(True),
-                                            runtime_bool(True))
+        sweep = adaptive_sweep(code, params, phys, point_stops, u0, h_first,
+                               TARGET_SHARE * rtol, scale_u, scale_p, model, atol, W, max_steps,
+                               runtime_bool(True), runtime_bool(True))
+        W, N, status = sweep.W, sweep.N, sweep.status
         sweeps += 1
-        evals[COST_ADAPTIVE] += e
+        evals[COST_ADAPTIVE] += sweep.evaluations
         if status != CONVERGED:
             return W, PointSolution(nan, nan, u0, status, N, sweeps, math.inf, evals, vscale)
         corner_nodes = np.zeros(N, dtype=np.bool_)
@@ -363,8 +363,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
         estimate = combine(e_u, e_p, scale_u, scale_p)
         # the steps next to turning points judged again by the converged u (``trapped_steps``)
         trap_caps = np.full(N, math.inf)
-        trapped, e = trapped_steps(code, params, phys, stops, stop_is_corner, stop_is_turning,
-                                   n_stops, W, N, trap_caps)
+        trapped, e = trapped_steps(code, params, phys, point_stops, W, N, trap_caps)
         evals[COST_ESTIMATE] += e
         if estimate <= rtol and trapped == 0:
             return W, PointSolution(int_u, int_p, u0, CONVERGED, N, sweeps, estimate, evals, vscale)

@@ -123,6 +123,31 @@ SPLIT_SHARE = 1e-9
 MAX_EVENT_CUTS = 4
 
 
+class Stops(NamedTuple):
+    """A point's kinematic step ends, which every sweep keeps (``periodic.switching``):
+    ``times`` (count,) sorted in [0, 1), times[0] = 0; ``is_corner`` (count,) whether phi has
+    a corner there (the next step's start values are re-evaluated on its side);
+    ``is_turning`` (count,) whether the links (nearly) stop rotating there (``trap_ceiling``;
+    ``switching.turning_stops``' codes); ``count``."""
+
+    times: np.ndarray
+    is_corner: np.ndarray
+    is_turning: np.ndarray
+    count: int
+
+
+class Sweep(NamedTuple):
+    """What ``adaptive_sweep`` returns: the workspace ``W`` (possibly grown, its first ``N``
+    steps the sweep's), ``status`` (CONVERGED when the sweep reached tau = 1), ``h_next``
+    (the controller's last proposal) and the ``evaluations`` of F made."""
+
+    W: np.ndarray
+    N: int
+    status: int
+    h_next: float
+    evaluations: int
+
+
 class WeightModel(NamedTuple):
     """What an adaptive sweep knows from the previous one: node times ``t`` (N + 1,), the
     node weights ``lam`` and ``mu`` there (int u's and int Pi's sensitivity to a jump of u),
@@ -391,8 +416,7 @@ TRAP_SLACK = 2.0
 
 
 @njit(cache=True, error_model="numpy")
-def trapped_steps(code, params, phys, stops, stop_is_corner, stop_is_turning, n_stops, W, N,
-                  ceilings):
+def trapped_steps(code, params, phys, point_stops, W, N, ceilings):
     """The ``trap_ceiling`` of ``adaptive_sweep`` checked again on the converged solution of
     ``W``: the sweep judged the steps next to a turning point by its own u, and the frozen
     Newton can move u there into the friction's band, where the ceiling is far smaller.  A
@@ -407,6 +431,8 @@ def trapped_steps(code, params, phys, stops, stop_is_corner, stop_is_turning, n_
     rest in the band has a ceiling of ACCEPT_STEP: judged there too, the stress power laws'
     steps doubled (mean n_tau 222 -> 434 at rtol 1e-3) and 22 solves exceeded the step
     budget (2 without), where no solve had been off.  Returns (how many, evaluations of F)."""
+    stops, stop_is_corner = point_stops.times, point_stops.is_corner
+    stop_is_turning, n_stops = point_stops.is_turning, point_stops.count
     count = 0
     evaluations = 0
     j = 0  # the stop at or after W[T, n]
@@ -561,17 +587,13 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
 
 
 @njit(cache=True, error_model="numpy")
-def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n_stops, u0,
-                   h_first, target, scale_u, scale_p, model, atol, W, max_steps, events,
-                   sharp=True):
+def adaptive_sweep(code, params, phys, point_stops, u0, h_first, target, scale_u, scale_p,
+                   model, atol, W, max_steps, events, sharp):
     """Integrate one period from u(0) = u0 with step-size control; see the module docstring.
 
     Parameters
     ----------
-    stops : (n_stops,) sorted step ends in [0, 1), stops[0] = 0; stop_is_corner : whether
-        phi has a corner there (the next step's start values are re-evaluated on its side);
-        stop_is_turning : whether the links (nearly) stop rotating there (``trap_ceiling``;
-        ``periodic.switching.turning_stops``' codes).
+    point_stops : Stops
     h_first : float
         The first step's size (the controller's proposal carried from an earlier sweep).
     target : float
@@ -579,13 +601,16 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     model : WeightModel
     events : bool
         Cut steps at the state events (``_first_crossing``).
+    sharp : bool
+        Judge steps by the defect estimate and solve every stage afresh (the target sweep);
+        False: the embedded estimate and a carried Newton constant (the loose sweeps).
 
     Returns
     -------
-    (W, N, status, h_next, evaluations): the workspace (possibly grown), the number of
-    steps, a status code (CONVERGED when the sweep reached tau = 1), the controller's last
-    proposal, and the evaluations of F made.
+    Sweep
     """
+    stops, stop_is_corner = point_stops.times, point_stops.is_corner
+    stop_is_turning, n_stops = point_stops.is_turning, point_stops.count
     t = 0.0
     u = u0
     n = runtime_int(0)
@@ -621,7 +646,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
     rate = math.inf
     while t < 1.0:
         if n >= max_steps:
-            return W, n, STEP_BUDGET_EXCEEDED, h, evaluations
+            return Sweep(W, n, STEP_BUDGET_EXCEEDED, h, evaluations)
         t_stop = stops[next_stop] if next_stop < n_stops else 1.0
         lam, mu, ceiling, k_model = _model_at(model, t, k_model)
         h = min(h, _ceiling_over(model, t, h, k_model))
@@ -662,7 +687,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
             end_kind = ORDINARY
         attempts += 1
         if not h >= MIN_STEP or attempts > MAX_ATTEMPTS_PER_STEP * (n + 16):
-            return W, n, TOLERANCE_NOT_REACHED, h, evaluations
+            return Sweep(W, n, TOLERANCE_NOT_REACHED, h, evaluations)
         kin = stage_kinematics(code, params, t, h)
         if have_previous:  # the last step's collocation polynomial, extrapolated
             r = h / prev_h
@@ -758,7 +783,7 @@ def adaptive_sweep(code, params, phys, stops, stop_is_corner, stop_is_turning, n
                 (_D1 * kin.om1 + _D2 * kin.om2 + _D3 * kin.om3) / h)
         h = h_next
     W[T, n] = 1.0
-    return W, n, status, h, evaluations
+    return Sweep(W, n, status, h, evaluations)
 
 
 @njit(cache=True, error_model="numpy")
