@@ -256,3 +256,13 @@ def test_freeze_round_trip(tmp_path, monkeypatch):
     other = honesty.PointSet("tiny", 6, point_set.draw, "tiny harmonic", points=3)
     with pytest.raises(ValueError, match="'tiny'"):
         honesty.frozen_references(other, *other.sample(2), path)
+
+
+def test_freeze_refuses_to_overwrite_the_committed_references(capsys):
+    """The committed references were made by the former order-3 engine; frozen anew by
+    today's engine the harness would judge the engine by itself: refused, exit 2, one line."""
+    before = honesty.REFERENCE_FILE.stat().st_mtime
+    assert honesty.main(["--freeze", "--set", "bench"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--reference-file" in err[0]
+    assert honesty.REFERENCE_FILE.stat().st_mtime == before
