@@ -109,8 +109,8 @@ from ..periodic.shooting import monodromy_factor, one_minus_monodromy
 from ..periodic.radau import (A11, A12, A13, A21, A22, A23, A31, A32, A33, C1, C2, PointPhysics, solve3,
                       stage_matrix)
 from ..periodic.driver import frozen_newton, shift_onto_fixed_point, stage_atol
-from ..periodic.sweep import (COS, END_KIND, ERR, INT_P, INT_U, M_MINUS_1, OMEGA, Q_P, Q_U, SENS, SIN,
-                     STAGE, T as W_T, U as W_U, frozen_sweep, new_workspace)
+from ..periodic.sweep import (COS, END_KIND, ERR, INT_P, INT_U, OMEGA, SENS, SIN, STAGE,
+                              T as W_T, U as W_U, frozen_sweep, new_workspace)
 from ..periodic import driver as periodic_driver
 from ..status import CONVERGED
 

@@ -31,7 +31,6 @@ Failures are NaN plus a status code (``status``), never silent.
 from __future__ import annotations
 
 import math
-import time
 from typing import NamedTuple
 
 import numpy as np

@@ -26,11 +26,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
-from .radau import ERROR_ORDER
-from .radau import StepError
+from .radau import ERROR_ORDER, StepError
 from .sweep import (ACCEPT_STEP, ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q_P, Q_U, T,
                      floored_errors)
 
