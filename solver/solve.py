@@ -85,6 +85,9 @@ class SolveResult:
     target sweeps, frozen-grid sweeps, estimates; shape (n_points, 4)), ``march`` in all
     (shape (n_points, 1)).
     method : the method that computed it.
+    start : how each point's solve started (``periodic``; None for ``march``): 0 cold,
+    1 warm from its sweep's previous point, 2 warm failed, then cold
+    (``periodic.driver.START_*``).
     Failed points have NaN in every float output.
     """
 
@@ -107,6 +110,7 @@ class SolveResult:
     seconds: float = 0.0
     method: str = "periodic"
     force_evaluations: np.ndarray | None = None
+    start: np.ndarray | None = None
 
     def point(self, i):
         """Dict of the scalar outputs of point ``i``."""
@@ -183,7 +187,7 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
 
 
 def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_series=False,
-                   max_steps_per_period=None):
+                   max_steps_per_period=None, sweeps=None):
     """Periodic steady state u(tau) of eq. (Newtonu) and its mean speed, power and efficiency.
 
     Parameters
@@ -203,6 +207,15 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         Also return u(tau) on the final grid.
     max_steps_per_period : int, optional
         Finest grid allowed (default 2^17).
+    sweeps : array of int, optional
+        Solve the points as sweeps (``periodic`` only): (n_sweeps + 1,) increasing offsets
+        from 0 to n_points; points sweeps[k] .. sweeps[k + 1] - 1 form one sweep, solved in
+        that order, each point starting from its predecessor's periodic orbit (its u(0),
+        node weights and norm; ``periodic.driver.warm_start``), the first cold.  Order the
+        points so that neighbours follow each other (``snake_order``).  Every result is
+        judged by the same error estimate as a cold solve; where the warm start fails the
+        point is solved cold.  A sweep's results depend on its own points only.  Default:
+        every point cold.
 
     Returns
     -------
@@ -217,11 +230,49 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         raise ValueError(f"physics: length {len(physics)} does not match the kinematics' {n} points")
     if len(physics) == 1 and n > 1:
         physics = physics.take(np.zeros(n, dtype=int))
+    if sweeps is not None:
+        sweeps = _checked_sweeps(sweeps, n, method)
     start = time.perf_counter()
-    driver = periodic_driver.solve if method == "periodic" else march_driver.solve
-    out = driver(kinematics, physics, rtol,
-                 max_steps_per_period or MAX_STEPS_PER_PERIOD, return_series)
+    max_steps = max_steps_per_period or MAX_STEPS_PER_PERIOD
+    if method == "periodic":
+        out = periodic_driver.solve(kinematics, physics, rtol, max_steps, return_series, sweeps)
+    else:
+        out = march_driver.solve(kinematics, physics, rtol, max_steps, return_series)
     return _result(out, physics, method, start)
+
+
+def snake_order(shape: tuple[int, ...]) -> np.ndarray:
+    """The flat C-order indices of a grid of ``shape`` in snake (boustrophedon) order: the
+    last axis runs forward, then backward, ..., each axis reversing whenever the axis before
+    it steps, so that consecutive points are grid neighbours (they differ by one step along
+    one axis).
+
+    >>> snake_order((2, 3)).tolist()
+    [0, 1, 2, 5, 4, 3]
+    """
+    order = np.arange(int(np.prod(shape, dtype=np.int64))).reshape(shape)
+    for axis in range(len(shape) - 1):
+        # reverse axis + 1 wherever the flat index of the axes up to ``axis`` is odd in
+        # snake order: by parity of the (already snaked) outer position
+        outer = int(np.prod(shape[:axis + 1], dtype=np.int64))
+        flat = order.reshape(outer, -1, *shape[axis + 2:]) if axis + 2 < len(shape) else order.reshape(outer, -1)
+        flat[1::2] = flat[1::2, ::-1].copy()
+        order = flat.reshape(shape)
+    return order.ravel()
+
+
+
+def _checked_sweeps(sweeps, n, method):
+    """``solve_periodic``'s ``sweeps`` as int64 offsets, or ValueError naming what is wrong."""
+    if method != "periodic":
+        raise ValueError(f"sweeps: only method 'periodic' starts points from their neighbours, "
+                         f"not {method!r}")
+    offsets = np.asarray(sweeps)
+    if offsets.ndim != 1 or offsets.size < 2 or not np.issubdtype(offsets.dtype, np.integer):
+        raise ValueError("sweeps: expected a 1-d integer array of offsets (n_sweeps + 1,)")
+    if offsets[0] != 0 or offsets[-1] != n or np.any(np.diff(offsets) <= 0):
+        raise ValueError(f"sweeps: offsets must rise strictly from 0 to n_points = {n}")
+    return offsets.astype(np.int64)
 
 
 def _result(out, physics, method, start):
@@ -257,4 +308,4 @@ def _result(out, physics, method, start):
         **outputs, status=status, converged=status == CONVERGED, error_estimate=estimate,
         iterations=out["iterations"], n_tau=out["n_tau"], u=u_arr, tau=tau_arr,
         seconds=time.perf_counter() - start, method=method,
-        force_evaluations=out["evaluations"])
+        force_evaluations=out["evaluations"], start=out.get("start"))

@@ -26,11 +26,19 @@ threads by ``solve_points``):
    the moved events instead cost more: bench at rtol 1e-7, 9,466 force evaluations per
    solve against 8,592.)
 
+**Warm starts.**  A batch may be solved as sweeps (``solve_points``' runs): each point of a
+sweep after the first starts from its predecessor's converged orbit (``Orbit``,
+``warm_start``): steps 3-4 from its u(0) (extrapolated linearly where the last three points
+lie evenly on a line, ``in_line``), its node weights and its norm, skipping step 2.  The
+result is judged by the same estimate as a cold solve; where the rounds fail, the point is
+solved cold.
+
 Failures are NaN plus a status code (``status``), never silent.
 """
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import numpy as np
@@ -66,6 +74,9 @@ RESIDUAL_WEIGHT = 2.0
 #: the force evaluations of a solve, by phase (``solve_point``'s last output)
 COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE = 0, 1, 2, 3
 N_COSTS = 4
+#: how a solve started (``PointSolution.start``): cold (loose shooting from the fast limit);
+#: warm, from the previous point of its sweep (``warm_start``); warm start failed, then cold
+START_COLD, START_WARM, START_WARM_REJECTED = 0, 1, 2
 #: first step of the first sweep
 FIRST_STEP = 1.0 / 16.0
 #: workspace capacity a thread starts with (steps; it doubles when a point needs more)
@@ -81,7 +92,8 @@ class PointSolution(NamedTuple):
     the global error estimate in rtol's norm (inf: none); evaluations : (N_COSTS,) the
     evaluations of F by phase (COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE);
     vscale : V = (1/4) int |dphi/dtau| dtau (``periodic.switching.stop_speed``; 0: phi is constant,
-    nothing was solved)."""
+    nothing was solved); start : how the solve started (START_COLD, START_WARM,
+    START_WARM_REJECTED)."""
 
     int_u: float
     int_pi: float
@@ -92,6 +104,7 @@ class PointSolution(NamedTuple):
     estimate: float
     evaluations: np.ndarray
     vscale: float
+    start: int
 
 
 @njit(cache=True, error_model="numpy")
@@ -220,70 +233,243 @@ def frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound):
     return FrozenNewton(u0, g, one_minus_M, status, restart, sweeps, evaluations)
 
 
+class PointProblem(NamedTuple):
+    """One point's problem as every phase of ``solve_point`` sees it: the kinematics' kernel
+    encoding ``code``, ``params`` (one row, ``model.kinematics``); ``phys`` (PointPhysics);
+    ``stops`` (its kinematic ``Stops``); ``vscale`` = V; ``rtol``; ``max_steps`` (steps per
+    period before STEP_BUDGET_EXCEEDED); ``tol_fix`` (the shooting's tolerance on
+    |g / (1 - M)|, 1e-3 rtol V) and ``bound`` (u(0) is bracketed in +-bound)."""
+
+    code: int
+    params: np.ndarray
+    phys: PointPhysics
+    stops: Stops
+    vscale: float
+    rtol: float
+    max_steps: int
+    tol_fix: float
+    bound: float
+
+
+class RoundStart(NamedTuple):
+    """Where the rounds of steps 3-4 start: ``u0``; the first step ``h_first``; the weight
+    ``model`` (node weights and ceilings) that judges the adaptive sweep's steps; the stage
+    tolerance ``atol``; the norm of U and P, ``scale_u`` and ``scale_p``."""
+
+    u0: float
+    h_first: float
+    model: WeightModel
+    atol: float
+    scale_u: float
+    scale_p: float
+
+
+class Orbit(NamedTuple):
+    """A converged point's periodic orbit, from which the next point of a sweep starts
+    (``solve_point``'s warm start).  Its steps are the workspace's first ``N`` columns
+    (``N`` = 0: there is none and the next point starts cold); ``u0``; the norm of U and P,
+    ``scale_u`` and ``scale_p``; ``largest_weight`` (``_largest_node_weight``)."""
+
+    N: int
+    u0: float
+    scale_u: float
+    scale_p: float
+    largest_weight: float
+
+
 @njit(cache=True, error_model="numpy")
-def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
-    """The periodic solution of one point; see the module docstring.
+def no_orbit():
+    """The ``Orbit`` of no point: the next point starts cold."""
+    return Orbit(0, math.nan, 1.0, 1.0, 1.0)
 
-    Parameters
-    ----------
-    code, params : the kinematics' kernel encoding (``model.kinematics``), one row.
-    corners : (k,) corners of phi in [0, 1).
-    phys : PointPhysics
-    rtol : float
-    u_guess : float
-        Starting u(0) (the fast limit).
-    max_steps : int
-        Steps per period before STEP_BUDGET_EXCEEDED.
-    W : workspace (``periodic.sweep.new_workspace``)
 
-    Returns
-    -------
-    (W, PointSolution): W possibly grown, holding the final sweep.  Where phi is constant
-    (V = 0) nothing is solved: status NO_MOTION, the integrals 0.
-    """
+class Judged(NamedTuple):
+    """What ``_judge`` finds of a converged sweep: the period integrals ``int_u``,
+    ``int_p``; the norm ``scale_u``, ``scale_p``; the global ``estimate`` (rtol's norm);
+    each step's weighted error ``shares`` (N,); the steps next to turning points over their
+    trap ceilings, ``trapped``, with those ceilings in ``trap_caps`` (N,, inf elsewhere);
+    the ``evaluations`` of F it made."""
+
+    int_u: float
+    int_p: float
+    scale_u: float
+    scale_p: float
+    estimate: float
+    shares: np.ndarray
+    trap_caps: np.ndarray
+    trapped: int
+    evaluations: int
+
+
+@njit(cache=True, error_model="numpy")
+def _judge(problem, W, N, atol, one_minus_M, residual):
+    """Step 4 on the converged sweep of ``W``: each step's local error (the defect, and
+    where an event sits inside a step the step split there), the node weights, the global
+    estimate, and the trap check of the steps next to turning points.  ``residual``: a
+    shooting residual kept unshifted (``solve_point``'s frozen map that jumps over its
+    fixed point), counted RESIDUAL_WEIGHT times by its first-order effect."""
+    code, params, phys = problem.code, problem.params, problem.phys
+    corner_nodes = np.zeros(N, dtype=np.bool_)
+    for n in range(N - 1):
+        corner_nodes[n + 1] = W[END_KIND, n] == CORNER_STOP
+    evaluations = estimate_sweep(code, params, phys, corner_nodes, atol, W, N)[1]
+    split = np.zeros(N, dtype=np.bool_)
+    evaluations += event_split_errors(code, params, phys, atol, W, N, split)[1]
+    node_weights(W, N, one_minus_M)
+    int_u, int_p = _integrals(W, N)
+    scale_u = max(abs(int_u), 1e-3 * problem.vscale)
+    scale_p = abs(int_p) if int_p != 0.0 else 1.0
+    shares = np.zeros(N)
+    e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
+    # a kept shooting residual g is a jump of u at node 0: it moves int u by lambda_0 g
+    # and int Pi by mu_0 g to first order (the node weights' meaning), counted twice
+    e_u += RESIDUAL_WEIGHT * abs(W[LAMBDA, 0] * residual)
+    e_p += RESIDUAL_WEIGHT * abs(W[MU, 0] * residual)
+    estimate = combine(e_u, e_p, scale_u, scale_p)
+    # the steps next to turning points judged again by the converged u (``trapped_steps``)
+    trap_caps = np.full(N, math.inf)
+    trapped, e = trapped_steps(code, params, phys, problem.stops, W, N, trap_caps)
+    return Judged(int_u, int_p, scale_u, scale_p, estimate, shares, trap_caps, trapped,
+                  evaluations + e)
+
+
+@njit(cache=True, error_model="numpy")
+def _refinement_model(W, N, judged, rtol):
+    """The weight model of the next round: the converged sweep's node weights, and ceilings
+    on the steps that asked for refinement (or all steps shrunk evenly where none asked
+    alone) and on the trapped ones."""
+    ceilings = np.full(N, math.inf)
+    if judged.estimate > rtol:
+        asked = refinement_ceiling(W, N, judged.shares, TARGET_SHARE * rtol, ceilings)
+        if asked == 0:
+            shrink = 0.9 * (rtol / judged.estimate) ** (1.0 / ERROR_ORDER)
+            for n in range(N):
+                ceilings[n] = shrink * (W[T, n + 1] - W[T, n])
+    for n in range(N):
+        ceilings[n] = min(ceilings[n], judged.trap_caps[n])
+    return _model(W, N, ceilings)
+
+
+@njit(cache=True, error_model="numpy")
+def _rounds(problem, start, W, evals, sweeps, start_kind):
+    """Steps 3-4 of the module docstring, at most MAX_ROUNDS times from ``start``
+    (RoundStart).  Returns (W, PointSolution)."""
+    code, params, phys = problem.code, problem.params, problem.phys
+    rtol, vscale = problem.rtol, problem.vscale
+    u0, h_first, model, atol = start.u0, start.h_first, start.model, start.atol
+    scale_u, scale_p = start.scale_u, start.scale_p
+    nan = math.nan
+    estimate = math.inf
+    N = 0
+    failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
+    for _ in range(MAX_ROUNDS):
+        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, h_first,
+                               TARGET_SHARE * rtol, scale_u, scale_p, model, atol, W,
+                               problem.max_steps, runtime_bool(True), runtime_bool(True))
+        W, N, status = sweep.W, sweep.N, sweep.status
+        sweeps += 1
+        evals[COST_ADAPTIVE] += sweep.evaluations
+        if status != CONVERGED:
+            return W, PointSolution(nan, nan, u0, status, N, sweeps, math.inf, evals, vscale,
+                                    start_kind)
+        round_start = u0
+        fn = frozen_newton(code, params, phys, u0, atol, W, N, problem.tol_fix, problem.bound)
+        sweeps += fn.sweeps
+        evals[COST_FROZEN] += fn.evaluations
+        u0, g, one_minus_M = fn.u0, fn.g, fn.one_minus_M
+        residual = 0.0  # a shooting residual kept and counted (``_judge``)
+        if fn.status != CONVERGED:
+            failure = fn.status
+            estimate = math.inf
+            if math.isfinite(fn.restart_u0):
+                u0 = fn.restart_u0
+                continue
+            if fn.status != NOT_PERIODIC:
+                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
+                                        vscale, start_kind)
+            # The frozen period map jumps over its fixed point (its bisection closed in on a
+            # step of g, and its best u(0) is the round's start, so another round would
+            # repeat this one): keep that start's solution unshifted and count its shooting
+            # residual g in the estimate instead (RESIDUAL_WEIGHT, ``_judge``).  (Measured:
+            # long_period_powerlaw point 356 at rtol 1e-7, g from +5.4e-11 to -2.8e-10 across
+            # 1e-21 of u(0), M = 0; NOT_PERIODIC before.)
+            u0 = round_start
+            status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
+            sweeps += 1
+            evals[COST_FROZEN] += e
+            if status != CONVERGED:
+                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
+                                        vscale, start_kind)
+            g, one_minus_M = _period_map(W, N, u0)
+            if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
+                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
+                                        vscale, start_kind)
+            residual = g
+        else:
+            shift = g / one_minus_M
+            shift_onto_fixed_point(W, N, shift)
+            u0 += shift
+        judged = _judge(problem, W, N, atol, one_minus_M, residual)
+        evals[COST_ESTIMATE] += judged.evaluations
+        estimate = judged.estimate
+        scale_u, scale_p = judged.scale_u, judged.scale_p
+        if estimate <= rtol and judged.trapped == 0:
+            return W, PointSolution(judged.int_u, judged.int_p, u0, CONVERGED, N, sweeps,
+                                    estimate, evals, vscale, start_kind)
+        failure = TOLERANCE_NOT_REACHED
+        model = _refinement_model(W, N, judged, rtol)
+        h_first = min(h_first, W[T, 1] - W[T, 0])
+    return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals, vscale,
+                            start_kind)
+
+
+@njit(cache=True, error_model="numpy")
+def _point_stops(code, params, corners):
+    """The point's kinematic ``Stops`` and V (``periodic.switching.stop_speed``)."""
     stops = np.empty(MAX_STOPS)
     n_stops, omax = kinematic_stops(code, params, corners, stops)
     vscale = stop_speed(code, params, stops, n_stops)
-    evals = np.zeros(N_COSTS, dtype=np.int64)
-    if vscale == 0.0:
-        return W, PointSolution(0.0, 0.0, 0.0, NO_MOTION, 0, 0, 0.0, evals, vscale)
     stop_is_corner = np.zeros(n_stops, dtype=np.bool_)
     for j in range(n_stops):
         for c in corners:
             if stops[j] == c:
                 stop_is_corner[j] = True
     stop_is_turning = turning_stops(code, params, stops, n_stops, omax)
-    point_stops = Stops(stops, stop_is_corner, stop_is_turning, n_stops)
-    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
+    return Stops(stops, stop_is_corner, stop_is_turning, n_stops), vscale
+
+
+@njit(cache=True, error_model="numpy")
+def _cold_start(problem, u_guess, W, evals):
+    """Step 2, the loose shooting from ``u_guess``.  Returns (W, RoundStart, status, N,
+    sweeps): status CONVERGED, or the failure that ends the solve."""
+    code, params, phys = problem.code, problem.params, problem.phys
+    rtol, vscale = problem.rtol, problem.vscale
     loose = max(LOOSE_RTOL, rtol)
     u0 = u_guess
-    bound = 1e3 * vscale + 10.0 * abs(u0)
     empty = np.zeros(1)
     model = WeightModel(empty, empty, empty, empty, 0)
     sweeps = 0
     N = 0
-    nan = math.nan
-    # step 2: loose shooting, judged in u alone, relative to V (int u and int Pi are not
-    # known yet: the floor 1e-3 V of U's norm would make it a thousand times too strict)
-    h_first = FIRST_STEP
-    lo, hi = -bound, bound
+    # judged in u alone, relative to V (int u and int Pi are not known yet: the floor
+    # 1e-3 V of U's norm would make it a thousand times too strict)
+    lo, hi = -problem.bound, problem.bound
     scale_u = scale_p = 1.0
     for _ in range(MAX_LOOSE_SWEEPS):
-        sweep = adaptive_sweep(code, params, phys, point_stops, u0, h_first,
+        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, FIRST_STEP,
                                TARGET_SHARE * loose, vscale, math.inf, model,
-                               stage_atol(loose, vscale, phys), W, max_steps, runtime_bool(True),
-                               runtime_bool(False))
+                               stage_atol(loose, vscale, phys), W, problem.max_steps,
+                               runtime_bool(True), runtime_bool(False))
         W, N, status = sweep.W, sweep.N, sweep.status
         sweeps += 1
         evals[COST_LOOSE] += sweep.evaluations
         if status != CONVERGED:
-            return W, PointSolution(nan, nan, u0, status, N, sweeps, math.inf, evals, vscale)
+            return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), status, N, sweeps
         int_u, int_p = _integrals(W, N)
         scale_u = max(abs(int_u), 1e-3 * vscale)
         scale_p = abs(int_p) if int_p != 0.0 else 1.0
         g, one_minus_M = _period_map(W, N, u0)
         if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-            return W, PointSolution(nan, nan, u0, NON_FINITE, N, sweeps, math.inf, evals, vscale)
+            return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), NON_FINITE, N, sweeps
         node_weights(W, N, one_minus_M)
         model = _model(W, N, np.full(N, math.inf))
         u_new, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
@@ -294,91 +480,90 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W):
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
     atol = stage_atol(rtol, scale_u, phys) / _largest_weight(model, scale_u, scale_p)
     h_first = max((W[T, 1] - W[T, 0]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
-    estimate = math.inf
-    ceilings = np.full(N, math.inf)
-    failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
-    for _ in range(MAX_ROUNDS):
-        sweep = adaptive_sweep(code, params, phys, point_stops, u0, h_first,
-                               TARGET_SHARE * rtol, scale_u, scale_p, model, atol, W, max_steps,
-                               runtime_bool(True), runtime_bool(True))
-        W, N, status = sweep.W, sweep.N, sweep.status
-        sweeps += 1
-        evals[COST_ADAPTIVE] += sweep.evaluations
-        if status != CONVERGED:
-            return W, PointSolution(nan, nan, u0, status, N, sweeps, math.inf, evals, vscale)
-        corner_nodes = np.zeros(N, dtype=np.bool_)
-        for n in range(N - 1):
-            corner_nodes[n + 1] = W[END_KIND, n] == CORNER_STOP
-        round_start = u0
-        fn = frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound)
-        sweeps += fn.sweeps
-        evals[COST_FROZEN] += fn.evaluations
-        u0, g, one_minus_M = fn.u0, fn.g, fn.one_minus_M
-        residual = 0.0  # a shooting residual kept and counted (below)
-        if fn.status != CONVERGED:
-            failure = fn.status
-            estimate = math.inf
-            if math.isfinite(fn.restart_u0):
-                u0 = fn.restart_u0
-                continue
-            if fn.status != NOT_PERIODIC:
-                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
-                                        vscale)
-            # The frozen period map jumps over its fixed point (its bisection closed in on a
-            # step of g, and its best u(0) is the round's start, so another round would
-            # repeat this one): keep that start's solution unshifted and count its shooting
-            # residual g in the estimate instead (RESIDUAL_WEIGHT, below).  (Measured:
-            # long_period_powerlaw point 356 at rtol 1e-7, g from +5.4e-11 to -2.8e-10 across
-            # 1e-21 of u(0), M = 0; NOT_PERIODIC before.)
-            u0 = round_start
-            status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
-            sweeps += 1
-            evals[COST_FROZEN] += e
-            if status != CONVERGED:
-                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
-                                        vscale)
-            g, one_minus_M = _period_map(W, N, u0)
-            if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
-                                        vscale)
-            residual = g
-        else:
-            shift = g / one_minus_M
-            shift_onto_fixed_point(W, N, shift)
-            u0 += shift
-        evals[COST_ESTIMATE] += estimate_sweep(code, params, phys, corner_nodes, atol, W, N)[1]
-        split = np.zeros(N, dtype=np.bool_)
-        evals[COST_ESTIMATE] += event_split_errors(code, params, phys, atol, W, N, split)[1]
-        node_weights(W, N, one_minus_M)
-        int_u, int_p = _integrals(W, N)
-        scale_u = max(abs(int_u), 1e-3 * vscale)
-        scale_p = abs(int_p) if int_p != 0.0 else 1.0
-        shares = np.zeros(N)
-        e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
-        # a kept shooting residual g is a jump of u at node 0: it moves int u by lambda_0 g
-        # and int Pi by mu_0 g to first order (the node weights' meaning), counted twice
-        e_u += RESIDUAL_WEIGHT * abs(W[LAMBDA, 0] * residual)
-        e_p += RESIDUAL_WEIGHT * abs(W[MU, 0] * residual)
-        estimate = combine(e_u, e_p, scale_u, scale_p)
-        # the steps next to turning points judged again by the converged u (``trapped_steps``)
-        trap_caps = np.full(N, math.inf)
-        trapped, e = trapped_steps(code, params, phys, point_stops, W, N, trap_caps)
-        evals[COST_ESTIMATE] += e
-        if estimate <= rtol and trapped == 0:
-            return W, PointSolution(int_u, int_p, u0, CONVERGED, N, sweeps, estimate, evals, vscale)
-        failure = TOLERANCE_NOT_REACHED
-        ceilings = np.full(N, math.inf)
-        if estimate > rtol:
-            asked = refinement_ceiling(W, N, shares, TARGET_SHARE * rtol, ceilings)
-            if asked == 0:
-                shrink = 0.9 * (rtol / estimate) ** (1.0 / ERROR_ORDER)
-                for n in range(N):
-                    ceilings[n] = shrink * (W[T, n + 1] - W[T, n])
-        for n in range(N):
-            ceilings[n] = min(ceilings[n], trap_caps[n])
-        model = _model(W, N, ceilings)
-        h_first = min(h_first, W[T, 1] - W[T, 0])
-    return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals, vscale)
+    return W, RoundStart(u0, h_first, model, atol, scale_u, scale_p), CONVERGED, N, sweeps
+
+
+@njit(cache=True, error_model="numpy")
+def _largest_node_weight(W, N, scale_u, scale_p):
+    """``_largest_weight`` of the node weights in W's rows LAMBDA and MU."""
+    largest = 1.0
+    for n in range(N + 1):
+        largest = max(largest, abs(W[LAMBDA, n]), abs(W[MU, n]) * scale_u / scale_p)
+    return largest
+
+
+@njit(cache=True, error_model="numpy")
+def warm_start(W, orbit, problem):
+    """Where the rounds of steps 3-4 start from a neighbour's ``orbit`` (its steps in W):
+    its u(0) (``solve_lane`` extrapolates it along a line of points), its node weights as
+    the weight model (no ceilings), its norm of U and P and the stage tolerance they set,
+    and its first step.  This skips the loose shooting (step 2), whose only products these
+    are.  (Placing the neighbour's steps on the point instead and solving them frozen, with
+    its state events moved onto the point's and the steps that asked for it split, was
+    slower: ``docs/validation.md``, "Warm starts".)"""
+    N = orbit.N
+    model = _model(W, N, np.full(N, math.inf))
+    atol = stage_atol(problem.rtol, orbit.scale_u, problem.phys) / orbit.largest_weight
+    return RoundStart(orbit.u0, W[T, 1] - W[T, 0], model, atol, orbit.scale_u, orbit.scale_p)
+
+
+@njit(cache=True, error_model="numpy")
+def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit):
+    """The periodic solution of one point; see the module docstring.
+
+    Parameters
+    ----------
+    code, params : the kinematics' kernel encoding (``model.kinematics``), one row.
+    corners : (k,) corners of phi in [0, 1).
+    phys : PointPhysics
+    rtol : float
+    u_guess : float
+        Starting u(0) of a cold solve (the fast limit).
+    max_steps : int
+        Steps per period before STEP_BUDGET_EXCEEDED.
+    W : workspace (``periodic.sweep.new_workspace``); with a warm start it holds ``orbit``.
+    orbit : Orbit
+        A neighbour's converged orbit to start from (``no_orbit()``: start cold).
+
+    Returns
+    -------
+    (W, PointSolution, Orbit): W possibly grown, holding the final sweep, and this point's
+    orbit for the next point of a sweep (``no_orbit()`` unless CONVERGED).  Where phi is
+    constant (V = 0) nothing is solved: status NO_MOTION, the integrals 0.
+    """
+    point_stops, vscale = _point_stops(code, params, corners)
+    evals = np.zeros(N_COSTS, dtype=np.int64)
+    if vscale == 0.0:
+        return W, PointSolution(0.0, 0.0, 0.0, NO_MOTION, 0, 0, 0.0, evals, vscale,
+                                START_COLD), no_orbit()
+    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
+    bound = 1e3 * vscale + 10.0 * abs(u_guess)
+    problem = PointProblem(code, params, phys, point_stops, vscale, rtol, max_steps, tol_fix,
+                           bound)
+    verdict = START_COLD
+    if orbit.N > 0:
+        # warm: the rounds of steps 3-4 from the neighbour's orbit (``warm_start``)
+        W, sol = _rounds(problem, warm_start(W, orbit, problem), W, evals, 0, START_WARM)
+        if sol.status == CONVERGED:
+            return W, sol, _orbit_of(W, sol, problem)
+        verdict = START_WARM_REJECTED
+    W, start, status, N, sweeps = _cold_start(problem, u_guess, W, evals)
+    if status != CONVERGED:
+        return W, PointSolution(math.nan, math.nan, start.u0, status, N, sweeps, math.inf,
+                                evals, vscale, verdict), no_orbit()
+    W, sol = _rounds(problem, start, W, evals, sweeps, verdict)
+    return W, sol, _orbit_of(W, sol, problem)
+
+
+@njit(cache=True, error_model="numpy")
+def _orbit_of(W, sol, problem):
+    """The ``Orbit`` of a solution whose final sweep is in ``W`` (none unless CONVERGED)."""
+    if sol.status != CONVERGED:
+        return no_orbit()
+    scale_u = max(abs(sol.int_u), 1e-3 * problem.vscale)
+    scale_p = abs(sol.int_pi) if sol.int_pi != 0.0 else 1.0
+    return Orbit(sol.n_steps, sol.u0, scale_u, scale_p,
+                 _largest_node_weight(W, sol.n_steps, scale_u, scale_p))
 
 
 @njit(cache=True, error_model="numpy")
@@ -424,70 +609,162 @@ def fixed_grid_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, rtol, vsc
     return int_u, int_pi, status
 
 
+class Points(NamedTuple):
+    """A batch of points for ``solve_points``: the kinematics' ``code``; per point (rows,
+    n points) ``params`` (n, k) and ``corners`` (n, c) (``model.kinematics``), the physics
+    ``kappa``, ``mu_n``, ``mu_s``, ``p``, ``dtau`` (n,) (``PointPhysics``) and ``u_guess``
+    (n,), the start of a cold solve."""
+
+    code: int
+    params: np.ndarray
+    corners: np.ndarray
+    kappa: np.ndarray
+    mu_n: np.ndarray
+    mu_s: np.ndarray
+    p: np.ndarray
+    dtau: np.ndarray
+    u_guess: np.ndarray
+
+
+class Outputs(NamedTuple):
+    """``solve_points``' results, per point (n,): ``PointSolution``'s fields (evaluations
+    (n, N_COSTS)).  A point no thread reached reports NON_FINITE, not status 0 with NaN."""
+
+    int_u: np.ndarray
+    int_pi: np.ndarray
+    u0: np.ndarray
+    status: np.ndarray
+    n_steps: np.ndarray
+    sweeps: np.ndarray
+    estimate: np.ndarray
+    vscale: np.ndarray
+    evaluations: np.ndarray
+    start: np.ndarray
+
+
 @njit(cache=True, error_model="numpy")
-def _solve_chunk(c, chunks, code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_guess,
-                 max_steps, int_u, int_pi, u0, status, n_steps, sweeps, estimate, evaluations,
-                 vscale):
-    """The points c, c + chunks, ... of ``solve_points`` on one workspace."""
+def _new_outputs(n):
+    return Outputs(np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
+                   np.full(n, NON_FINITE, dtype=np.int8), np.zeros(n, dtype=np.int64),
+                   np.zeros(n, dtype=np.int64), np.full(n, np.inf), np.full(n, np.nan),
+                   np.zeros((n, N_COSTS), dtype=np.int64), np.zeros(n, dtype=np.int8))
+
+
+@njit(cache=True, error_model="numpy")
+def _store(out, i, sol):
+    out.int_u[i] = sol.int_u
+    out.int_pi[i] = sol.int_pi
+    out.u0[i] = sol.u0
+    out.status[i] = sol.status
+    out.n_steps[i] = sol.n_steps
+    out.sweeps[i] = sol.sweeps
+    out.estimate[i] = sol.estimate
+    out.vscale[i] = sol.vscale
+    out.evaluations[i, :] = sol.evaluations
+    out.start[i] = sol.start
+
+
+class Series(NamedTuple):
+    """Where ``solve_points`` writes each point's final nodes (without tau = 1) and u there:
+    ``tau`` and ``u`` from ``offsets[i]`` to ``offsets[i + 1]`` (empty ``offsets``: nowhere),
+    and how many it wrote, ``counts`` (n,)."""
+
+    offsets: np.ndarray
+    tau: np.ndarray
+    u: np.ndarray
+    counts: np.ndarray
+
+
+@njit(cache=True, error_model="numpy")
+def no_series():
+    empty = np.zeros(0)
+    return Series(np.zeros(0, dtype=np.int64), empty, empty, np.zeros(0, dtype=np.int64))
+
+
+#: ``in_line``'s relative tolerance on a second difference
+IN_LINE_SHARE = 1e-9
+
+
+@njit(cache=True, error_model="numpy")
+def _second_difference_small(a, b, c):
+    return abs(a - 2.0 * b + c) <= IN_LINE_SHARE * max(abs(a), abs(b), abs(c), 1e-300)
+
+
+@njit(cache=True, error_model="numpy")
+def in_line(points, i, j, k):
+    """Whether points i, j, k lie evenly spaced on a line in parameter space (every
+    parameter and physical constant has a vanishing second difference): then j's orbit
+    and its change from i predict k's."""
+    for c in range(points.params.shape[1]):
+        if not _second_difference_small(points.params[i, c], points.params[j, c],
+                                        points.params[k, c]):
+            return False
+    return (_second_difference_small(points.kappa[i], points.kappa[j], points.kappa[k])
+            and _second_difference_small(points.mu_n[i], points.mu_n[j], points.mu_n[k])
+            and _second_difference_small(points.mu_s[i], points.mu_s[j], points.mu_s[k])
+            and _second_difference_small(points.p[i], points.p[j], points.p[k])
+            and _second_difference_small(points.dtau[i], points.dtau[j], points.dtau[k]))
+
+
+@njit(cache=True, error_model="numpy")
+def predicted_u0(points, out, first, i):
+    """u(0) of point i predicted from its sweep's points before it (from ``first`` on;
+    ``out`` holds their results; point i - 1 converged): by the quadratic through the last
+    three where the last four lie evenly on a line (``in_line``), by the line through the
+    last two where the last three do, else the last one's."""
+    u1 = out.u0[i - 1]
+    if i - 2 < first or out.status[i - 2] != CONVERGED or not in_line(points, i - 2, i - 1, i):
+        return u1
+    u2 = out.u0[i - 2]
+    if i - 3 < first or out.status[i - 3] != CONVERGED or not in_line(points, i - 3, i - 2, i - 1):
+        return 2.0 * u1 - u2
+    return 3.0 * u1 - 3.0 * u2 + out.u0[i - 3]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, series):
+    """The sweeps lane, lane + lanes, ... of ``solve_points`` on one workspace: each point
+    of a sweep starts from its predecessor's orbit, the first cold.  Releases the GIL (the
+    lanes run on Python threads: numba's parallel loops do not take NamedTuples)."""
     W = new_workspace(START_CAPACITY)
-    for i in range(c, params.shape[0], chunks):
-        phys = PointPhysics(kappa[i], mu_n[i], mu_s[i], p[i], dtau[i])
-        W, sol = solve_point(code, params[i], corners[i], phys, rtol, u_guess[i], max_steps, W)
-        int_u[i] = sol.int_u
-        int_pi[i] = sol.int_pi
-        u0[i] = sol.u0
-        status[i] = sol.status
-        n_steps[i] = sol.n_steps
-        sweeps[i] = sol.sweeps
-        estimate[i] = sol.estimate
-        evaluations[i, :] = sol.evaluations
-        vscale[i] = sol.vscale
+    for r in range(lane, runs.size - 1, lanes):
+        orbit = no_orbit()
+        for i in range(runs[r], runs[r + 1]):
+            phys = PointPhysics(points.kappa[i], points.mu_n[i], points.mu_s[i], points.p[i],
+                                points.dtau[i])
+            start = orbit
+            if orbit.N > 0:
+                start = Orbit(orbit.N, predicted_u0(points, out, runs[r], i), orbit.scale_u,
+                              orbit.scale_p, orbit.largest_weight)
+            W, sol, orbit = solve_point(points.code, points.params[i], points.corners[i], phys,
+                                        rtol, points.u_guess[i], max_steps, W, start)
+            _store(out, i, sol)
+            if series.offsets.size > 0:
+                N = min(sol.n_steps, series.offsets[i + 1] - series.offsets[i])
+                series.tau[series.offsets[i]:series.offsets[i] + N] = W[T, :N]
+                series.u[series.offsets[i]:series.offsets[i] + N] = W[U, :N]
+                series.counts[i] = N
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
-def solve_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_guess, max_steps,
-                 threads):
-    """``solve_point`` over every point: (int_u, int_pi, u0, status, n_steps, sweeps,
-    estimate, vscale), each (n_points,), and the evaluations of F, (n_points, N_COSTS)
-    (``PointSolution``'s fields).  The points are dealt to the threads' chunks in turn (point
-    i to chunk i mod chunks), so that numba's static split of the chunks gives each thread
-    a share of the hard points; each chunk keeps one workspace."""
-    n = params.shape[0]
-    int_u = np.full(n, np.nan)
-    int_pi = np.full(n, np.nan)
-    u0 = np.full(n, np.nan)
-    # (a point no thread reached reports a failure, not status 0 with NaN)
-    status = np.full(n, NON_FINITE, dtype=np.int8)
-    n_steps = np.zeros(n, dtype=np.int64)
-    sweeps = np.zeros(n, dtype=np.int64)
-    estimate = np.full(n, np.inf)
-    evaluations = np.zeros((n, N_COSTS), dtype=np.int64)
-    vscale = np.full(n, np.nan)
-    chunks = max(min(n, 4 * threads), 1)
-    for c in prange(chunks):
-        _solve_chunk(c, chunks, code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_guess,
-                     max_steps, int_u, int_pi, u0, status, n_steps, sweeps, estimate,
-                     evaluations, vscale)
-    return int_u, int_pi, u0, status, n_steps, sweeps, estimate, vscale, evaluations
-
-
-@njit(cache=True, parallel=True, error_model="numpy")
-def series_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_guess, max_steps,
-                  offsets, tau_out, u_out):
-    """``solve_point`` of every point again (it is deterministic), writing the final grid's
-    nodes without tau = 1 and u there into ``tau_out`` / ``u_out`` from ``offsets[i]`` on
-    (``solve_points``' n_steps apart).  Returns each point's node count."""
-    n = params.shape[0]
-    counts = np.zeros(n, dtype=np.int64)
-    for i in prange(n):
-        W = new_workspace(START_CAPACITY)
-        phys = PointPhysics(kappa[i], mu_n[i], mu_s[i], p[i], dtau[i])
-        W, sol = solve_point(code, params[i], corners[i], phys, rtol, u_guess[i], max_steps, W)
-        N = min(sol.n_steps, offsets[i + 1] - offsets[i])
-        tau_out[offsets[i]:offsets[i] + N] = W[T, :N]
-        u_out[offsets[i]:offsets[i] + N] = W[U, :N]
-        counts[i] = N
-    return counts
+def solve_points(points, rtol, max_steps, runs, threads, series):
+    """``solve_point`` over every point of ``points`` (Points), as the sweeps ``runs``:
+    (n_runs + 1,) offsets from 0 to n, points runs[k] .. runs[k + 1] - 1 one sweep in that
+    order (every point its own sweep: all cold).  Returns ``Outputs``; with a ``series``
+    (``Series``, else ``no_series()``) also each point's nodes and u there.  The sweeps are
+    dealt to 4 ``threads`` lanes in turn (sweep k to lane k mod lanes), so that each
+    thread gets a share of the hard points; each lane keeps one workspace.  A sweep's
+    results depend on its points alone, not on the threads."""
+    out = _new_outputs(points.params.shape[0])
+    lanes = max(min(runs.size - 1, 4 * threads), 1)
+    if threads <= 1 or lanes == 1:
+        for lane in range(lanes):
+            solve_lane(lane, lanes, points, rtol, max_steps, runs, out, series)
+        return out
+    with ThreadPoolExecutor(threads) as pool:
+        for done in pool.map(lambda lane: solve_lane(lane, lanes, points, rtol, max_steps,
+                                                     runs, out, series), range(lanes)):
+            pass
+    return out
 
 
 #: the fast limit's u (``model.limits.fast_limit_velocity``) that starts the shooting is taken on
@@ -496,29 +773,33 @@ def series_points(code, params, corners, kappa, mu_n, mu_s, p, dtau, rtol, u_gue
 GUESS_STEPS = 8
 
 
-def solve(kinematics, physics, rtol, max_steps, return_series):
+def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None):
     """Batched ``solve_point`` for ``solve.solve_periodic(method="periodic")``.
 
-    Returns a dict with int_u, int_pi, status, estimate, n_tau, iterations (sweeps), still
-    (phi constant: nothing solved), evaluations and, with ``return_series``, per point
-    (u nodes, tau nodes)."""
+    ``sweeps``: None (every point cold) or the offsets of ``solve_points``' runs.  Returns a
+    dict with int_u, int_pi, status, estimate, n_tau, iterations (sweeps), still (phi
+    constant: nothing solved), evaluations, start (``PointSolution.start``) and, with
+    ``return_series``, per point (u nodes, tau nodes)."""
     from ..model.limits import fast_limit_velocity
 
     code, params = kinematics.kernel_encoding()
-    corners = kinematics.corners()
-    u_guess = fast_limit_velocity(kinematics, physics, GUESS_STEPS)
-    args = (code, params, corners, physics.inertia_factor, physics.mu_n, physics.mu_s,
-            physics.p, physics.delta_tau, float(rtol), u_guess, int(max_steps))
-    out = solve_points(*args, get_num_threads())
-    int_u, int_pi, u0, status, n_steps, sweeps, estimate, vscale, evaluations = out
+    n = params.shape[0]
+    runs = np.arange(n + 1, dtype=np.int64) if sweeps is None else np.asarray(sweeps, np.int64)
+    points = Points(code, params, kinematics.corners(), physics.inertia_factor, physics.mu_n,
+                    physics.mu_s, physics.p, physics.delta_tau,
+                    fast_limit_velocity(kinematics, physics, GUESS_STEPS))
+    out = solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(),
+                       no_series())
     series = None
     if return_series:
-        offsets = np.concatenate([[0], np.cumsum(n_steps)])
-        tau_out = np.empty(offsets[-1])
-        u_out = np.empty(offsets[-1])
-        counts = series_points(*args, offsets, tau_out, u_out)
-        if not np.array_equal(counts, n_steps):
+        # the same sweeps again (deterministic), writing each point's final steps
+        offsets = np.concatenate([[0], np.cumsum(out.n_steps)]).astype(np.int64)
+        written = Series(offsets, np.empty(offsets[-1]), np.empty(offsets[-1]),
+                         np.zeros(n, dtype=np.int64))
+        solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(), written)
+        if not np.array_equal(written.counts, out.n_steps):
             raise RuntimeError("periodic: a point's second solve for its series took another grid")
-        series = [(u_out[a:b], tau_out[a:b]) for a, b in zip(offsets[:-1], offsets[1:])]
-    return dict(int_u=int_u, int_pi=int_pi, status=status, estimate=estimate, n_tau=n_steps,
-                iterations=sweeps, still=vscale == 0.0, series=series, evaluations=evaluations)
+        series = [(written.u[a:b], written.tau[a:b]) for a, b in zip(offsets[:-1], offsets[1:])]
+    return dict(int_u=out.int_u, int_pi=out.int_pi, status=out.status, estimate=out.estimate,
+                n_tau=out.n_steps, iterations=out.sweeps, still=out.vscale == 0.0,
+                series=series, evaluations=out.evaluations, start=out.start)
