@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ._scene import Scene
+from ._scene import DEFAULT_POINTS_PER_CHUNK, Scene
 
 __all__ = [
     "DEFAULT_POINTS_PER_CHUNK",
@@ -23,6 +23,7 @@ __all__ = [
     "iter_chunks",
     "region_parameters",
     "solve_points",
+    "chunk_sweeps",
 ]
 
 #: Wall time aimed at for one task: long enough that scheduling and store overheads are
@@ -30,10 +31,6 @@ __all__ = [
 TASK_SECONDS = 4.0
 #: Bounds of the calibrated points per task.
 MIN_POINTS_PER_TASK, MAX_POINTS_PER_TASK = 16, 16384
-#: Points of one chunk of a grid store unless the scene says ``[execution] points_per_chunk``.
-#: A constant, never a timing: where chunks begin decides which grid neighbours a chunk's
-#: sweep may start from, so it must follow from the scene alone.
-DEFAULT_POINTS_PER_CHUNK = 256
 
 
 def calibrate_points_per_task(scene: Scene, workers: int, n_probe: int = 16) -> tuple[int, float]:
@@ -123,6 +120,24 @@ def iter_chunks(shape, chunks):
     return itertools.product(*(range(n) for n in chunk_grid(shape, chunks)))
 
 
+#: points of one sweep (``chunk_sweeps``): a chunk is cut into sweeps of this many points in
+#: snake order (``solver.snake_order``), so that a task's sweeps share its cores; a constant, never a timing
+SWEEP_POINTS = 64
+
+
+def chunk_sweeps(shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """How a chunk of ``shape`` is solved as sweeps: (order, runs) for
+    ``solver.solve_periodic(..., sweeps=runs)`` on the chunk's points taken in ``order``
+    (``solver.snake_order``), runs cutting it into sweeps of ``SWEEP_POINTS``.  A function of the
+    chunk's shape alone: warm starts never cross a chunk's boundary, so a chunk's values
+    depend only on its own points, and a resumed store equals an uninterrupted run."""
+    from solver import snake_order
+
+    order = snake_order(shape)
+    runs = np.unique(np.r_[np.arange(0, order.size, SWEEP_POINTS), order.size]).astype(np.int64)
+    return order, runs
+
+
 def region_parameters(scene: Scene, region: tuple[slice, ...]) -> dict[str, np.ndarray]:
     """Parameter values at every point of ``region``, each shape (n,) in C order of the region."""
     axes_vals = [a.array()[sl] for a, sl in zip(scene.axes, region)]
@@ -160,8 +175,9 @@ def _kinematics(solver, family: str, params: dict[str, np.ndarray]):
 
 
 def solve_points(family: str, params: dict[str, np.ndarray], outputs, *, method: str, rtol: float,
-                 series: bool = False):
-    """Solve at the points ``params`` (each shape (n,)) and return the requested outputs.
+                 series: bool = False, sweeps=None):
+    """Solve at the points ``params`` (each shape (n,)) and return the requested outputs
+    (``sweeps``: ``solver.solve_periodic``'s, the points in sweep order).
 
     Returns
     -------
@@ -173,7 +189,7 @@ def solve_points(family: str, params: dict[str, np.ndarray], outputs, *, method:
 
     kin = _kinematics(solver, family, params)
     phys, _ = _physics(solver, params)
-    res = solver.solve_periodic(kin, phys, method=method, rtol=rtol, return_series=series)
+    res = solver.solve_periodic(kin, phys, method=method, rtol=rtol, return_series=series, sweeps=sweeps)
     out = {"status": np.asarray(res.status, dtype=np.int8)}
     if series:
         out["u"] = [np.asarray(v, dtype=np.float64) for v in res.u]

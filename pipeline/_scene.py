@@ -244,6 +244,12 @@ class Series:
     points: tuple[tuple[tuple[str, float], ...], ...]
 
 
+#: Points of one chunk of a grid store unless the scene says ``[execution] points_per_chunk``.
+#: A constant, never a timing: where chunks begin decides which grid neighbours a chunk's
+#: sweep may start from, so it must follow from the scene alone (``_grid.scene_chunks``).
+DEFAULT_POINTS_PER_CHUNK = 256
+
+
 @dataclass(frozen=True)
 class Execution:
     """How to run; not part of the scene hash."""
@@ -277,6 +283,8 @@ class Scene:
     science: dict = field(compare=False, repr=False)
     text: str = field(default="", compare=False, repr=False)
     kind: str = "grid"
+    #: ``[solver] sweeps``: each chunk solved as sweeps in snake order (``_grid.chunk_sweeps``)
+    sweeps: bool = False
 
     # -- convenience -------------------------------------------------------
     @property
@@ -596,7 +604,7 @@ _TOP_KEYS = {
     "scene": "kind (grid, default), name, title, figure, family",
     "axes": "swept parameters",
     "fixed": "parameters held fixed",
-    "solver": "method and rtol",
+    "solver": "method, rtol and sweeps",
     "outputs": "stored quantities and diagnostics",
     "reductions": "maxima over axes",
     "series": "u(tau) at a few points",
@@ -669,9 +677,13 @@ def parse_grid_scene(doc: dict, ctx: "ParseContext", text: str) -> Scene:
     if extreme("delta", min) == 0 and extreme("p", min) == 0:
         raise ctx.err("fixed.delta" if "delta" in fixed else "axes.delta", "delta = 0 needs p > 0")
 
-    sol = ctx.table(doc["solver"], "solver", {"method": "periodic or march", "rtol": "relative tolerance"},
+    sol = ctx.table(doc["solver"], "solver", {"method": "periodic or march", "rtol": "relative tolerance",
+                                              "sweeps": "true: warm starts along each chunk"},
                     required=("rtol",))
     method = ctx.string(sol.get("method", "periodic"), "solver.method", ("periodic", "march"))
+    sweeps = ctx.boolean(sol["sweeps"], "solver.sweeps") if "sweeps" in sol else False
+    if sweeps and method != "periodic":
+        raise ctx.err("solver.sweeps", f"warm starts need method 'periodic', not {method!r}")
     rtol = ctx.number(sol["rtol"], "solver.rtol")
     if not 0 < rtol <= 0.1:
         raise ctx.err("solver.rtol", f"must be in (0, 0.1], got {rtol:g}")
@@ -737,14 +749,21 @@ def parse_grid_scene(doc: dict, ctx: "ParseContext", text: str) -> Scene:
         "family": family,
         "axes": [{"name": a.name, "values": list(a.values), "spacing": a.spacing} for a in axes],
         "fixed": dict(sorted(fixed.items())),
-        "solver": {"method": method, "rtol": rtol},
+        # (with sweeps a point's value depends on its chunk's points: the layout is hashed)
+        "solver": {"method": method, "rtol": rtol, **({"sweeps": True, "points_per_chunk": _chunk_points(execution)}
+                                                      if sweeps else {})},
         "outputs": {"quantities": list(quantities), "diagnostics": list(diagnostics)},
         "reductions": [_reduction_json(r) for r in reductions],
         **({"series": {"n_tau": series.n_tau, "points": [dict(p) for p in series.points]}} if series else {}),
     }
     return Scene(path=ctx.file, name=name, title=title, figure=figure, family=family, axes=axes,
-                 fixed=tuple(sorted(fixed.items())), method=method, rtol=rtol, quantities=quantities,
+                 fixed=tuple(sorted(fixed.items())), method=method, rtol=rtol, sweeps=sweeps, quantities=quantities,
                  diagnostics=diagnostics, reductions=reductions, series=series, execution=execution, science=science, text=text)
+
+
+def _chunk_points(execution: Execution) -> int:
+    """``[execution] points_per_chunk`` or its default, DEFAULT_POINTS_PER_CHUNK."""
+    return execution.points_per_chunk or DEFAULT_POINTS_PER_CHUNK
 
 
 _MAX_SERIES_POINTS = 64

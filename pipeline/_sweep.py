@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._grid import (calibrate_points_per_task, chunk_region, chunks_per_task, region_parameters, scene_chunks,
-                    solve_points)
+from ._grid import (calibrate_points_per_task, chunk_region, chunk_sweeps, chunks_per_task, region_parameters,
+                    scene_chunks, solve_points)
 from ._kind import RunContext, SceneKind, Step
 from ._reduce import grid_reduction, objective, polish_cells
 from ._scene import Scene, parse_grid_scene
@@ -37,10 +37,20 @@ def compute_chunk(store: str, scene: Scene, chunks: tuple[int, ...], index: tupl
     store_path = Path(store)
     region = chunk_region(index, scene.shape, chunks)
     params = region_parameters(scene, region)
-    t0 = time.perf_counter()
-    values = solve_points(scene.family, params, scene.outputs, method=scene.method, rtol=scene.rtol)
-    seconds = time.perf_counter() - t0
     rshape = tuple(sl.stop - sl.start for sl in region)
+    t0 = time.perf_counter()
+    if scene.sweeps:
+        # warm starts along snake-ordered sweeps inside the chunk (``_grid.chunk_sweeps``)
+        order, runs = chunk_sweeps(rshape)
+        swept = solve_points(scene.family, {k: v[order] for k, v in params.items()}, scene.outputs,
+                             method=scene.method, rtol=scene.rtol, sweeps=runs)
+        values = {}
+        for k, v in swept.items():
+            values[k] = np.empty_like(v)
+            values[k][order] = v
+    else:
+        values = solve_points(scene.family, params, scene.outputs, method=scene.method, rtol=scene.rtol)
+    seconds = time.perf_counter() - t0
     values = {k: np.asarray(v).reshape(rshape) for k, v in values.items()}
     write_region(store_path, region, index, chunks, scene.shape, values)
     # Test hook: widen the window between data and marker, where a kill leaves a half-done chunk.

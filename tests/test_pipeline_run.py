@@ -296,12 +296,20 @@ def test_store_of_another_chunk_layout_is_refused_until_complete(reference, tmp_
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--overwrite" in err and "chunk layout" in err
     assert (read_store(store)["status"] == -1).all()  # untouched
-    # The scene's layout changed under a complete store (points_per_chunk is not hashed): nothing
-    # is left to compute in the old layout, so the store is accepted as it is.
-    other = write_scene(tmp_path, small_scene_text(polish=True).replace("points_per_chunk = 8", "points_per_chunk = 16"),
-                        "other.toml")
-    summary = run_scene(load_scene(other), ref_store, scheduler="synchronous", progress=False)
+    # The layout of a scene without sweeps changed under a complete store (points_per_chunk is
+    # then not hashed): nothing is left to compute in the old layout, so the store is accepted
+    # as it is.  (With sweeps the layout is hashed: such a store is another scene's.)
+    cold = small_scene_text(polish=True).replace("sweeps = true", "sweeps = false")
+    cold_store = tmp_path / "cold.zarr"
+    run_scene(load_scene(write_scene(tmp_path, cold, "cold.toml")), cold_store, scheduler="synchronous",
+              progress=False)
+    other = write_scene(tmp_path, cold.replace("points_per_chunk = 8", "points_per_chunk = 16"), "other.toml")
+    summary = run_scene(load_scene(other), cold_store, scheduler="synchronous", progress=False)
     assert summary.computed_chunks == 0 and "nothing to do" in summary.line()
+    swept_other = write_scene(tmp_path, small_scene_text(polish=True).replace("points_per_chunk = 8",
+                                                                              "points_per_chunk = 16"), "swept.toml")
+    with pytest.raises(StoreMismatch):
+        run_scene(load_scene(swept_other), ref_store, scheduler="synchronous", progress=False)
 
 
 def test_run_killed_during_reductions_recomputes_only_reductions(reference, tmp_path):

@@ -43,6 +43,9 @@ BAD = [
                  "axes.A1_ratio.range", "outside the physical domain", id="ratio-domain"),
     pytest.param(("rtol = 0.001", "rtol = 0.0"), "solver.rtol", "must be in (0, 0.1]", id="rtol-domain"),
     pytest.param(('method = "periodic"', 'method = "euler"'), "solver.method", "must be one of", id="method"),
+    pytest.param(('method = "periodic"', 'method = "march"'), "solver.sweeps", "need method 'periodic'",
+                 id="sweeps-march"),
+    pytest.param(("sweeps = true", 'sweeps = "yes"'), "solver.sweeps", "must be true or false", id="sweeps-type"),
     pytest.param(('over = ["A0", "A1_ratio"]', 'over = ["A0", "A2"]'), "reductions[0].over[1]",
                  "is not one of", id="reduction-axis"),
     pytest.param(('quantity = "scaled_speed"', 'quantity = "U"'), "reductions[1].quantity",
@@ -77,7 +80,7 @@ def test_cli_bad_scene_exit_2_nothing_written(tmp_path, capsys):
     store = tmp_path / "out" / "bad.zarr"
     assert main(["run", str(path), "--store", str(store)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == f"error: {path}: solver.speed: unknown key (allowed: method, rtol)"
+    assert err == f"error: {path}: solver.speed: unknown key (allowed: method, rtol, sweeps)"
     assert not (tmp_path / "out").exists()
 
 
@@ -100,6 +103,52 @@ def test_hash_covers_science_not_execution():
     c = parse_scene(small_scene_text(rtol=1e-4), "a.toml")
     assert a.hash == b.hash
     assert a.hash != c.hash
+
+
+def test_sweeps_and_their_chunk_layout_are_hashed():
+    """With sweeps a value depends on its chunk's points: the sweeps and the layout enter
+    the hash; without, the layout does not (a store of another layout is refused anyway)."""
+    swept = parse_scene(small_scene_text(), "a.toml")
+    cold = parse_scene(small_scene_text().replace("sweeps = true", "sweeps = false"), "a.toml")
+    other_layout = parse_scene(small_scene_text().replace("points_per_chunk = 8", "points_per_chunk = 16"), "a.toml")
+    cold_layout = parse_scene(small_scene_text().replace("sweeps = true", "sweeps = false")
+                              .replace("points_per_chunk = 8", "points_per_chunk = 16"), "a.toml")
+    assert swept.sweeps and not cold.sweeps
+    assert swept.hash != cold.hash
+    assert swept.hash != other_layout.hash
+    assert cold.hash == cold_layout.hash
+
+
+def test_a_swept_chunk_is_its_snake_ordered_sweeps(tmp_path):
+    """``compute_chunk`` with sweeps stores what ``solve_periodic`` gives the chunk's points in
+    snake order as sweeps of SWEEP_POINTS, put back in grid order (computed here directly)."""
+    import solver
+    from pipeline._grid import SWEEP_POINTS, chunk_region, region_parameters, scene_chunks
+    from pipeline._store import create_skeleton
+    from pipeline._sweep import compute_chunk
+    from pipeline_cases import read_store
+
+    scene = parse_scene(small_scene_text().replace("points_per_chunk = 8", "points_per_chunk = 16"), "a.toml")
+    chunks = scene_chunks(scene)
+    store = tmp_path / "s.zarr"
+    create_skeleton(store, scene, chunks)
+    index = (1, 0, 0, 0)
+    compute_chunk(str(store), scene, chunks, index)
+    region = chunk_region(index, scene.shape, chunks)
+    rshape = tuple(r.stop - r.start for r in region)
+    params = region_parameters(scene, region)
+    order = solver.snake_order(rshape)
+    kin = solver.Harmonic(A0=params["A0"][order], A1=(params["A1_ratio"] * params["A0"])[order])
+    phys = solver.Physics.from_scaled(anisotropy_ratio=params["anisotropy_ratio"][order],
+                                      scaled_period=params["scaled_period"][order], p=params["p"][order],
+                                      delta=params["delta"][order])
+    runs = np.unique(np.r_[np.arange(0, order.size, SWEEP_POINTS), order.size])
+    res = solver.solve_periodic(kin, phys, rtol=scene.rtol, sweeps=runs)
+    want = np.empty(order.size)
+    want[order] = res.scaled_efficiency
+    got = read_store(store)["scaled_efficiency"][region].ravel()
+    np.testing.assert_array_equal(got, want)
+    assert np.count_nonzero(res.start == 1) == order.size - 1  # one sweep: all but the first warm
 
 
 def test_axis_forms():
@@ -160,7 +209,10 @@ def test_chunk_shape_is_a_function_of_the_scene_only(tmp_path, monkeypatch):
     scenes = [parse_scene(base.replace("[execution]\n", "[execution]\n" + extra), "a.toml") for extra in runs]
     assert {scene_chunks(s) for s in scenes} == {chunk_shape((2, 2, 4, 4), DEFAULT_POINTS_PER_CHUNK)} == {(2, 2, 4, 4)}  # 64 points: one chunk
     chunked = parse_scene(base.replace("[execution]\n", "[execution]\npoints_per_chunk = 8\n"), "a.toml")
-    assert scene_chunks(chunked) == (1, 1, 2, 4) and chunked.hash == scenes[0].hash
+    # (the small scene solves its chunks as sweeps, whose values depend on the layout: hashed)
+    assert scene_chunks(chunked) == (1, 1, 2, 4) and chunked.hash != scenes[0].hash
+    default = parse_scene(base.replace("[execution]\n", "[execution]\npoints_per_chunk = 256\n"), "a.toml")
+    assert default.hash == scenes[0].hash
 
     # The skeleton never asks the probe: its layout is the scene's under any load.
     def no_probe(*args, **kwargs):
