@@ -131,14 +131,14 @@ def test_an_event_in_the_first_sixth_of_a_step_is_found():
     step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
     phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
     f0 = sweep.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)[0]
-    theta = sweep.find_event(code, params, phys, t0, h, u_n, step, kin3, math.sin(phi0), om0,
-                              f0, 1e-14, True, sweep.new_exit_memo())
+    solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
+    theta = sweep.find_event(code, params, phys, solved, 1e-14, True, sweep.new_exit_memo())
     assert abs(theta - 0.1) < 1e-2, theta
     h = theta * h
     kin3 = sweep.stage_kinematics(code, params, t0, h)
     step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
-    cut = sweep.find_event(code, params, phys, t0, h, u_n, step, kin3, math.sin(phi0), om0,
-                            f0, 1e-14, False, sweep.new_exit_memo())
+    solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
+    cut = sweep.find_event(code, params, phys, solved, 1e-14, False, sweep.new_exit_memo())
     true = (t_c - t0) / h
     assert abs(true - 1.0) < 0.05  # the cut step ends near the true crossing ...
     if cut > 0:                    # ... and any crossing left in it is located to 1e-6

@@ -97,6 +97,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -127,9 +128,24 @@ OBJECTIVES = ("efficiency", "speed", "power")
 # partial derivatives of the force and the power density
 
 
+class LinkIntegrand(NamedTuple):
+    """What the force and power integrands along the link depend on besides s: the state at
+    one time and the force law (``force_and_slope``'s arguments, phi as its sine and cosine)."""
+
+    u: float       # body velocity
+    S: float       # sin phi
+    C: float       # cos phi
+    omega: float   # dphi/dtau
+    mu_n: float
+    mu_s: float
+    p: float
+    dtau: float    # delta_tau
+
+
 @njit(cache=True, error_model="numpy")
-def _panel(s_c, w_c, lo, hi, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
-    """Add 10-point Gauss-Legendre sums over s in [s_c + lo, s_c + hi] of the integrands to ``acc``.
+def _panel(s_c, w_c, lo, hi, link, acc):
+    """Add 10-point Gauss-Legendre sums over s in [s_c + lo, s_c + hi] of the integrands of
+    ``link`` (a ``LinkIntegrand``) to ``acc``.
 
     w = w_c + omega (s - s_c) is formed from the offset s - s_c, with w_c = w(s_c)
     (0 at an interior kink): near the kink w is then exact to rounding relative to
@@ -139,6 +155,7 @@ def _panel(s_c, w_c, lo, hi, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
     acc: [G, G_u, G_phi, G_omega, G_delta, H, H_u, H_phi, H_omega, H_delta] with
     G = (mu_n S w - mu_s C c) r^(p-1) (force) and H = (mu_n w^2 + mu_s c^2) r^(p-1) (power).
     """
+    u, S, C, omega, mu_n, mu_s, p, dtau = link
     length = hi - lo
     c = C * (u + 0.25 * omega * S)
     c_u = C
@@ -184,8 +201,8 @@ def _panel(s_c, w_c, lo, hi, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
 
 
 @njit(cache=True, error_model="numpy")
-def _graded_side(s_c, w_c, end, rho, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
-    """Panels on [s_c, end] (either order), halving toward s_c down to length <= rho."""
+def _graded_side(s_c, w_c, end, rho, link, acc):
+    """``_panel``s on [s_c, end] (either order), halving toward s_c down to length <= rho."""
     L = abs(end - s_c)
     if L == 0.0:
         return
@@ -198,10 +215,10 @@ def _graded_side(s_c, w_c, end, rho, u, S, C, omega, dtau, p, mu_n, mu_s, acc):
         inner = 0.5 * outer
         a = direction * inner
         b = direction * outer
-        _panel(s_c, w_c, min(a, b), max(a, b), u, S, C, omega, dtau, p, mu_n, mu_s, acc)
+        _panel(s_c, w_c, min(a, b), max(a, b), link, acc)
         outer = inner
     b = direction * outer
-    _panel(s_c, w_c, min(0.0, b), max(0.0, b), u, S, C, omega, dtau, p, mu_n, mu_s, acc)
+    _panel(s_c, w_c, min(0.0, b), max(0.0, b), link, acc)
 
 
 @njit(cache=True, error_model="numpy")
@@ -232,16 +249,17 @@ def force_partials(u, phi, omega, mu_n, mu_s, p, delta_tau):
     the adjoint's Jacobian is the derivative of what the forward residual evaluates).
     """
     out = np.empty(10)
-    force_partials_into(u, math.sin(phi), math.cos(phi), phi, omega, mu_n, mu_s, p, delta_tau,
-                        out)
+    force_partials_into(LinkIntegrand(u, math.sin(phi), math.cos(phi), omega, mu_n, mu_s, p,
+                                      delta_tau), phi, out)
     return out
 
 
 @njit(cache=True, error_model="numpy")
-def force_partials_into(u, S, C, phi, omega, mu_n, mu_s, p, delta_tau, out):
-    """``force_partials`` written into ``out`` (10,), with S = sin(phi), C = cos(phi) given:
-    the adjoint calls it twice a step, and the allocation and the sine and cosine were ~1/3
-    of its cost."""
+def force_partials_into(link, phi, out):
+    """``force_partials`` at ``link`` (a ``LinkIntegrand``: sin and cos of phi given) written
+    into ``out`` (10,): the adjoint calls it at every stage, and the allocation and the sine
+    and cosine were ~1/3 of its cost."""
+    u, S, C, omega, mu_n, mu_s, p, delta_tau = link
     S, C, a, b, c, e2 = link_setup_sc(u, S, C, omega, delta_tau, p)
     m00, m10, m20, m01, m11, m21 = link_moments(a, b, e2, p)
     m31 = m10 - e2 * m11
@@ -287,13 +305,14 @@ def force_partials_quadrature(u, phi, omega, mu_n, mu_s, p, delta_tau):
     """
     S = math.sin(phi)
     C = math.cos(phi)
+    link = LinkIntegrand(u, S, C, omega, mu_n, mu_s, p, delta_tau)
     acc = np.zeros(10)
     c = C * (u + 0.25 * omega * S)
     e = max(math.sqrt(c * c + delta_tau * delta_tau), E_FLOOR)  # as in _panel: rho > 0
     a = -u * S - 0.25 * omega * S * S
     if omega == 0.0 or p == 1.0:
         # polynomial or constant in s: one panel is exact
-        _panel(0.0, a, 0.0, 0.5, u, S, C, omega, delta_tau, p, mu_n, mu_s, acc)
+        _panel(0.0, a, 0.0, 0.5, link, acc)
     else:
         s_star = -a / omega
         eta = e / abs(omega)
@@ -305,8 +324,8 @@ def force_partials_quadrature(u, phi, omega, mu_n, mu_s, p, delta_tau):
             w_c = a
         else:
             w_c = a + 0.5 * omega
-        _graded_side(s_c, w_c, 0.5, rho, u, S, C, omega, delta_tau, p, mu_n, mu_s, acc)
-        _graded_side(s_c, w_c, 0.0, rho, u, S, C, omega, delta_tau, p, mu_n, mu_s, acc)
+        _graded_side(s_c, w_c, 0.5, rho, link, acc)
+        _graded_side(s_c, w_c, 0.0, rho, link, acc)
     for k in range(10):
         acc[k] *= 2.0
     return acc
@@ -467,15 +486,16 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
 
 
 @njit(cache=True, error_model="numpy")
-def _adjoint(code, params, nodes, N, kappa, mu_n, mu_s, p, dtau, stages, stage_kinematics,
-             grad):
+def _adjoint(code, params, nodes, N, phys, stages, stage_kinematics, grad):
     """Gradients of the period integrals from the converged stages (3N,) and phi, dphi/dtau,
-    sin phi, cos phi there (4, 3N) (``_forward``'s); see the module docstring.
+    sin phi, cos phi there (4, 3N) (``_forward``'s), for ``phys`` (``PointPhysics``); see the
+    module docstring.
 
     ``grad`` has shape (2, n_par + 2): rows I_u and I_Pi; columns the family
     parameters, then kappa, then delta_tau (each held independent of the others).
     Returns 1 - M; the period integrals come from the forward solve (``_forward``).
     """
+    kappa, mu_n, mu_s, p, dtau = phys
     n_par = grad.shape[1] - 2
     jac = np.empty((N, 9))       # J_n = I - h kappa A diag(F_u), row-major
     sens = np.empty((N, 3))      # s_n = J_n^-1 1 = dU_i/du_n
@@ -488,8 +508,8 @@ def _adjoint(code, params, nodes, N, kappa, mu_n, mu_s, p, dtau, stages, stage_k
         hk = (nodes[n + 1] - nodes[n]) * kappa
         for j in range(3):
             i = 3 * n + j
-            force_partials_into(stages[i], sins[i], coss[i], phis[i], oms[i], mu_n, mu_s, p,
-                                dtau, part[n, j])
+            force_partials_into(LinkIntegrand(stages[i], sins[i], coss[i], oms[i], mu_n, mu_s,
+                                              p, dtau), phis[i], part[n, j])
         # F_u of force_partials is the closed-form slope of the forward residual
         z1 = hk * part[n, 0, 1]
         z2 = hk * part[n, 1, 1]
@@ -867,8 +887,8 @@ def objective_gradient(kinematics, physics, grid, *, objective="efficiency", rto
     if stage_kinematics.shape[0] < 4:  # a solution stored with phi and dphi/dtau only
         phi = stage_kinematics[0]
         stage_kinematics = np.vstack([stage_kinematics[:2], np.sin(phi), np.cos(phi)])
-    one_minus_M = _adjoint(code, params, nodes, N, kappa, float(physics.mu_n[0]),
-                           float(physics.mu_s[0]), p, dtau, stages, stage_kinematics, grad)
+    phys = PointPhysics(kappa, float(physics.mu_n[0]), float(physics.mu_s[0]), p, dtau)
+    one_minus_M = _adjoint(code, params, nodes, N, phys, stages, stage_kinematics, grad)
     n_fam = len(names)  # the harmonic encoding carries B1 = 0: drop its column
     d_int = np.empty((2, n_out))
     d_int[:, :n_fam] = grad[:, :n_fam]

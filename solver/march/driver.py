@@ -55,7 +55,7 @@ import numpy as np
 
 from ..model.kinematics import period_grid
 from ..model.limits import kinematic_speed
-from .heun import march_level
+from .heun import PhysicsColumns, march_level
 from ..status import CONVERGED, NO_MOTION, TOLERANCE_NOT_REACHED, UNSTABLE
 
 #: steps per period of the first grid (a multiple of 8: ``model.kinematics.phase_steps``)
@@ -121,10 +121,11 @@ def _march_grid(kinematics, physics, index, N, u_init, vscale, rtol):
     and the grids (len(index), N + 1)."""
     code, params = kinematics.kernel_encoding()
     grids = period_grid(kinematics.take(index), N)
-    out = march_level(code, params[index], grids, physics.inertia_factor[index],
-                      physics.mu_n[index], physics.mu_s[index], physics.p[index],
-                      physics.delta_tau[index], u_init, np.maximum(vscale[index], 1e-300),
-                      float(rtol), max(min(MARCH_STEP_BUDGET, MAX_PERIODS * N), MIN_PERIODS * N))
+    columns = PhysicsColumns(physics.inertia_factor[index], physics.mu_n[index],
+                             physics.mu_s[index], physics.p[index], physics.delta_tau[index])
+    out = march_level(code, params[index], grids, columns, u_init,
+                      np.maximum(vscale[index], 1e-300), float(rtol),
+                      max(min(MARCH_STEP_BUDGET, MAX_PERIODS * N), MIN_PERIODS * N))
     return out, grids
 
 

@@ -15,12 +15,14 @@ point is reported UNSTABLE rather than returned wrong.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
 from ..model.force import force_and_slope, power_density
 from ..model.kinematics import angle_and_rate
+from ..periodic.radau import PointPhysics
 from ..status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
 
 #: Heun's method (explicit trapezoidal RK2).
@@ -30,14 +32,46 @@ HEUN_B = np.array([0.5, 0.5])
 ORDER = 2
 
 
+class PhysicsColumns(NamedTuple):
+    """``PointPhysics``' fields for the n points of one ``march_level``, each of shape (n,)."""
+
+    kappa: np.ndarray   # T^(2-p), the inertia factor in u' = kappa F
+    mu_n: np.ndarray
+    mu_s: np.ndarray
+    p: np.ndarray
+    dtau: np.ndarray    # delta_tau = T delta
+
+
+class PeriodicityTest(NamedTuple):
+    """When ``_march_point`` stops: u(0) within max(1e-5 rtol, 1e-13) vscale of the fixed
+    point (the module docstring's bound), or ``max_steps`` steps marched."""
+
+    vscale: float    # V, the point's speed scale (``model.limits.kinematic_speed``)
+    rtol: float
+    max_steps: int
+
+
+class MarchRecord(NamedTuple):
+    """The arrays ``_march_point`` writes (its caller allocates them, one set per thread)."""
+
+    nodes: np.ndarray       # (N + 1,) u at the grid's nodes over the last period marched
+    step_m: np.ndarray      # (N,) each step's du_{n+1}/du_n
+    step_u: np.ndarray      # (N,) each step's trapezoidal integral of u
+    step_pi: np.ndarray     # (N,) ... and of Pi
+    step_stiff: np.ndarray  # (N,) bool: the step chatters through a sticking phase
+
+
 @njit(cache=True, error_model="numpy")
-def heun_step(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
-    """One RK2 step (Butcher tableau HEUN_*): pure function, no state.
+def heun_step(u, h, phi0, om0, phi1, om1, phys):
+    """One RK2 step (Butcher tableau HEUN_*) of u' = kappa F for ``phys`` (``PointPhysics``),
+    phi and dphi/dtau at the step's ends given: pure function, no state.
 
     Returns (u_{n+1}, du_{n+1}/du_n).
     """
-    F1, dF1 = force_and_slope(u, phi0, om0, mu_n, mu_s, p, dtau)
-    F2, dF2 = force_and_slope(u + h * kappa * F1, phi1, om1, mu_n, mu_s, p, dtau)
+    kappa = phys.kappa
+    F1, dF1 = force_and_slope(u, phi0, om0, phys.mu_n, phys.mu_s, phys.p, phys.dtau)
+    F2, dF2 = force_and_slope(u + h * kappa * F1, phi1, om1, phys.mu_n, phys.mu_s, phys.p,
+                              phys.dtau)
     m = 1.0 + 0.5 * h * kappa * (dF1 + dF2 * (1.0 + h * kappa * dF1))
     return u + 0.5 * h * kappa * (F1 + F2), m
 
@@ -49,10 +83,12 @@ JUMP_LIMIT = -1.5
 
 
 @njit(cache=True, error_model="numpy")
-def step_jumps(u, h, phi0, om0, phi1, om1, kappa, mu_n, mu_s, p, dtau):
-    """Whether a Heun step from u jumps across a sticking band instead of resolving it."""
-    F1, _ = force_and_slope(u, phi0, om0, mu_n, mu_s, p, dtau)
-    F2, _ = force_and_slope(u + h * kappa * F1, phi1, om1, mu_n, mu_s, p, dtau)
+def step_jumps(u, h, phi0, om0, phi1, om1, phys):
+    """Whether a Heun step (``heun_step``'s arguments) from u jumps across a sticking band
+    instead of resolving it."""
+    F1, _ = force_and_slope(u, phi0, om0, phys.mu_n, phys.mu_s, phys.p, phys.dtau)
+    F2, _ = force_and_slope(u + h * phys.kappa * F1, phi1, om1, phys.mu_n, phys.mu_s, phys.p,
+                            phys.dtau)
     return F1 * F2 < 0.0 and (F2 - F1) / F1 < JUMP_LIMIT
 
 
@@ -73,22 +109,24 @@ def _step_kinematics(code, params, grid, N):
 
 
 @njit(cache=True, error_model="numpy")
-def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
-                 max_steps, nodes, step_m, step_u, step_pi, step_stiff):
-    """March on the first N steps of ``grid`` from u(0) = ``u_init`` until periodic.
+def _march_point(code, params, grid, N, phys, u_init, test, record):
+    """March on the first N steps of ``grid`` from u(0) = ``u_init`` until periodic
+    (``test``, a ``PeriodicityTest``), for ``phys`` (``PointPhysics``).
 
-    On return (when CONVERGED) ``nodes[:N + 1]`` holds u at the grid's nodes over the last
-    period marched, ``step_m[:N]`` each step's du_{n+1}/du_n, ``step_u``, ``step_pi`` each
-    step's trapezoidal integral of u and Pi, and ``step_stiff[:N]`` flags the steps that
-    chatter through a sticking phase (consecutive ``step_jumps``).
+    On return (when CONVERGED) ``record`` (a ``MarchRecord``) holds in ``nodes[:N + 1]`` u at
+    the grid's nodes over the last period marched, in ``step_m[:N]`` each step's
+    du_{n+1}/du_n, in ``step_u``, ``step_pi`` each step's trapezoidal integral of u and Pi,
+    and in ``step_stiff[:N]`` the steps that chatter through a sticking phase (consecutive
+    ``step_jumps``).
     Returns (int_u, int_Pi, u0, status, periods, force evaluations).
     """
+    nodes, step_m, step_u, step_pi, step_stiff = record
     phis, oms, hs = _step_kinematics(code, params, grid, N)
     # |u(0) - fixed point| <= tol_fix: a shift of u(0) carries about one for one into int u,
     # whose norm can be as small as 1e-3 V, so this is 1 % of rtol there
-    tol_fix = max(1e-5 * rtol, 1e-13) * vscale
-    bound = 1e3 * vscale + 1.0
-    max_periods = max(max_steps // N, 3)
+    tol_fix = max(1e-5 * test.rtol, 1e-13) * test.vscale
+    bound = 1e3 * test.vscale + 1.0
+    max_periods = max(test.max_steps // N, 3)
     u = u_init
     prev_change = math.nan
     prev_ratio = math.nan
@@ -100,7 +138,7 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
         nodes[0] = u
         for n in range(N):
             u, step_m[n] = heun_step(u, hs[n], phis[2 * n], oms[2 * n], phis[2 * n + 1],
-                                     oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
+                                     oms[2 * n + 1], phys)
             evaluations += 2
             nodes[n + 1] = u
             if not (abs(u) <= bound):
@@ -131,14 +169,16 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
     int_pi = 0.0
     for n in range(N):
         h = hs[n]
-        P0 = power_density(nodes[n], phis[2 * n], oms[2 * n], mu_n, mu_s, p, dtau)
-        P1 = power_density(nodes[n + 1], phis[2 * n + 1], oms[2 * n + 1], mu_n, mu_s, p, dtau)
+        P0 = power_density(nodes[n], phis[2 * n], oms[2 * n], phys.mu_n, phys.mu_s, phys.p,
+                           phys.dtau)
+        P1 = power_density(nodes[n + 1], phis[2 * n + 1], oms[2 * n + 1], phys.mu_n,
+                           phys.mu_s, phys.p, phys.dtau)
         step_u[n] = 0.5 * h * (nodes[n] + nodes[n + 1])
         step_pi[n] = 0.5 * h * (P0 + P1)
         int_u += step_u[n]
         int_pi += step_pi[n]
         step_stiff[n] = step_jumps(nodes[n], h, phis[2 * n], oms[2 * n], phis[2 * n + 1],
-                                   oms[2 * n + 1], kappa, mu_n, mu_s, p, dtau)
+                                   oms[2 * n + 1], phys)
         evaluations += 2
     # one jump is a velocity reversal or a stop inside a step (harmless: the error
     # estimate sees it); consecutive jumps are chatter through a sticking phase: the
@@ -155,21 +195,22 @@ def _march_point(code, params, grid, N, kappa, mu_n, mu_s, p, dtau, u_init, vsca
 
 
 @njit(cache=True, error_model="numpy")
-def band_stiffness(phi, h, kappa, mu_n, mu_s, p, dtau):
+def band_stiffness(phi, h, phys):
     """h T^(2-p) |dF/du| across the sticking band of a link at rest at angle phi:
     z = h kappa (mu_n sin^2 phi + mu_s cos^2 phi) delta_tau^(p-1) (the slope of F there,
     2 (mu_n S^2 + mu_s C^2) int_0^(1/2) r^(p-1) ds with r ~ delta_tau).  Heun resolves the
     band only for z below about 2 (its stability limit on the real axis)."""
     S = math.sin(phi)
     C = math.cos(phi)
-    return h * kappa * (mu_n * S * S + mu_s * C * C) * max(dtau, 1e-300) ** (p - 1.0)
+    return (h * phys.kappa * (phys.mu_n * S * S + phys.mu_s * C * C)
+            * max(phys.dtau, 1e-300) ** (phys.p - 1.0))
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def march_level(code, params, grids, kappa, mu_n, mu_s, p, dtau, u_init, vscale, rtol,
-                max_steps):
+def march_level(code, params, grids, physics, u_init, vscale, rtol, max_steps):
     """``_march_point`` on every row of ``grids`` (shape (n, N + 1), one grid per point, all
-    of N steps), one thread per point.
+    of N steps), one thread per point; ``physics`` (``PhysicsColumns``), ``u_init`` and
+    ``vscale`` per point, ``rtol`` and ``max_steps`` (``PeriodicityTest``) for all.
 
     Returns (int_u, int_pi, u0, status, periods, evaluations, chatter_mass, stiffness,
     nodes): per point the period integrals, the periodic u(0), the ``status`` code,
@@ -194,9 +235,12 @@ def march_level(code, params, grids, kappa, mu_n, mu_s, p, dtau, u_init, vscale,
         step_u = np.empty(N)
         step_pi = np.empty(N)
         stiff = np.zeros(N, dtype=np.bool_)
+        phys = PointPhysics(physics.kappa[i], physics.mu_n[i], physics.mu_s[i], physics.p[i],
+                            physics.dtau[i])
         int_u[i], int_pi[i], u0[i], status[i], periods[i], evaluations[i] = _march_point(
-            code, params[i], grids[i], N, kappa[i], mu_n[i], mu_s[i], p[i], dtau[i],
-            u_init[i], vscale[i], rtol, max_steps, nodes, step_m, step_u, step_pi, stiff)
+            code, params[i], grids[i], N, phys, u_init[i],
+            PeriodicityTest(vscale[i], rtol, max_steps),
+            MarchRecord(nodes, step_m, step_u, step_pi, stiff))
         if status[i] != CONVERGED:
             continue
         nodes_out[i, :] = nodes[:N]
@@ -206,6 +250,5 @@ def march_level(code, params, grids, kappa, mu_n, mu_s, p, dtau, u_init, vscale,
                 chatter_mass[i] += abs(nodes[k]) * h
                 phi, _ = angle_and_rate(code, params[i], grids[i, k] + 0.5 * h,
                                         grids[i, k] + 0.5 * h)
-                stiffness[i] = max(stiffness[i], band_stiffness(phi, h, kappa[i], mu_n[i],
-                                                                mu_s[i], p[i], dtau[i]))
+                stiffness[i] = max(stiffness[i], band_stiffness(phi, h, phys))
     return int_u, int_pi, u0, status, periods, evaluations, chatter_mass, stiffness, nodes_out

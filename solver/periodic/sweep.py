@@ -39,8 +39,9 @@ from .radau import (C1, C2, StepError, runtime_bool, runtime_int, THETA_LATE, TH
 from ..status import CONVERGED, NON_FINITE, STAGE_SOLVE_FAILED, STEP_BUDGET_EXCEEDED, \
     TOLERANCE_NOT_REACHED
 from .control import MIN_FACTOR, predict_factor
-from .switching import (N_STATE_FUNCTIONS, SIMPLE_TURNING, STOP, TANGENTIAL, exit_functions,
-                         locate_exit, locate_state_event, rate_slope, state_function)
+from .switching import (N_STATE_FUNCTIONS, SIMPLE_TURNING, STOP, TANGENTIAL, Bracket,
+                         SolvedStep, exit_functions, locate_exit, locate_state_event, rate_slope,
+                         state_function)
 
 # ---------------------------------------------------------------- workspace fields
 T = 0            # node times tau_n, n = 0 .. N (tau_N = 1)
@@ -527,8 +528,9 @@ def held_exits(code, params, t, side, phys, band, memo):
 
 
 @njit(cache=True, error_model="numpy")
-def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, first_cut, memo):
-    """theta in (0, 1] of the earliest event in a solved step, or -1 where it holds none:
+def find_event(code, params, phys, step, atol, first_cut, memo):
+    """theta in (0, 1] of the earliest event in a solved step (a ``SolvedStep``), or -1 where
+    it holds none:
 
     - a sign change of g or of the outer end's velocity (``_first_crossing``), located on
       the collocation polynomial;
@@ -543,12 +545,12 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
       (``periodic.switching.exit_functions``) turns positive; their values at the step's ends come
       from ``memo`` (``held_exits``) where it has them.
     """
+    t0, h, u_n, sol, kin, S0, om0, f0 = step
     theta = 2.0
     k, a, b, fa, fb = _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol,
                                       phys.dtau)
     if k >= 0:
-        theta = locate_state_event(k, code, params, t0, h, u_n, sol.U1, sol.U2, sol.U3, fa, fb,
-                                   a, b, 0.0)
+        theta = locate_state_event(k, code, params, step, Bracket(a, b, fa, fb), 0.0)
     band = EVENT_BAND * phys.dtau
     if phys.p == 0.0 and band > 0.0:
         g0 = state_function(runtime_int(TANGENTIAL), u_n, S0, om0, 0.0)
@@ -564,8 +566,8 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
                     th_a, f_a, th_b, f_b = C1, abs(g1) - band, C2, abs(g2) - band
                 else:
                     th_b, f_b = C1, abs(g1) - band
-                stop = locate_state_event(runtime_int(STOP), code, params, t0, h, u_n, sol.U1, sol.U2,
-                                          sol.U3, f_a, f_b, th_a, th_b, band)
+                stop = locate_state_event(runtime_int(STOP), code, params, step,
+                                          Bracket(th_a, th_b, f_a, f_b), band)
                 if first_cut:
                     phi, om = angle_and_rate(code, params, t0, t0 + 0.5 * h)
                     reach = _stop_reach(phys, u_n, f0, band, math.sin(phi), math.cos(phi), om,
@@ -578,11 +580,13 @@ def find_event(code, params, phys, t0, h, u_n, sol, kin, S0, om0, f0, atol, firs
             up0, down0 = held_exits(code, params, t0, side, phys, band, memo)
             up1, down1 = held_exits(code, params, t0 + h, side, phys, band, memo)
             if up0 <= 0.0 < up1:
-                theta = min(theta, (locate_exit(runtime_int(0), code, params, t0, t0 + h, up0, up1, side,
-                                                phys, band) - t0) / h)
+                theta = min(theta, (locate_exit(runtime_int(0), code, params,
+                                                Bracket(t0, t0 + h, up0, up1), side, phys,
+                                                band) - t0) / h)
             if down0 <= 0.0 < down1:
-                theta = min(theta, (locate_exit(runtime_int(1), code, params, t0, t0 + h, down0, down1,
-                                                side, phys, band) - t0) / h)
+                theta = min(theta, (locate_exit(runtime_int(1), code, params,
+                                                Bracket(t0, t0 + h, down0, down1), side, phys,
+                                                band) - t0) / h)
     return theta if theta <= 1.0 else -1.0
 
 
@@ -709,8 +713,8 @@ def adaptive_sweep(code, params, phys, point_stops, u0, h_first, target, scale_u
         # events first: a step whose stages straddle a corner of F has a large error, and
         # shrinking it by the controller would only approach the corner step by step
         if events and cuts < MAX_EVENT_CUTS:
-            theta = find_event(code, params, phys, t, h, u, sol, kin, S0, om0, f0, atol,
-                               cuts == 0, memo)
+            theta = find_event(code, params, phys, SolvedStep(t, h, u, sol, kin, S0, om0, f0),
+                               atol, cuts == 0, memo)
             if theta > 0.0:
                 at_start = have_previous and theta * h <= EVENT_START_SHARE * prev_h
                 if theta < 1.0 - EVENT_END_SHARE and theta * h >= MIN_STEP and not at_start:
@@ -875,8 +879,8 @@ def _interior_event(code, params, phys, atol, W, N, n, memo):
                        0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, True, math.nan)
     kin = StageKinematics(W[SIN, n], W[SIN + 1, n], W[SIN + 2, n], W[COS, n], W[COS + 1, n],
                           W[COS + 2, n], W[OMEGA, n], W[OMEGA + 1, n], W[OMEGA + 2, n])
-    theta = find_event(code, params, phys, t0, h, W[U, n], sol, kin, S0, om0, 0.0, atol,
-                       runtime_bool(False), memo)
+    theta = find_event(code, params, phys, SolvedStep(t0, h, W[U, n], sol, kin, S0, om0, 0.0),
+                       atol, runtime_bool(False), memo)
     return theta if SPLIT_SHARE < theta < 1.0 - SPLIT_SHARE else -1.0
 
 

@@ -27,13 +27,14 @@ DifferentialEquations.jl ``tstops``):
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ..model.force import force_slope_power_sc
 from ..model.kinematics import FOURIER, angle_and_rate, rate_slope
-from .radau import dense_value, runtime_int
+from .radau import StageKinematics, StepSolution, dense_value, runtime_int
 
 #: samples per wavenumber (and period) in the search for the zeros of the kinematic
 #: switching functions of a Fourier motion (a function of wavenumber K has at most 2K zeros)
@@ -56,6 +57,34 @@ TANGENTIAL = 0   # g = u + omega S / 4: the link's tangential velocity is C g, i
 OUTER_END = 1    # -S g + omega / 2: the normal velocity at the link's outer end
 STOP = 2         # |g| - band: the junction comes to rest (p = 0: the body sticks)
 N_STATE_FUNCTIONS = 2  # those that are located at their sign changes (not STOP)
+
+
+class Bracket(NamedTuple):
+    """A root's bracket [a, b] and the function's values there, of opposite signs."""
+
+    a: float
+    b: float
+    fa: float
+    fb: float
+
+
+class SolvedStep(NamedTuple):
+    """A solved step of a sweep, as its events are sought in it (``periodic.sweep.find_event``).
+
+    t0, h : its start and length; u_n : u at its start; sol : its stages
+    (``periodic.radau.StepSolution``: U1, U2, U3 with u_n define the collocation polynomial,
+    ``periodic.radau.dense_value``); kin : the kinematics at its stages; S0, om0 : sin phi and
+    dphi/dtau at its start (on the step's side of a corner of phi); f0 : kappa F there.
+    """
+
+    t0: float
+    h: float
+    u_n: float
+    sol: StepSolution
+    kin: StageKinematics
+    S0: float
+    om0: float
+    f0: float
 
 
 @njit(cache=True, error_model="numpy")
@@ -94,8 +123,9 @@ def exit_functions(code, params, t, side, phys, band):
 
 
 @njit(cache=True, error_model="numpy")
-def locate_exit(which, code, params, a, b, fa, fb, side, phys, band):
-    """Zero of exit function ``which`` (0 up, 1 down) in [a, b] (fa fb < 0), Illinois."""
+def locate_exit(which, code, params, bracket, side, phys, band):
+    """Zero of exit function ``which`` (0 up, 1 down) in its ``Bracket`` of tau, Illinois."""
+    a, b, fa, fb = bracket
     last = runtime_int(0)
     c = a
     for _ in range(100):
@@ -277,10 +307,13 @@ def illinois_update(a, b, fa, fb, c, fc, last):
 
 
 @njit(cache=True, error_model="numpy")
-def locate_state_event(k, code, params, t0, h, u_n, U1, U2, U3, f_a, f_b, a, b, band=0.0):
-    """Zero of state function ``k`` along the step's collocation polynomial in theta in
-    [a, b] (0 <= a < b <= 1), where its values are f_a, f_b of opposite signs: Illinois
-    regula falsi to 1e-13 of the step.  Returns theta."""
+def locate_state_event(k, code, params, step, bracket, band):
+    """Zero of state function ``k`` (with the friction's ``band``) along the collocation
+    polynomial of ``step`` (a ``SolvedStep``) in its ``Bracket`` of theta, [a, b] with
+    0 <= a < b <= 1: Illinois regula falsi to 1e-13 of the step.  Returns theta."""
+    t0, h, u_n = step.t0, step.h, step.u_n
+    U1, U2, U3 = step.sol.U1, step.sol.U2, step.sol.U3
+    a, b, f_a, f_b = bracket
     side = t0 + 0.5 * h
     last = runtime_int(0)
     c = a
