@@ -181,14 +181,17 @@ def subset():
     return out
 
 
-@pytest.mark.parametrize("method", honesty.default_methods())
-def test_honesty_subset(method, subset):
+@pytest.mark.parametrize("method,sweeps", [(m, False) for m in honesty.default_methods()]
+                         + [("periodic", True)])
+def test_honesty_subset(method, sweeps, subset):
+    """The subset cold, and (``--sweeps``) as warm-started sweeps in a neighbour order."""
     judged = failed_refs = 0
     misses = []
     for name, (kin, phys, references) in subset.items():
         failed_refs += int(np.count_nonzero(references.kind == honesty.FAILED))
+        order = honesty.neighbour_order(kin, phys) if sweeps else None
         for rtol in SUBSET_RTOLS:
-            result = honesty.Solves.run(kin, phys, method, rtol)
+            result = honesty.Solves.run(kin, phys, method, rtol, order)
             outcome = honesty.judge(result, references, phys, rtol)
             judged += outcome["solves"]
             assert outcome["silent_failures"] == 0, (name, rtol, outcome["error"])
@@ -197,6 +200,17 @@ def test_honesty_subset(method, subset):
                        for i in np.flatnonzero(outcome["outside"])]
     assert judged >= MIN_JUDGED * len(SUBSET_RTOLS), (judged, failed_refs)
     assert not misses, misses
+
+
+def test_the_neighbour_order_walks_to_near_points():
+    """``neighbour_order`` is a permutation whose steps are shorter than a random order's."""
+    kin, phys = honesty.SETS["bench"].sample(300)
+    order = honesty.neighbour_order(kin, phys)
+    assert sorted(order.tolist()) == list(range(300)) and order[0] == 0
+    _, params = kin.kernel_encoding()
+    x = np.column_stack([params, np.log(phys.mu_n), np.log(phys.period)])
+    step = lambda o: np.linalg.norm(np.diff(x[o], axis=0), axis=1).mean()
+    assert step(order) < 0.5 * step(np.random.default_rng(0).permutation(300))
 
 
 def test_references_of_an_earlier_engine_are_reused_only_when_asked(tmp_path, monkeypatch):

@@ -133,3 +133,24 @@ def test_snake_order_visits_every_point_once_through_neighbours(shape):
     if len(order) > 1:
         steps = np.abs(np.diff(coords, axis=0))
         assert np.all(steps.sum(axis=1) == 1)  # one step along one axis
+
+
+def test_a_neighbour_from_another_regime_does_not_loosen_the_stages():
+    """short_period_harmonic point 78 (scaled period 0.0094), swept as in ``honesty
+    --sweeps`` (positions 320 .. 363 of its ``neighbour_order``) after a point of scaled
+    period 0.089: with the neighbour's stage tolerance it took 51 steps and returned an error
+    of 41 rtol under an estimate of 0.84 rtol (``WARM_ATOL_SLACK``)."""
+    from solver.tools.honesty import SETS, neighbour_order
+
+    kin, phys = SETS["short_period_harmonic"].sample(None)
+    order = neighbour_order(kin, phys)
+    run = order[320:364]
+    assert run[-1] == 78
+    kin, phys = kin.take(run), phys.take(run)
+    warm = solver.solve_periodic(kin, phys, rtol=1e-3, sweeps=np.array([0, run.size]))
+    ref = solver.solve_periodic(kin.take([run.size - 1]), phys.take([run.size - 1]), rtol=1e-8)
+    assert ref.converged.all() and warm.converged.all()
+    assert warm.start[-1] == driver.START_WARM
+    error = solution_error(warm.U[-1:], warm.P[-1:], ref.U, ref.P, phys.period[-1:],
+                           solver.kinematic_speed(kin.take([run.size - 1])))
+    assert error[0] <= 1e-3

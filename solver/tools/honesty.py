@@ -2,7 +2,11 @@
 
 Run as ``python -m solver.tools.honesty [--method M ...] [--set S ...] [--rtol R ...] [--points N]
 [--refresh] [--reuse-references] [--reference-method periodic] [--reference-rtol 1e-9] [--check-method M]
-[--check-rtol R] [--agreement 0.1] [--cache-dir out/honesty]``.
+[--check-rtol R] [--agreement 0.1] [--cache-dir out/honesty] [--sweeps]``.
+
+With ``--sweeps`` the engine solves each set as warm-started sweeps
+(``solve_periodic(..., sweeps=...)``) of SWEEP_POINTS in a neighbour order
+(``neighbour_order``), so that the warm path meets the same standard as cold solves.
 
 A solve that returns status 0 claims an error of at most ``rtol`` in the solver's norm
 (``error_estimate`` <= rtol, see ``solver.solve``).  This harness solves seeded sets of
@@ -360,10 +364,21 @@ class Solves:
     seconds: float
 
     @classmethod
-    def run(cls, kinematics, physics, method, rtol):
+    def run(cls, kinematics, physics, method, rtol, order=None):
+        """One batched solve; with ``order`` (a permutation of the points, ``neighbour_order``)
+        the points are solved in that order as warm-started sweeps of SWEEP_POINTS
+        (``solve_periodic(..., sweeps=...)``), the results put back in the set's order."""
         start = time.perf_counter()
-        r = solver.solve_periodic(kinematics, physics, method=method, rtol=rtol)
-        return cls(r.U, r.P, r.status, r.n_tau, r.error_estimate, time.perf_counter() - start)
+        if order is None:
+            r = solver.solve_periodic(kinematics, physics, method=method, rtol=rtol)
+            return cls(r.U, r.P, r.status, r.n_tau, r.error_estimate, time.perf_counter() - start)
+        runs = np.unique(np.r_[np.arange(0, order.size, SWEEP_POINTS), order.size])
+        r = solver.solve_periodic(kinematics.take(order), physics.take(order), method=method,
+                                  rtol=rtol, sweeps=runs)
+        back = np.empty_like(order)
+        back[order] = np.arange(order.size)
+        return cls(r.U[back], r.P[back], r.status[back], r.n_tau[back],
+                   r.error_estimate[back], time.perf_counter() - start)
 
     @property
     def converged(self):
@@ -497,6 +512,7 @@ def default_check():
 @dataclass(frozen=True)
 class Settings:
     methods: tuple
+    sweeps: bool = False
     rtols: tuple = RTOLS
     points: int | None = None
     reference_method: str = REFERENCE_METHOD
@@ -508,6 +524,35 @@ class Settings:
     refresh: bool = False
     reuse: bool = False
     reference_file: Path = REFERENCE_FILE
+
+
+#: points of one sweep with ``--sweeps`` (as the pipeline's ``_grid.SWEEP_POINTS``)
+SWEEP_POINTS = 64
+
+
+def neighbour_order(kinematics, physics):
+    """A permutation of the points that walks from neighbour to neighbour: greedy nearest
+    neighbour from point 0 in the standardised coordinates of the kinematics' parameters
+    and log mu_n, log mu_s, log T, p, log(delta + 1e-12).  For ``--sweeps``: a random set
+    in the order a sweep over it would take."""
+    _, params = kinematics.kernel_encoding()
+    columns = [params[:, k] for k in range(params.shape[1])]
+    columns += [np.log(physics.mu_n), np.log(physics.mu_s), np.log(physics.period), physics.p,
+                np.log(physics.delta + 1e-12)]
+    x = np.array(columns, dtype=np.float64).T
+    spread = x.std(axis=0)
+    x = (x - x.mean(axis=0)) / np.where(spread > 0, spread, 1.0)
+    n = x.shape[0]
+    order = np.empty(n, dtype=np.int64)
+    left = np.ones(n, dtype=bool)
+    here = 0
+    for k in range(n):
+        order[k] = here
+        left[here] = False
+        if k + 1 < n:
+            d = np.where(left, ((x - x[here]) ** 2).sum(axis=1), np.inf)
+            here = int(np.argmin(d))
+    return order
 
 
 def set_references(point_set, kinematics, physics, settings):
@@ -707,9 +752,11 @@ def run_set(point_set, settings):
           "       silent  n_tau mean  median   time s", flush=True)
     runs = {m: {} for m in settings.methods}
     lines = []
+    order = neighbour_order(kinematics, physics) if settings.sweeps else None
     for rtol in settings.rtols:
         for method in settings.methods:
-            result = Solves.run(kinematics, physics, method, rtol)
+            result = Solves.run(kinematics, physics, method, rtol,
+                                order if method == "periodic" else None)
             outcome = judge(result, references, physics, rtol)
             outliers = _outliers(outcome, result, references, rtol)
             row = {k: v for k, v in outcome.items() if not isinstance(v, np.ndarray)}
@@ -800,6 +847,8 @@ def build_parser():
     parser.add_argument("--agreement", type=float, default=AGREEMENT,
                         help="references must agree within this share of the judged rtol")
     parser.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE)
+    parser.add_argument("--sweeps", action="store_true",
+                        help="solve each set as warm-started sweeps (periodic), in a neighbour order")
     return parser
 
 
@@ -822,7 +871,7 @@ def settings_from(args):
             raise ValueError(f"method: expected one of {solver.METHODS}, got {m!r}")
     if args.points is not None and args.points < 1:
         raise ValueError("--points must be >= 1")
-    return Settings(methods=methods, rtols=tuple(args.rtol), points=args.points,
+    return Settings(methods=methods, sweeps=args.sweeps, rtols=tuple(args.rtol), points=args.points,
                     reference_method=reference_method, reference_rtol=args.reference_rtol,
                     check_method=check_method, check_rtol=check_rtol,
                     agreement=args.agreement, cache_dir=args.cache_dir, refresh=args.refresh,
