@@ -26,6 +26,7 @@ import time
 from dataclasses import dataclass, fields
 
 import numpy as np
+from numba import get_num_threads
 
 from .march import driver as march_driver
 from .periodic import driver as periodic_driver
@@ -181,9 +182,10 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
     vscale = kinematic_speed(kinematics)
     u0 = fast_limit_velocity(kinematics, physics)
     grids = period_grid(kinematics, n_steps)
-    return periodic_driver.fixed_grid_points(
-        code, params, grids, physics.inertia_factor, physics.mu_n, physics.mu_s, physics.p,
-        physics.delta_tau, float(rtol), np.maximum(vscale, 1e-300), u0)
+    points = periodic_driver.Points(code, params, np.zeros((n, 0)), physics.inertia_factor,
+                                    physics.mu_n, physics.mu_s, physics.p, physics.delta_tau, u0)
+    return periodic_driver.fixed_grid_points(points, grids, float(rtol),
+                                             np.maximum(vscale, 1e-300), get_num_threads())
 
 
 def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_series=False,

@@ -16,7 +16,7 @@ LAYOUT = {
     "periodic": {"radau", "control", "switching", "sweep", "global_error", "shooting", "driver"},
     "march": {"heun", "driver"},
     "adjoint": {"gradient", "optimize"},
-    "tools": {"bench", "bench_optimize", "honesty"},
+    "tools": {"bench", "bench_optimize", "bench_sweep", "honesty"},
 }
 
 

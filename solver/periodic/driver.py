@@ -42,16 +42,16 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import get_num_threads, njit
 
 from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
 from .shooting import (bracketed_newton_update, monodromy_factor, one_minus_monodromy,
                         stage_tolerance)
-from .radau import ERROR_ORDER, PointPhysics, runtime_bool
+from .radau import ERROR_ORDER, PointPhysics
 from ..status import (CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED,
                       TOLERANCE_NOT_REACHED)
 from .sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
-                     SENS, STAGE, T, U, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
+                     SENS, STAGE, T, U, SweepAim, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
                      event_split_errors, new_workspace, stage_kinematics_into, trapped_steps, Stops)
 from .switching import MAX_STOPS, kinematic_stops, stop_speed, turning_stops
 
@@ -363,9 +363,9 @@ def _rounds(problem, start, W, evals, sweeps, start_kind):
     N = 0
     failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
     for _ in range(MAX_ROUNDS):
-        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, h_first,
-                               TARGET_SHARE * rtol, scale_u, scale_p, model, atol, W,
-                               problem.max_steps, runtime_bool(True), runtime_bool(True))
+        aim = SweepAim(TARGET_SHARE * rtol, scale_u, scale_p, model, atol, problem.max_steps,
+                       True, True)
+        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, h_first, aim, W)
         W, N, status = sweep.W, sweep.N, sweep.status
         sweeps += 1
         evals[COST_ADAPTIVE] += sweep.evaluations
@@ -455,10 +455,9 @@ def _cold_start(problem, u_guess, W, evals):
     lo, hi = -problem.bound, problem.bound
     scale_u = scale_p = 1.0
     for _ in range(MAX_LOOSE_SWEEPS):
-        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, FIRST_STEP,
-                               TARGET_SHARE * loose, vscale, math.inf, model,
-                               stage_atol(loose, vscale, phys), W, problem.max_steps,
-                               runtime_bool(True), runtime_bool(False))
+        aim = SweepAim(TARGET_SHARE * loose, vscale, math.inf, model,
+                       stage_atol(loose, vscale, phys), problem.max_steps, True, False)
+        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, FIRST_STEP, aim, W)
         W, N, status = sweep.W, sweep.N, sweep.status
         sweeps += 1
         evals[COST_LOOSE] += sweep.evaluations
@@ -614,18 +613,30 @@ def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
     return int_u, int_p, CONVERGED
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
-def fixed_grid_points(code, params, grids, kappa, mu_n, mu_s, p, dtau, rtol, vscale, u_guess):
-    """``fixed_grid_point`` over points (rows of ``grids``): (int_u, int_pi, status)."""
-    n = grids.shape[0]
-    int_u = np.empty(n)
-    int_pi = np.empty(n)
-    status = np.empty(n, dtype=np.int8)
-    for i in prange(n):
-        phys = PointPhysics(kappa[i], mu_n[i], mu_s[i], p[i], dtau[i])
-        int_u[i], int_pi[i], status[i] = fixed_grid_point(code, params[i], grids[i], phys, rtol,
-                                                          vscale[i], u_guess[i])
-    return int_u, int_pi, status
+@njit(cache=True, nogil=True, error_model="numpy")
+def _fixed_grid_lane(lane, lanes, points, grids, rtol, vscale, out):
+    """Points lane, lane + lanes, ... of ``fixed_grid_points``; out: (int_u, int_pi, status)."""
+    for i in range(lane, points.params.shape[0], lanes):
+        phys = PointPhysics(points.kappa[i], points.mu_n[i], points.mu_s[i], points.p[i],
+                            points.dtau[i])
+        out[0][i], out[1][i], out[2][i] = fixed_grid_point(
+            points.code, points.params[i], grids[i], phys, rtol, vscale[i], points.u_guess[i])
+
+
+def fixed_grid_points(points, grids, rtol, vscale, threads):
+    """``fixed_grid_point`` of every point of ``points`` (Points; its corners unused) on its
+    row of ``grids``, on ``threads`` Python threads: (int_u, int_pi, status), each (n,)."""
+    n = points.params.shape[0]
+    out = (np.full(n, np.nan), np.full(n, np.nan), np.full(n, NON_FINITE, dtype=np.int8))
+    lanes = max(min(n, threads), 1)
+    if lanes == 1:
+        _fixed_grid_lane(0, 1, points, grids, rtol, vscale, out)
+        return out
+    with ThreadPoolExecutor(lanes) as pool:
+        for _ in pool.map(lambda lane: _fixed_grid_lane(lane, lanes, points, grids, rtol,
+                                                        vscale, out), range(lanes)):
+            pass
+    return out
 
 
 class Points(NamedTuple):

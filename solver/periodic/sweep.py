@@ -149,6 +149,25 @@ class Sweep(NamedTuple):
     evaluations: int
 
 
+class SweepAim(NamedTuple):
+    """What an ``adaptive_sweep`` aims at: accepted steps keep their weighted error
+    (``weighted_error``, in the norm ``scale_u``, ``scale_p``, weighted by ``model``, a
+    ``WeightModel``) <= ``target`` h; stages solved to ``atol``; at most ``max_steps`` steps;
+    ``events``: cut steps at the state events (``_first_crossing``); ``sharp``: judge steps
+    by the defect estimate and solve every stage afresh (the target sweep), else by the
+    embedded estimate with a carried Newton constant (the loose sweeps).  (Flags in a bundle
+    are run-time values: no specialisation per constant, ``periodic.radau.runtime_bool``.)"""
+
+    target: float
+    scale_u: float
+    scale_p: float
+    model: "WeightModel"
+    atol: float
+    max_steps: int
+    events: bool
+    sharp: bool
+
+
 class WeightModel(NamedTuple):
     """What an adaptive sweep knows from the previous one: node times ``t`` (N + 1,), the
     node weights ``lam`` and ``mu`` there (int u's and int Pi's sensitivity to a jump of u),
@@ -591,28 +610,26 @@ def find_event(code, params, phys, step, atol, first_cut, memo):
 
 
 @njit(cache=True, error_model="numpy")
-def adaptive_sweep(code, params, phys, point_stops, u0, h_first, target, scale_u, scale_p,
-                   model, atol, W, max_steps, events, sharp):
+def adaptive_sweep(code, params, phys, point_stops, u0, h_first, aim, W):
     """Integrate one period from u(0) = u0 with step-size control; see the module docstring.
 
     Parameters
     ----------
+    code, params : the kinematics' kernel encoding, one row; phys : PointPhysics
     point_stops : Stops
     h_first : float
         The first step's size (the controller's proposal carried from an earlier sweep).
-    target : float
-        Accepted steps keep their weighted error (``weighted_error``) <= target h.
-    model : WeightModel
-    events : bool
-        Cut steps at the state events (``_first_crossing``).
-    sharp : bool
-        Judge steps by the defect estimate and solve every stage afresh (the target sweep);
-        False: the embedded estimate and a carried Newton constant (the loose sweeps).
+    aim : SweepAim
+        What the steps are judged by (target, norm, weight model, stage tolerance, step
+        budget, events, sharp).
+    W : workspace, grown as needed
 
     Returns
     -------
     Sweep
     """
+    target, scale_u, scale_p, model = aim.target, aim.scale_u, aim.scale_p, aim.model
+    atol, max_steps, events, sharp = aim.atol, aim.max_steps, aim.events, aim.sharp
     stops, stop_is_corner = point_stops.times, point_stops.is_corner
     stop_is_turning, n_stops = point_stops.is_turning, point_stops.count
     t = 0.0
