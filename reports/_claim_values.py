@@ -12,6 +12,8 @@ They are built from a few small steps over labelled arrays (``xarray.DataArray``
 ``select``
     ``at`` (one value per dimension; "min"/"max" for the axis' ends), ``cells`` (a list of such
     points, stacked along ``cell``), ``ranges`` (inclusive [lo, hi] per dimension), ``exclude``;
+``grid``
+    true: the grid optimum even where a polished one is stored;
 ``peak_over``
     the maximum over dimensions (the paper's "peak" over periods);
 ``location_along``
@@ -368,12 +370,17 @@ class _Source:
 
 
 def _selected(stores, scene, *, reduction=None, role="value", quantity=None, absolute=False, at=None, cells=None,
-              ranges=None, exclude=None, peak_over=(), location_along=None) -> _Source:
-    """The selected array of one claim source (see the module docstring)."""
+              ranges=None, exclude=None, peak_over=(), location_along=None, grid=False) -> _Source:
+    """The selected array of one claim source (see the module docstring); ``grid``: the grid
+    optimum even where a polished one is stored (what the grid alone resolves)."""
     sd = _store(stores, scene)
     grid_da, polished = None, False
     if reduction is not None:
         da, grid_da, polished = grid_role_array(sd, reduction, role)
+        if grid and polished:
+            if grid_da is None:
+                raise NotComputed(f"store {sd.name} has no grid {role!r} of {reduction!r}")
+            da, grid_da, polished = grid_da, None, False
     elif quantity is not None:
         if quantity not in sd.ds:
             raise NotComputed(f"store {sd.name} has no quantity {quantity!r}")
