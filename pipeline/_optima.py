@@ -22,9 +22,12 @@ zero beyond the cell's Kmax (the truncated series itself).
 
 Direction.  By default every start keeps the sign of U it starts with and maximises |lambda|
 in that basin (``[optimizer] direction = "start"``); the reflection below then brings the
-optima with U > 0 to U < 0.  Minimising lambda as the paper did (``direction = "negative"``)
-sends starts that move forwards through U = 0, and measured at mu_n/mu_s = 2^-4, Kmax = 1 half
-of them stall at the zero-amplitude stationary point (lambda = 0) instead.
+optima with U > 0 to U < 0.  Minimising lambda as the paper did (``direction = "negative"``,
+the convention of the shipped optima scenes since issue 28) sends starts that move forwards
+through U = 0.  Measured on the fourier_optima scene (12 starts, 432 optimisations): 8 starts
+stall near the zero-amplitude stationary point (|lambda| < 1/10 of the cell's best; none
+accepted), and at 2^-8, Kmax = 1 the clapping optimum of |lambda| about phi = 0 that 5 of 12
+starts reach under "start" is no longer found (one optimum per cell for mu_n/mu_s < 1).
 
 Reduction.  Per cell, the ten (``keep.best``) best *distinct* local optima by |lambda|/lambda_ub,
 among the starts whose stop reason is accepted (``keep.accept``, default: gradient norm below

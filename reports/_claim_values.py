@@ -478,8 +478,10 @@ def _optima_resolution(sd):
     ratios = np.asarray(sd.ds["anisotropy_ratio"].values, dtype=np.float64)
     step = float(np.min(np.diff(np.log2(ratios)))) if ratios.size > 1 else math.nan
     opt = sc.get("optimizer", {})
+    convention = ("the paper's convention (signed λ minimised)" if opt.get("direction") == "negative"
+                  else "|λ| maximised in each start's direction")
     return (f"{sc.get('starts', {}).get('num', '?')} random starts per cell; μn/μs in steps of 2^{step:g}; "
-            f"best of the kept distinct optima",
+            f"best of the kept distinct optima; {convention}",
             f"gradient norm ≤ {opt.get('gtol', '?')}, τ grid rtol {opt.get('grid_rtol', '?')}")
 
 
