@@ -177,22 +177,25 @@ def recompute(stores, claim, m, *, label: str, compute=None, args=None, override
                                                  "miss_recomputed": miss})
 
 
-def cross_check(stores, claim, m, *, label: str, compute=None, args=None, override=None, rtol: float) -> Evidence:
+def cross_check(stores, claim, m, *, label: str, compute=None, args=None, override=None, rtol: float,
+                atol: float = 0.0) -> Evidence:
     """A second, independent computation of the claim's value (another scene, the grid against
-    the optimiser, ...) named ``label``: holds when the two agree within ``rtol`` (relative) and
-    the second also misses the paper's value."""
+    the optimiser, ...) named ``label``: holds when the two agree within ``rtol`` (relative) or
+    ``atol`` (absolute, for shares) and the second also misses the paper's value."""
     m2, _ = _measure(stores, claim, compute, args, override)
     a, b = m.value, m2.value
     va = list(a) if isinstance(a, tuple) else [a]
     vb = list(b) if isinstance(b, tuple) else [b]
-    gaps = [abs(x - y) / max(abs(x), abs(y), 1e-300) for x, y in zip(va, vb)]
+    gaps = [0.0 if x == y else abs(x - y) / max(abs(x), abs(y)) for x, y in zip(va, vb)]
     gap = max(gaps) if gaps and all(math.isfinite(g) for g in gaps) else math.nan
     also_misses = _miss(claim, b) > 0
-    holds = bool(math.isfinite(gap) and gap <= rtol and also_misses)
+    close = bool(math.isfinite(gap) and (gap <= rtol or max(abs(x - y) for x, y in zip(va, vb)) <= atol))
+    holds = close and also_misses
     result = (f"ours {_num(a)}; {label}: {_num(b)}" + (f" ({m2.where})" if m2.where else "") + f"; they differ by {100 * gap:.2g} % "
-              f"({'within' if gap <= rtol else 'beyond'} {100 * rtol:g} %), and the second "
+              f"({'within' if close else 'beyond'} {100 * rtol:g} %" + (f" or {atol:g}" if atol else "") + "), and the second "
               + ("also misses" if also_misses else "agrees with") + f" the paper's {claim.paper_value}")
-    return Evidence("cross_check", holds, result, {"ours": a, "second": b, "relative_gap": gap, "rtol": rtol})
+    return Evidence("cross_check", holds, result, {"ours": a, "second": b, "relative_gap": gap, "rtol": rtol,
+                                                   "atol": atol})
 
 
 def toward(stores, claim, m, *, label: str, compute=None, args=None, override=None, share: float = 0.5) -> Evidence:

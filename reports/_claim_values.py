@@ -113,8 +113,12 @@ def grid_role_array(sd, reduction: str, role: str = "value"):
 
     The polished array when stored (the grid one beside it for the resolution error), else
     the grid one. ``role``: value | signed | an axis of ``over`` | a reported quantity |
-    ``linear_shapes`` (1 where both power laws of the optimum are linear)."""
+    ``linear_shapes`` (1 where both power laws of the optimum are linear) | ``phi_min``,
+    ``phi_max`` (A0 (1 -+ A1/A0), the span of a harmonic optimum)."""
     _reduction(sd, reduction)
+    if role in ("phi_min", "phi_max"):  # a harmonic optimum: phi spans A0 (1 -+ A1/A0)
+        (a0, _, polished), (r, _, _) = grid_role_array(sd, reduction, "A0"), grid_role_array(sd, reduction, "A1_ratio")
+        return a0 * (1 - r) if role == "phi_min" else a0 * (1 + r), None, polished
     if role == "linear_shapes":
         arrays = [grid_role_array(sd, reduction, r) for r in ("closing_shape", "opening_shape")]
         both = (abs(arrays[0][0]) == 1) & (abs(arrays[1][0]) == 1)
