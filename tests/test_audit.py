@@ -567,3 +567,21 @@ def test_audit_json_and_front_page_carry_causes_and_their_counts(plane, tmp_path
     assert "1 differ with a computed cause</span> (domain 1)" in html and "1 unexplained</span>" in html
     assert "check <code>recompute</code>: holds" in html
     assert "1 agree, 2 differ (domain 1; 1 unexplained), 0 not run" in audit_summary(tmp_path / "audit.json")
+
+
+def test_distinct_in_best_ten_counts_the_optima_the_papers_figures_draw():
+    """The paper draws "the ten most efficient local optima (with repetition)": the distinct
+    optima among the ten best starts, walking the kept optima in rank order."""
+    d4 = ("anisotropy_ratio", "max_wavenumber", "p", "rank")
+    mult = np.array([[[[5, 1, 0]]], [[[12, 3, 0]]], [[[9, 1, 2]]], [[[0, 0, 0]]]])  # 4 ratios, 3 ranks
+    start = np.where(mult > 0, 0, -1)
+    ds = xr.Dataset({"optimum_multiplicity": (d4, mult), "optimum_start": (d4, start),
+                     "optimum_relative_efficiency": (d4, -np.ones(mult.shape))},
+                    coords={"anisotropy_ratio": [0.25, 0.5, 1.0, 2.0], "max_wavenumber": [1], "p": [0.0]})
+    from reports._claim_values import optima_role_array
+
+    sd = _store("force_laws", ds, kind="optima")
+    shown = optima_role_array(sd, "distinct_in_best_ten").values.ravel()
+    # 6 starts: both drawn; 15: the best alone covers ten; 12: 9 + 1 = ten, the third not drawn
+    assert shown[:3].tolist() == [2.0, 1.0, 2.0] and np.isnan(shown[3])
+    assert optima_role_array(sd, "distinct").values.ravel()[:3].tolist() == [2.0, 2.0, 3.0]
