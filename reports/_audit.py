@@ -25,7 +25,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from ._causes import CAUSES, Cause, Evidence, explain, parse_cause
+from ._causes import CAUSES, Cause, Evidence, explain, miss, parse_cause, tolerance_text
 from ._claim_values import COMPUTE, Measurement, NotComputed
 from ._site import esc
 
@@ -64,17 +64,7 @@ class Claim:
         return list(dict.fromkeys(out))
 
     def tolerance_text(self) -> str:
-        e = self.expect
-        if "tolerance" in e and "range" in e:
-            return f"each end ± {e['tolerance']:g}"
-        if "tolerance" in e:
-            return f"± {e['tolerance']:g}"
-        if "factor" in e:
-            return f"within a factor {e['factor']:g}"
-        lo, hi = e.get("min"), e.get("max")
-        if lo is not None and hi is not None:
-            return f"in [{lo:g}, {hi:g}]"
-        return f"≥ {lo:g}" if lo is not None else f"≤ {hi:g}"
+        return tolerance_text(self.expect)
 
 
 @dataclass
@@ -138,25 +128,6 @@ def load_claims(path: Path | str = CLAIMS_FILE) -> list[Claim]:
 # ---------------------------------------------------------------------------
 
 
-def _miss(expect: dict, value) -> float:
-    """How far ``value`` lies outside the accepted set (0 inside; NaN for no value)."""
-    vals = list(value) if isinstance(value, tuple) else [value]
-    if any(v is None or not math.isfinite(v) for v in vals):
-        return math.nan
-    if "range" in expect:
-        if len(vals) != 2:
-            return math.nan
-        return max(max(abs(v - p) - expect["tolerance"], 0.0) for v, p in zip(vals, expect["range"]))
-    if "factor" in expect:
-        p = expect["value"]
-        worst = max((max(v / p, p / v) if v * p > 0 else math.inf) for v in vals)
-        return max(worst - expect["factor"], 0.0)
-    if "tolerance" in expect:
-        return max(max(abs(v - expect["value"]) - expect["tolerance"], 0.0) for v in vals)
-    lo, hi = expect.get("min", -math.inf), expect.get("max", math.inf)
-    return max(max(lo - v, v - hi, 0.0) for v in vals)
-
-
 def _num(v) -> str:
     if isinstance(v, tuple):
         return "–".join(_num(x) for x in v)
@@ -173,39 +144,39 @@ def _side(expect: dict, value) -> str:
 def verdict(claim: Claim, m: Measurement) -> tuple[str, str]:
     """(verdict, reason) of ``claim`` given our measurement ``m``, reasons drawn from the data."""
     e = claim.expect
-    miss = _miss(e, m.value)
+    short = miss(e, m.value)
     notes = []
     if m.edges:
         notes.append("at the domain edge: " + "; ".join(m.edges))
     if m.failed[0] and m.failed[1]:
         notes.append(f"{m.failed[0]} of {m.failed[1]} selected cells have no valid value")
-    if math.isnan(miss):
+    if math.isnan(short):
         return "differs", "; ".join([f"no valid value ({m.where})"] + notes)
-    if miss == 0:
+    if short == 0:
         return "agrees", "; ".join([f"ours {_num(m.value)} is within the tolerance ({claim.tolerance_text()})"] + notes)
     reasons = []
     if m.edges:
         reasons.append(f"at the domain edge ({'; '.join(m.edges)}): the optimum lies beyond the scanned range, "
                        f"and ours is {_side(e, m.value)} the paper's value")
     resolution = ""
-    agreeing = [nb for nb in m.neighbours if _miss(e, nb) == 0]
+    agreeing = [nb for nb in m.neighbours if miss(e, nb) == 0]
     if agreeing:
         resolution = (f"grid resolution coarser than the claim's precision: {m.coarse}, and the neighbouring grid "
                       f"value {_num(agreeing[0])} would agree")
-    elif m.coarse and m.coarse_value >= miss and m.coarse_side in ("", _side(e, m.value)):
+    elif m.coarse and m.coarse_value >= short and m.coarse_side in ("", _side(e, m.value)):
         resolution = f"grid resolution coarser than the claim's precision: {m.coarse}" + (
-            f", more than the miss {miss:.2g}" if math.isfinite(m.coarse_value) else "")
-    elif math.isfinite(m.error_value) and m.error_value >= miss:
+            f", more than the miss {short:.2g}" if math.isfinite(m.coarse_value) else "")
+    elif math.isfinite(m.error_value) and m.error_value >= short:
         resolution = (f"grid resolution coarser than the claim's precision: our error estimate ({m.error}) is "
-                      f"larger than the miss {miss:.2g}")
+                      f"larger than the miss {short:.2g}")
     if resolution and not m.edges:
         reasons.append(resolution)
     if m.failed[0] and m.failed[1]:
         reasons.append(f"{m.failed[0]} of {m.failed[1]} selected cells have no valid value")
     if not reasons:
-        est = (f", {miss / m.error_value:.3g} times our error estimate ({m.error})"
+        est = (f", {short / m.error_value:.3g} times our error estimate ({m.error})"
                if math.isfinite(m.error_value) and m.error_value > 0 else "")
-        reasons.append(f"ours is {_side(e, m.value)} the paper's value, {miss:.2g} beyond the tolerance "
+        reasons.append(f"ours is {_side(e, m.value)} the paper's value, {short:.2g} beyond the tolerance "
                        f"({claim.tolerance_text()}){est}: a difference in the data, not in its resolution")
     return "differs", "; ".join(reasons)
 

@@ -34,9 +34,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._claim_values import COMPUTE, Measurement, NotComputed, _store, select
+from ._claim_values import COMPUTE, Measurement, NotComputed, scene_store, select
 
-__all__ = ["CAUSES", "CHECKS", "Cause", "Evidence", "explain", "parse_cause"]
+__all__ = ["CAUSES", "CHECKS", "Cause", "Evidence", "explain", "miss", "parse_cause", "tolerance_text"]
 
 CAUSES = ("domain", "convention", "resolution", "cross-check", "reading", "defect")
 
@@ -139,20 +139,49 @@ def _measure(stores, claim, compute=None, args=None, override=None) -> tuple[Mea
     scenes = [a["scene"]] if "scene" in a else []
     scenes += [a[s]["scene"] for s in ("numerator", "denominator") if isinstance(a.get(s), dict) and "scene" in a[s]]
     for s in scenes:
-        _store(stores, s)
+        scene_store(stores, s)
     return COMPUTE[compute or claim.compute](stores, **a), a
 
 
 def _miss(claim, value, expect=None) -> float:
-    from ._audit import _miss as miss
-
     return miss(expect or claim.expect, value)
 
 
 def _expect_text(expect: dict) -> str:
-    from ._audit import Claim
+    return tolerance_text(expect)
 
-    return Claim("", "", "", "", expect, "", {}).tolerance_text()
+
+def miss(expect: dict, value) -> float:
+    """How far ``value`` lies outside the accepted set (0 inside; NaN for no value)."""
+    vals = list(value) if isinstance(value, tuple) else [value]
+    if any(v is None or not math.isfinite(v) for v in vals):
+        return math.nan
+    if "range" in expect:
+        if len(vals) != 2:
+            return math.nan
+        return max(max(abs(v - p) - expect["tolerance"], 0.0) for v, p in zip(vals, expect["range"]))
+    if "factor" in expect:
+        p = expect["value"]
+        worst = max((max(v / p, p / v) if v * p > 0 else math.inf) for v in vals)
+        return max(worst - expect["factor"], 0.0)
+    if "tolerance" in expect:
+        return max(max(abs(v - expect["value"]) - expect["tolerance"], 0.0) for v in vals)
+    lo, hi = expect.get("min", -math.inf), expect.get("max", math.inf)
+    return max(max(lo - v, v - hi, 0.0) for v in vals)
+
+
+def tolerance_text(e: dict) -> str:
+    """The accepted set of an expectation in words ("± 0.05", "in [1.1, 1.57]", ...)."""
+    if "tolerance" in e and "range" in e:
+        return f"each end ± {e['tolerance']:g}"
+    if "tolerance" in e:
+        return f"± {e['tolerance']:g}"
+    if "factor" in e:
+        return f"within a factor {e['factor']:g}"
+    lo, hi = e.get("min"), e.get("max")
+    if lo is not None and hi is not None:
+        return f"in [{lo:g}, {hi:g}]"
+    return f"≥ {lo:g}" if lo is not None else f"≤ {hi:g}"
 
 
 # ---------------------------------------------------------------------------
@@ -218,7 +247,7 @@ def subgrid_max(stores, claim, m, *, scene: str, quantity: str, at: dict, dims: 
     best-aligned placement. Holds when the paper's value lies in that span for a grid coarser than
     ours (± ``tolerance``, default the claim's) and the worst-aligned maxima rise toward ours as the
     grid is refined (the maximum is not yet converged in the sampling)."""
-    sd = _store(stores, scene)
+    sd = scene_store(stores, scene)
     if quantity not in sd.ds:
         raise NotComputed(f"store {scene} has no quantity {quantity!r}")
     da = abs(sd.ds[quantity])
@@ -256,7 +285,7 @@ def region_near_optimal(stores, claim, m, *, scene: str, quantity: str, cells: l
     the maximum of |``quantity``| over ``region`` (the paper's place, ranges per axis) against the
     maximum over the whole panel. Holds when every ratio is at least ``share`` (the top contour
     covers the paper's place)."""
-    sd = _store(stores, scene)
+    sd = scene_store(stores, scene)
     if quantity not in sd.ds:
         raise NotComputed(f"store {scene} has no quantity {quantity!r}")
     da = abs(sd.ds[quantity])

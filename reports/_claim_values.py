@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Measurement", "NotComputed", "COMPUTE", "grid_role_array", "optima_role_array"]
+__all__ = ["Measurement", "NotComputed", "COMPUTE", "grid_role_array", "optima_role_array", "scene_store"]
 
 
 class NotComputed(LookupError):
@@ -95,7 +95,8 @@ def value_text(dim: str, v: float) -> str:
     return f"{v:.3g}"
 
 
-def _store(stores, scene):
+def scene_store(stores, scene):
+    """The store of ``scene`` among ``stores`` (by name); NotComputed when absent."""
     if scene not in stores:
         raise NotComputed(f"no store of scene {scene!r}")
     return stores[scene]
@@ -387,7 +388,7 @@ def _selected(stores, scene, *, reduction=None, role="value", quantity=None, abs
               ranges=None, exclude=None, peak_over=(), location_along=None, grid=False) -> _Source:
     """The selected array of one claim source (see the module docstring); ``grid``: the grid
     optimum even where a polished one is stored (what the grid alone resolves)."""
-    sd = _store(stores, scene)
+    sd = scene_store(stores, scene)
     grid_da, polished = None, False
     if reduction is not None:
         da, grid_da, polished = grid_role_array(sd, reduction, role)
@@ -579,7 +580,7 @@ def monotone(stores, *, scene, along: str, direction="increasing", slack=0.0, di
 def harmonic_phi_span(stores, *, scene, reduction, statistic="max", **select_args) -> Measurement:
     """(min, max) of φ = A0 + A1 cos 2πτ over a period, A0 ± A1, at the optimum of the cell
     where ``reduction`` is ``statistic`` (its polished arg-max where stored)."""
-    sd = _store(stores, scene)
+    sd = scene_store(stores, scene)
     value, _, _ = grid_role_array(sd, reduction, "value")
     a0, _, polished = grid_role_array(sd, reduction, "A0")
     ratio, _, _ = grid_role_array(sd, reduction, "A1_ratio")
