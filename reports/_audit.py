@@ -203,6 +203,9 @@ def evaluate_claims(claims, stores) -> list[AuditRow]:
         row = AuditRow(c, v, reason, m)
         if v == "differs":
             row.cause, row.evidence = explain(c.cause, by_name, c, m)
+            if row.cause != "unexplained":  # the data's difference now has its computed cause
+                row.reason = row.reason.replace(": a difference in the data, not in its resolution",
+                                                f" (cause: {row.cause}, beside)")
         rows.append(row)
     return rows
 
