@@ -102,8 +102,9 @@ def explain(cause: Cause | None, stores, claim, m: Measurement | None) -> tuple[
         return "unexplained", None
     try:
         ev = CHECKS[cause.check](stores, claim, m, **cause.args)
-    except NotComputed as exc:
-        return "unexplained", Evidence(cause.check, False, f"the check could not run: {exc}")
+    except (NotComputed, KeyError, IndexError, ValueError, ZeroDivisionError) as exc:
+        # a store without what the check reads: no cause shown, the row says why
+        return "unexplained", Evidence(cause.check, False, f"the check could not run: {type(exc).__name__}: {exc}")
     return (cause.kind if ev.holds else "unexplained"), ev
 
 
