@@ -22,15 +22,20 @@ zero beyond the cell's Kmax (the truncated series itself).
 
 Direction.  By default every start keeps the sign of U it starts with and maximises |lambda|
 in that basin (``[optimizer] direction = "start"``); the reflection below then brings the
-optima with U > 0 to U < 0.  Minimising lambda as the paper did (``direction = "negative"``)
-sends starts that move forwards through U = 0, and measured at mu_n/mu_s = 2^-4, Kmax = 1 half
-of them stall at the zero-amplitude stationary point (lambda = 0) instead.
+optima with U > 0 to U < 0.  Minimising lambda as the paper did (``direction = "negative"``,
+the convention of the shipped optima scenes since issue 28) sends starts that move forwards
+through U = 0, and some end at the zero-amplitude stationary point (lambda = 0; not kept, see
+below).  Measured on the fourier_optima scene: 6 of 432 starts at 12 per cell, 43 of 1728 at 48
+per cell; and at 2^-8, Kmax = 1 the clapping optimum of |lambda| about phi = 0 that 5 of 12
+starts reach under "start" is no longer found (one optimum per cell for mu_n/mu_s < 1).
 
 Reduction.  Per cell, the ten (``keep.best``) best *distinct* local optima by |lambda|/lambda_ub,
 among the starts whose stop reason is accepted (``keep.accept``, default: gradient norm below
 gtol) or whose final gradient norm is below ``keep.accept_gradient_norm`` (default 0: off), and whose
 period did not end on its box (``period_at_bound``: T running off to 0 or infinity, the p -> 2
-regime, is no interior optimum even with a zero projected gradient).  Every optimum is first put in the paper's orientation U < 0 by the reflection
+regime, is no interior optimum even with a zero projected gradient), and whose phi(tau) moves
+(spans more than ``STILL_AMPLITUDE``: the zero-amplitude stationary point is no optimum).
+Every optimum is first put in the paper's orientation U < 0 by the reflection
 phi -> pi - phi (which maps U to -U and keeps P: "reflecting the motions about phi = pi/2
 takes U to -U").  Two optima are the same when their scaled periods agree to
 ``keep.period_tolerance`` (relative) and max_tau |phi_a(tau) - s phi_b(tau + c)| <=
@@ -644,6 +649,12 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
         forward = data["U"][cell] > 0
         coefficients[forward] = reflect_about_half_pi(coefficients[forward])
         phi = fourier_samples(coefficients, keep.n_tau)
+        # a start that ends at the zero-amplitude stationary point (phi constant, no motion,
+        # lambda = 0) found no optimum: under the paper's convention starts that move forwards
+        # descend to it (issue 28, 48 starts: 43 of 1728 fourier_optima starts, 16 of them
+        # accepted, amplitudes 3e-5 .. 2e-4 rad, each kept as a "distinct optimum" at its own
+        # constant phi; the smallest amplitude of a kept optimum with lambda != 0 is 0.04 rad)
+        ok &= np.ptp(phi, axis=1) > STILL_AMPLITUDE
         score = np.where(ok, np.abs(data["relative_efficiency"][cell]), np.nan)
         found = distinct_optima(phi, data["scaled_period"][cell], score, best=keep.best,
                                 phi_tolerance=keep.phi_tolerance,
@@ -658,6 +669,9 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
         out["optimum_phi"][cell][:m] = phi[found.index]
     return out
 
+
+#: phi(tau) spanning no more than this [rad] is a body at rest, not an optimal motion
+STILL_AMPLITUDE = 1e-3
 
 PER_START = ("status", "U", "efficiency", "relative_efficiency", "scaled_period", "gradient_norm",
              "period_at_bound", "coefficients")

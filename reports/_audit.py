@@ -10,6 +10,11 @@ here holds a result. Verdicts:
   the scanned domain, a grid coarser than the claim's precision, failed points, or a
   difference beyond our error estimate);
 * **not run** — the store the claim needs is missing, or lacks the cells it needs.
+
+A claim that differs carries a *cause* (:mod:`reports._causes`): a named check registered with
+the claim in ``claims.toml`` and run on the stores here; the row shows the cause, the check and
+its result, ``audit.json`` its ``cause`` and ``evidence``.  A claim whose check does not hold
+(or that has none) is ``unexplained``.
 """
 
 from __future__ import annotations
@@ -20,11 +25,12 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from ._causes import CAUSES, Cause, Evidence, explain, miss, parse_cause, tolerance_text
 from ._claim_values import COMPUTE, Measurement, NotComputed
 from ._site import esc
 
-__all__ = ["CLAIMS_FILE", "Claim", "AuditRow", "RegistryError", "load_claims", "evaluate_claims", "verdict", "audit_html", "audit_counts", "audit_summary",
-           "write_audit_json", "VERDICTS"]
+__all__ = ["CLAIMS_FILE", "Claim", "AuditRow", "RegistryError", "load_claims", "evaluate_claims", "verdict", "audit_html",
+           "audit_counts", "cause_counts", "audit_summary", "write_audit_json", "VERDICTS", "CAUSES"]
 
 CLAIMS_FILE = Path(__file__).resolve().with_name("claims.toml")
 VERDICTS = ("agrees", "differs", "not run")
@@ -46,6 +52,7 @@ class Claim:
     expect: dict
     compute: str
     args: dict
+    cause: Cause | None = None
 
     @property
     def scenes(self) -> list[str]:
@@ -57,17 +64,7 @@ class Claim:
         return list(dict.fromkeys(out))
 
     def tolerance_text(self) -> str:
-        e = self.expect
-        if "tolerance" in e and "range" in e:
-            return f"each end ± {e['tolerance']:g}"
-        if "tolerance" in e:
-            return f"± {e['tolerance']:g}"
-        if "factor" in e:
-            return f"within a factor {e['factor']:g}"
-        lo, hi = e.get("min"), e.get("max")
-        if lo is not None and hi is not None:
-            return f"in [{lo:g}, {hi:g}]"
-        return f"≥ {lo:g}" if lo is not None else f"≤ {hi:g}"
+        return tolerance_text(self.expect)
 
 
 @dataclass
@@ -76,6 +73,8 @@ class AuditRow:
     verdict: str
     reason: str
     measurement: Measurement | None
+    cause: str | None = None          # for a claim that differs: a kind of CAUSES or "unexplained"
+    evidence: Evidence | None = None  # what the cause check computed
 
     def to_json(self) -> dict:
         m = self.measurement
@@ -88,7 +87,9 @@ class AuditRow:
                 "tolerance": self.claim.tolerance_text(), "our_value": value,
                 "where": m.where if m else None, "resolution": m.resolution if m else None,
                 "error_estimate": m.error if m else None, "verdict": self.verdict, "reason": self.reason,
-                "scenes": self.claim.scenes, "compute": self.claim.compute}
+                "scenes": self.claim.scenes, "compute": self.claim.compute, "cause": self.cause,
+                "why": self.claim.cause.why if self.claim.cause and self.cause else None,
+                "evidence": self.evidence.to_json() if self.evidence else None}
 
 
 def _json_number(v):
@@ -113,33 +114,18 @@ def load_claims(path: Path | str = CLAIMS_FILE) -> list[Claim]:
             raise RegistryError(f"claim {cid}: unknown compute {c['compute']!r} (known: {', '.join(COMPUTE)})")
         if set(c["expect"]) not in _EXPECT_KEYS:
             raise RegistryError(f"claim {cid}: expect must be one of {[sorted(s) for s in _EXPECT_KEYS]}")
+        try:
+            cause = parse_cause(cid, c.get("cause"))
+        except ValueError as exc:
+            raise RegistryError(str(exc)) from None
         out.append(Claim(id=cid, figure=c["figure"], claim=c["claim"], paper_value=str(c["paper_value"]),
-                         expect=dict(c["expect"]), compute=c["compute"], args=dict(c["args"])))
+                         expect=dict(c["expect"]), compute=c["compute"], args=dict(c["args"]), cause=cause))
     return out
 
 
 # ---------------------------------------------------------------------------
 # Verdicts
 # ---------------------------------------------------------------------------
-
-
-def _miss(expect: dict, value) -> float:
-    """How far ``value`` lies outside the accepted set (0 inside; NaN for no value)."""
-    vals = list(value) if isinstance(value, tuple) else [value]
-    if any(v is None or not math.isfinite(v) for v in vals):
-        return math.nan
-    if "range" in expect:
-        if len(vals) != 2:
-            return math.nan
-        return max(max(abs(v - p) - expect["tolerance"], 0.0) for v, p in zip(vals, expect["range"]))
-    if "factor" in expect:
-        p = expect["value"]
-        worst = max((max(v / p, p / v) if v * p > 0 else math.inf) for v in vals)
-        return max(worst - expect["factor"], 0.0)
-    if "tolerance" in expect:
-        return max(max(abs(v - expect["value"]) - expect["tolerance"], 0.0) for v in vals)
-    lo, hi = expect.get("min", -math.inf), expect.get("max", math.inf)
-    return max(max(lo - v, v - hi, 0.0) for v in vals)
 
 
 def _num(v) -> str:
@@ -158,39 +144,39 @@ def _side(expect: dict, value) -> str:
 def verdict(claim: Claim, m: Measurement) -> tuple[str, str]:
     """(verdict, reason) of ``claim`` given our measurement ``m``, reasons drawn from the data."""
     e = claim.expect
-    miss = _miss(e, m.value)
+    short = miss(e, m.value)
     notes = []
     if m.edges:
         notes.append("at the domain edge: " + "; ".join(m.edges))
     if m.failed[0] and m.failed[1]:
         notes.append(f"{m.failed[0]} of {m.failed[1]} selected cells have no valid value")
-    if math.isnan(miss):
+    if math.isnan(short):
         return "differs", "; ".join([f"no valid value ({m.where})"] + notes)
-    if miss == 0:
+    if short == 0:
         return "agrees", "; ".join([f"ours {_num(m.value)} is within the tolerance ({claim.tolerance_text()})"] + notes)
     reasons = []
     if m.edges:
         reasons.append(f"at the domain edge ({'; '.join(m.edges)}): the optimum lies beyond the scanned range, "
                        f"and ours is {_side(e, m.value)} the paper's value")
     resolution = ""
-    agreeing = [nb for nb in m.neighbours if _miss(e, nb) == 0]
+    agreeing = [nb for nb in m.neighbours if miss(e, nb) == 0]
     if agreeing:
         resolution = (f"grid resolution coarser than the claim's precision: {m.coarse}, and the neighbouring grid "
                       f"value {_num(agreeing[0])} would agree")
-    elif m.coarse and m.coarse_value >= miss and m.coarse_side in ("", _side(e, m.value)):
+    elif m.coarse and m.coarse_value >= short and m.coarse_side in ("", _side(e, m.value)):
         resolution = f"grid resolution coarser than the claim's precision: {m.coarse}" + (
-            f", more than the miss {miss:.2g}" if math.isfinite(m.coarse_value) else "")
-    elif math.isfinite(m.error_value) and m.error_value >= miss:
+            f", more than the miss {short:.2g}" if math.isfinite(m.coarse_value) else "")
+    elif math.isfinite(m.error_value) and m.error_value >= short:
         resolution = (f"grid resolution coarser than the claim's precision: our error estimate ({m.error}) is "
-                      f"larger than the miss {miss:.2g}")
+                      f"larger than the miss {short:.2g}")
     if resolution and not m.edges:
         reasons.append(resolution)
     if m.failed[0] and m.failed[1]:
         reasons.append(f"{m.failed[0]} of {m.failed[1]} selected cells have no valid value")
     if not reasons:
-        est = (f", {miss / m.error_value:.3g} times our error estimate ({m.error})"
+        est = (f", {short / m.error_value:.3g} times our error estimate ({m.error})"
                if math.isfinite(m.error_value) and m.error_value > 0 else "")
-        reasons.append(f"ours is {_side(e, m.value)} the paper's value, {miss:.2g} beyond the tolerance "
+        reasons.append(f"ours is {_side(e, m.value)} the paper's value, {short:.2g} beyond the tolerance "
                        f"({claim.tolerance_text()}){est}: a difference in the data, not in its resolution")
     return "differs", "; ".join(reasons)
 
@@ -214,7 +200,13 @@ def evaluate_claims(claims, stores) -> list[AuditRow]:
             rows.append(AuditRow(c, "not run", str(exc), None))
             continue
         v, reason = verdict(c, m)
-        rows.append(AuditRow(c, v, reason, m))
+        row = AuditRow(c, v, reason, m)
+        if v == "differs":
+            row.cause, row.evidence = explain(c.cause, by_name, c, m)
+            if row.cause != "unexplained":  # the data's difference now has its computed cause
+                row.reason = row.reason.replace(": a difference in the data, not in its resolution",
+                                                f" (cause: {row.cause}, beside)")
+        rows.append(row)
     return rows
 
 
@@ -229,9 +221,27 @@ def audit_counts(rows) -> dict:
     return {v: sum(r.verdict == v for r in rows) for v in VERDICTS}
 
 
+def cause_counts(rows) -> dict:
+    """Claims that differ, by cause (every kind of CAUSES, then ``unexplained``)."""
+    return {k: sum(r.verdict == "differs" and r.cause == k for r in rows) for k in (*CAUSES, "unexplained")}
+
+
+def _cause_cell(r) -> str:
+    if r.verdict != "differs":
+        return "—"
+    ev = r.evidence
+    why = f"<div class='small'>{esc(r.claim.cause.why)}</div>" if r.claim.cause else ""
+    check = (f"<details><summary class='small'>check <code>{esc(ev.check)}</code>: "
+             f"{'holds' if ev.holds else 'does not hold'}</summary><div class='small'>{esc(ev.result)}</div></details>"
+             if ev else "<div class='small'>no cause check registered</div>")
+    return f"<b class='cause-{esc(r.cause)}'>{esc(r.cause)}</b>{why}{check}"
+
+
 def audit_html(rows, figure_anchor=lambda label: f"fig-{label}") -> str:
     """The audit section (front page): a summary line and one table row per claim."""
     n = audit_counts(rows)
+    causes = cause_counts(rows)
+    by_cause = ", ".join(f"{k} {causes[k]}" for k in CAUSES if causes[k])
     body = []
     for r in rows:
         c, m = r.claim, r.measurement
@@ -243,17 +253,22 @@ def audit_html(rows, figure_anchor=lambda label: f"fig-{label}") -> str:
         body.append(f"<tr id='claim-{esc(c.id)}'><td><a href='#{figure_anchor(c.figure)}'>{esc(c.figure)}</a>: "
                     f"{esc(c.claim)}<div class='small'><code>{esc(c.id)}</code></div></td>"
                     f"<td>{esc(c.paper_value)}<div class='small'>{esc(c.tolerance_text())}</div></td><td>{ours}</td>"
-                    f"<td class='{_CLASS[r.verdict]}'>{esc(r.verdict)}</td><td>{esc(r.reason)}</td></tr>")
+                    f"<td class='{_CLASS[r.verdict]}'>{esc(r.verdict)}</td><td>{_cause_cell(r)}</td>"
+                    f"<td>{esc(r.reason)}</td></tr>")
     return (f"<section class='audit' id='audit'><h2>Reproduction audit</h2>"
             f"<p><b>{len(rows)} quantitative claims</b> of the paper's results, each checked against the stores "
             f"when this report was built: <span class='v-agrees'>{n['agrees']} agree</span>, "
-            f"<span class='v-differs'>{n['differs']} differ</span>, "
-            f"<span class='v-notrun'>{n['not run']} not run</span>. The claims, their tolerances and the "
-            "reductions computing our values are in <code>reports/claims.toml</code>; the table is also "
-            "written as <code>audit.json</code> beside this page.</p>"
+            f"<span class='v-differs'>{n['differs'] - causes['unexplained']} differ with a computed cause</span>"
+            + (f" ({esc(by_cause)})" if by_cause else "") + ", "
+            f"<span class='v-unexplained'>{causes['unexplained']} unexplained</span>, "
+            f"<span class='v-notrun'>{n['not run']} not run</span>. Each cause is a check registered with the "
+            "claim and run on the stores for this page (open a row's check for its numbers). The claims, their "
+            "tolerances, causes and the reductions computing our values are in <code>reports/claims.toml</code>; "
+            "the table is also written as <code>audit.json</code> beside this page.</p>"
             "<table class='audit'><colgroup><col class='c-claim'><col class='c-paper'><col class='c-ours'>"
-            "<col class='c-verdict'><col class='c-reason'></colgroup>"
-            "<tr><th>claim</th><th>paper</th><th>ours (from the stores)</th><th>verdict</th><th>reason</th></tr>"
+            "<col class='c-verdict'><col class='c-cause'><col class='c-reason'></colgroup>"
+            "<tr><th>claim</th><th>paper</th><th>ours (from the stores)</th><th>verdict</th><th>cause</th>"
+            "<th>reason</th></tr>"
             + "".join(body) + "</table></section>")
 
 
@@ -261,7 +276,10 @@ def audit_summary(path: Path) -> str:
     """'N claims: a agree, d differ, r not run (path)' from an audit.json."""
     doc = json.loads(Path(path).read_text(encoding="utf-8"))
     n = {v: sum(o["verdict"] == v for o in doc) for v in VERDICTS}
-    return f"{len(doc)} claims: {n['agrees']} agree, {n['differs']} differ, {n['not run']} not run ({path})"
+    causes = {k: sum(o["verdict"] == "differs" and o.get("cause") == k for o in doc) for k in (*CAUSES, "unexplained")}
+    by = ", ".join(f"{k} {causes[k]}" for k in CAUSES if causes[k])
+    return (f"{len(doc)} claims: {n['agrees']} agree, {n['differs']} differ ({by + '; ' if by else ''}"
+            f"{causes['unexplained']} unexplained), {n['not run']} not run ({path})")
 
 
 def write_audit_json(rows, path: Path) -> Path:

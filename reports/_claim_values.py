@@ -12,6 +12,8 @@ They are built from a few small steps over labelled arrays (``xarray.DataArray``
 ``select``
     ``at`` (one value per dimension; "min"/"max" for the axis' ends), ``cells`` (a list of such
     points, stacked along ``cell``), ``ranges`` (inclusive [lo, hi] per dimension), ``exclude``;
+``grid``
+    true: the grid optimum even where a polished one is stored;
 ``peak_over``
     the maximum over dimensions (the paper's "peak" over periods);
 ``location_along``
@@ -31,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Measurement", "NotComputed", "COMPUTE", "grid_role_array", "optima_role_array"]
+__all__ = ["Measurement", "NotComputed", "COMPUTE", "grid_role_array", "optima_role_array", "scene_store"]
 
 
 class NotComputed(LookupError):
@@ -93,7 +95,8 @@ def value_text(dim: str, v: float) -> str:
     return f"{v:.3g}"
 
 
-def _store(stores, scene):
+def scene_store(stores, scene):
+    """The store of ``scene`` among ``stores`` (by name); NotComputed when absent."""
     if scene not in stores:
         raise NotComputed(f"no store of scene {scene!r}")
     return stores[scene]
@@ -111,8 +114,12 @@ def grid_role_array(sd, reduction: str, role: str = "value"):
 
     The polished array when stored (the grid one beside it for the resolution error), else
     the grid one. ``role``: value | signed | an axis of ``over`` | a reported quantity |
-    ``linear_shapes`` (1 where both power laws of the optimum are linear)."""
+    ``linear_shapes`` (1 where both power laws of the optimum are linear) | ``phi_min``,
+    ``phi_max`` (A0 (1 -+ A1/A0), the span of a harmonic optimum)."""
     _reduction(sd, reduction)
+    if role in ("phi_min", "phi_max"):  # a harmonic optimum: phi spans A0 (1 -+ A1/A0)
+        (a0, _, polished), (r, _, _) = grid_role_array(sd, reduction, "A0"), grid_role_array(sd, reduction, "A1_ratio")
+        return a0 * (1 - r) if role == "phi_min" else a0 * (1 + r), None, polished
     if role == "linear_shapes":
         arrays = [grid_role_array(sd, reduction, r) for r in ("closing_shape", "opening_shape")]
         both = (abs(arrays[0][0]) == 1) & (abs(arrays[1][0]) == 1)
@@ -128,8 +135,10 @@ def grid_role_array(sd, reduction: str, role: str = "value"):
 
 def optima_role_array(sd, role: str):
     """A role of the best kept optimum per (anisotropy_ratio, max_wavenumber, p): |λ|/λub
-    (``relative_efficiency``), ``scaled_period``, ``phi_max``, ``phi_min`` [rad], or the number
-    of distinct optima kept (``distinct``)."""
+    (``relative_efficiency``), ``scaled_period``, ``phi_max``, ``phi_min`` [rad], the number
+    of distinct optima kept (``distinct``), or the number of distinct optima among the ten most
+    efficient starts counted with repetition (``distinct_in_best_ten``, what the paper's figures
+    draw)."""
     ds = sd.ds
     if "optimum_relative_efficiency" not in ds:
         raise NotComputed(f"store {sd.name} holds no kept optima")
@@ -143,6 +152,14 @@ def optima_role_array(sd, role: str):
     if role == "distinct":
         kept = (ds["optimum_start"] >= 0).sum("rank")
         return kept.where(kept > 0).astype(float)
+    if role == "distinct_in_best_ten":
+        # the paper's figures: "the ten most efficient local optima (with repetition)"; the kept
+        # optima are ranked by |lambda|, each reached by `multiplicity` accepted starts
+        mult = ds["optimum_multiplicity"].where(ds["optimum_start"] >= 0, 0)
+        before = mult.cumsum("rank") - mult
+        total = mult.sum("rank")
+        shown = ((mult > 0) & (before < np.minimum(total, 10))).sum("rank")
+        return shown.where(total > 0).astype(float)
     raise NotComputed(f"no optima role {role!r}")
 
 
@@ -368,12 +385,17 @@ class _Source:
 
 
 def _selected(stores, scene, *, reduction=None, role="value", quantity=None, absolute=False, at=None, cells=None,
-              ranges=None, exclude=None, peak_over=(), location_along=None) -> _Source:
-    """The selected array of one claim source (see the module docstring)."""
-    sd = _store(stores, scene)
+              ranges=None, exclude=None, peak_over=(), location_along=None, grid=False) -> _Source:
+    """The selected array of one claim source (see the module docstring); ``grid``: the grid
+    optimum even where a polished one is stored (what the grid alone resolves)."""
+    sd = scene_store(stores, scene)
     grid_da, polished = None, False
     if reduction is not None:
         da, grid_da, polished = grid_role_array(sd, reduction, role)
+        if grid and polished:
+            if grid_da is None:
+                raise NotComputed(f"store {sd.name} has no grid {role!r} of {reduction!r}")
+            da, grid_da, polished = grid_da, None, False
     elif quantity is not None:
         if quantity not in sd.ds:
             raise NotComputed(f"store {sd.name} has no quantity {quantity!r}")
@@ -471,8 +493,10 @@ def _optima_resolution(sd):
     ratios = np.asarray(sd.ds["anisotropy_ratio"].values, dtype=np.float64)
     step = float(np.min(np.diff(np.log2(ratios)))) if ratios.size > 1 else math.nan
     opt = sc.get("optimizer", {})
+    convention = ("the paper's convention (signed λ minimised)" if opt.get("direction") == "negative"
+                  else "|λ| maximised in each start's direction")
     return (f"{sc.get('starts', {}).get('num', '?')} random starts per cell; μn/μs in steps of 2^{step:g}; "
-            f"best of the kept distinct optima",
+            f"best of the kept distinct optima; {convention}",
             f"gradient norm ≤ {opt.get('gtol', '?')}, τ grid rtol {opt.get('grid_rtol', '?')}")
 
 
@@ -556,7 +580,7 @@ def monotone(stores, *, scene, along: str, direction="increasing", slack=0.0, di
 def harmonic_phi_span(stores, *, scene, reduction, statistic="max", **select_args) -> Measurement:
     """(min, max) of φ = A0 + A1 cos 2πτ over a period, A0 ± A1, at the optimum of the cell
     where ``reduction`` is ``statistic`` (its polished arg-max where stored)."""
-    sd = _store(stores, scene)
+    sd = scene_store(stores, scene)
     value, _, _ = grid_role_array(sd, reduction, "value")
     a0, _, polished = grid_role_array(sd, reduction, "A0")
     ratio, _, _ = grid_role_array(sd, reduction, "A1_ratio")

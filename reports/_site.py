@@ -41,9 +41,9 @@ div.view{border-top:1px solid #eee;margin-top:1em}
 table{border-collapse:collapse;margin:.5em 0;font-size:.9em}td,th{border:1px solid #ddd;padding:2px 8px;text-align:left}
 th{background:#f0f0f0}.num{text-align:right;font-variant-numeric:tabular-nums}
 table.audit{table-layout:fixed;width:100%;overflow-wrap:anywhere}table.audit td{vertical-align:top}
-table.audit col.c-claim{width:34%}table.audit col.c-paper{width:11%}table.audit col.c-ours{width:20%}
-table.audit col.c-verdict{width:8%}table.audit col.c-reason{width:27%}
-.v-agrees{color:#16691e;font-weight:bold}.v-differs{color:#b03a00;font-weight:bold}.v-notrun{color:#777;font-weight:bold}
+table.audit col.c-claim{width:27%}table.audit col.c-paper{width:10%}table.audit col.c-ours{width:17%}
+table.audit col.c-verdict{width:7%}table.audit col.c-cause{width:19%}table.audit col.c-reason{width:20%}
+.v-agrees{color:#16691e;font-weight:bold}.v-differs{color:#b03a00;font-weight:bold}.v-notrun{color:#777;font-weight:bold}.v-unexplained{color:#8a0000;font-weight:bold}
 .small{font-size:.85em;color:#555}
 .note{color:#555;font-size:.9em}.warn{color:#a04000}.notrun{color:#777}
 .panel-error{color:#b00;border:1px solid #b00;padding:.5em;white-space:pre-wrap}

@@ -111,9 +111,11 @@ def test_figure_views_name_shipped_scenes_and_every_figure_scene_has_a_view():
     figures = load_figures()
     viewed = {v.scene for f in figures for v in f.views}
     assert viewed <= set(scenes)
+    # scenes that exist for a cause check of the audit (claims.toml) need no figure view
+    checks = {s for c in load_claims() if c.cause for s in _cause_scenes(c.cause)} - viewed
     for name, doc in scenes.items():
         head = doc["scene"]
-        if head.get("kind") in ("accuracy", "stiffness") or name == "quick":
+        if head.get("kind") in ("accuracy", "stiffness") or name == "quick" or name in checks:
             continue
         assert name in viewed, name
 
@@ -376,3 +378,210 @@ def test_a_ratio_of_unpolished_grid_optima_is_named_as_resolution(plane):
     polished = evaluate_claims([Claim(**{**c.__dict__, "args": {k: ({**v, "scene": "plane"} if isinstance(v, dict) else v)
                                                                for k, v in args.items()}})], [sd])[0]
     assert "a difference in the data" in polished.reason
+
+
+# ---------------------------------------------------------------------------
+# Causes of the claims that differ (reports/_causes.py), each check on a small synthetic store
+# ---------------------------------------------------------------------------
+
+
+def _cause_scenes(cause) -> set:
+    """Every scene a cause check reads (its ``scene``, ``args.scene`` and gain sides)."""
+    out = set()
+    for table in (cause.args, cause.args.get("args") or {}, cause.args.get("override") or {}):
+        if "scene" in table:
+            out.add(table["scene"])
+        for side in ("numerator", "denominator"):
+            if isinstance(table.get(side), dict) and "scene" in table[side]:
+                out.add(table[side]["scene"])
+    return out
+
+
+def test_registered_causes_name_known_kinds_checks_and_shipped_scenes():
+    from reports._causes import CAUSES, CHECKS
+
+    scenes = _scenes()
+    causes = [c for c in load_claims() if c.cause is not None]
+    assert len(causes) >= 15
+    for c in causes:
+        assert c.cause.kind in CAUSES and c.cause.check in CHECKS and c.cause.why, c.id
+        assert _cause_scenes(c.cause) <= set(scenes), (c.id, _cause_scenes(c.cause) - set(scenes))
+
+
+def test_a_malformed_cause_is_refused(tmp_path):
+    from reports._audit import RegistryError
+
+    good = CLAIMS_FILE.read_text(encoding="utf-8")
+    bad = tmp_path / "claims.toml"
+    bad.write_text(good.replace('kind = "resolution"', 'kind = "bad luck"', 1))
+    with pytest.raises(RegistryError, match="cause kind"):
+        load_claims(bad)
+    bad.write_text(good.replace('check = "subgrid_max"', 'check = "no_such_check"', 1))
+    with pytest.raises(RegistryError, match="unknown cause check"):
+        load_claims(bad)
+
+
+def _cause(kind, check, **args):
+    from reports._causes import Cause
+
+    return Cause(kind=kind, check=check, why="because", args=args)
+
+
+def _with_cause(claim, cause):
+    return Claim(**{**claim.__dict__, "cause": cause})
+
+
+def test_recompute_holds_on_the_papers_range_and_not_elsewhere(plane):
+    """domain/reading/convention: the claim's reduction on another selection, judged again."""
+    stores, value, *_ = plane
+    halves = {(0.0, 0.5): value[:4].max(), (2.0, 16.0): value[5:].max()}
+    paper_range = min(halves, key=halves.get)  # the half without the global maximum
+    other = max(halves, key=halves.get)
+    low = halves[paper_range]
+    c = Claim(id="t", figure="EtaOptt0", claim="c", paper_value="p", expect={"value": low, "tolerance": 1e-9},
+              compute="stat", args={"scene": "plane", "reduction": "best", "statistic": "max"})
+    on_range = _cause("domain", "recompute", label="on the paper's range",
+                      override={"ranges": {"anisotropy_ratio": list(paper_range)}})
+    row = evaluate_claims([_with_cause(c, on_range)], list(stores.values()))[0]
+    assert row.verdict == "differs" and row.cause == "domain" and row.evidence.holds
+    assert row.evidence.numbers["recomputed"] == low and "on the paper's range" in row.evidence.result
+    wrong = _cause("domain", "recompute", label="elsewhere", override={"ranges": {"anisotropy_ratio": list(other)}})
+    row = evaluate_claims([_with_cause(c, wrong)], list(stores.values()))[0]
+    assert row.cause == "unexplained" and not row.evidence.holds and "still" in row.evidence.result
+    # a reading with its own expectation
+    reading = _cause("reading", "recompute", label="the median", override={"statistic": "median"},
+                     expect={"value": float(np.median(value)), "tolerance": 1e-9})
+    assert evaluate_claims([_with_cause(c, reading)], list(stores.values()))[0].cause == "reading"
+
+
+def test_cross_check_holds_when_two_computations_agree_and_both_miss(plane):
+    stores, value, *_ = plane
+    sd = stores["plane"]
+    twin = _store("twin", sd.ds * 1.01, sd.reductions)  # a second computation, 1 % apart
+    both = {**stores, "twin": twin}
+    c = Claim(id="t", figure="EtaOptt0", claim="c", paper_value="p", expect={"value": 5.0, "tolerance": 0.1},
+              compute="stat", args={"scene": "plane", "reduction": "best", "statistic": "max"})
+    check = _cause("cross-check", "cross_check", label="twin", override={"scene": "twin"}, rtol=0.02)
+    row = evaluate_claims([_with_cause(c, check)], list(both.values()))[0]
+    assert row.cause == "cross-check" and row.evidence.numbers["relative_gap"] == pytest.approx(0.01 / 1.01)
+    tight = _cause("cross-check", "cross_check", label="twin", override={"scene": "twin"}, rtol=0.001)
+    assert evaluate_claims([_with_cause(c, tight)], list(both.values()))[0].cause == "unexplained"
+    # a second computation that agrees with the paper is no cross-check of a difference
+    agreeing = Claim(**{**c.__dict__, "expect": {"value": float(value.max() * 1.01), "tolerance": 1e-6}})
+    row = evaluate_claims([_with_cause(agreeing, check)], list(both.values()))[0]
+    assert row.verdict == "differs" and row.cause == "unexplained" and "agrees with" in row.evidence.result
+    # the second store missing: the check cannot run, the claim stays unexplained
+    row = evaluate_claims([_with_cause(c, check)], [sd])[0]
+    assert row.cause == "unexplained" and "could not run" in row.evidence.result
+
+
+def test_toward_holds_when_the_finer_computation_removes_most_of_the_miss(plane):
+    """resolution: the grid optimum against the polished one (``grid = true``)."""
+    stores, value, *_ = plane
+    paper = float(value.max())  # the polished maximum; the grid one is 2 % lower
+    c = Claim(id="t", figure="EtaOptt0", claim="c", paper_value="p", expect={"value": paper, "tolerance": 1e-3},
+              compute="stat", args={"scene": "plane", "reduction": "best", "statistic": "max", "grid": True})
+    finer = _cause("resolution", "toward", label="polished", override={"grid": False})
+    row = evaluate_claims([_with_cause(c, finer)], list(stores.values()))[0]
+    assert row.measurement.value == pytest.approx(0.98 * paper)
+    assert row.cause == "resolution" and row.evidence.numbers["miss_finer"] == 0
+    coarser = _cause("resolution", "toward", label="coarser", override={"ranges": {"anisotropy_ratio": [0, 0.3]}})
+    assert evaluate_claims([_with_cause(c, coarser)], list(stores.values()))[0].cause == "unexplained"
+
+
+def _ridge_store():
+    """A field with a narrow ridge at small A1/A0: its maximum 2.4 at the second sample."""
+    a0, r = np.linspace(0.1, 1.5, 24), np.linspace(0.01, 0.99, 48)
+    field = 2.4 * np.exp(-((r - r[1]) / 0.04) ** 2)[None, :] * np.exp(-((a0 - a0[-2]) / 0.5) ** 2)[:, None]
+    ds = xr.Dataset({"scaled_efficiency": (("A0", "A1_ratio"), field)}, coords={"A0": a0, "A1_ratio": r})
+    return _store("ridge", ds), field
+
+
+def test_subgrid_max_shows_a_coarser_grid_gives_the_papers_value():
+    sd, field = _ridge_store()
+    for paper, holds in ((1.8, True), (3.0, False)):
+        c = Claim(id="t", figure="EtaA0A1", claim="c", paper_value="p", expect={"value": paper, "tolerance": 0.05},
+                  compute="stat", args={})
+        from reports._causes import subgrid_max
+
+        ev = subgrid_max({"ridge": sd}, c, Measurement(value=2.4), scene="ridge", quantity="scaled_efficiency",
+                         at={}, dims=["A0", "A1_ratio"], strides=[1, 2, 4, 8])
+        assert ev.holds is holds
+        lows = [v[0] for v in ev.numbers["subgrid_maxima"].values()]
+        assert lows[0] == pytest.approx(field.max()) and lows == sorted(lows, reverse=True)
+
+
+def test_region_near_optimal_measures_the_top_contour_over_the_papers_place():
+    sd, field = _ridge_store()
+    from reports._causes import region_near_optimal
+
+    c = Claim(id="t", figure="UPEtaDiag1", claim="c", paper_value="p", expect={"min": 1.0}, compute="stat", args={})
+    a0 = sd.ds["A0"].values
+    near = region_near_optimal({"ridge": sd}, c, None, scene="ridge", quantity="scaled_efficiency", cells=[{}],
+                               region={"A0": [a0[-6], a0[-1]]}, share=0.95)
+    far = region_near_optimal({"ridge": sd}, c, None, scene="ridge", quantity="scaled_efficiency", cells=[{}],
+                              region={"A0": [a0[0], a0[3]]}, share=0.95)
+    assert near.holds and near.numbers["ratios"][0] == pytest.approx(1.0)
+    expected = field[:4].max() / field.max()
+    assert not far.holds and far.numbers["ratios"][0] == pytest.approx(expected)
+
+
+def test_nested_shortfall_bounds_the_grid_error_of_a_containing_family(plane):
+    stores, value, *_ = plane
+    sd = stores["plane"]
+    ds = sd.ds.copy()
+    wide = value * np.linspace(0.7, 1.3, value.shape[1])[None, :]  # the containing family, one cell 30 % low
+    ds["best_polished"] = (("anisotropy_ratio", "scaled_period"), wide)
+    both = {"plane": sd, "wide": _store("wide", ds, sd.reductions)}
+    args = {"statistic": "median", "numerator": {"scene": "wide", "reduction": "best"},
+            "denominator": {"scene": "plane", "reduction": "best"}}
+    for paper, holds in ((1.1, True), (2.0, False)):
+        c = Claim(id="t", figure="EtaOptAllParams", claim="c", paper_value="p", expect={"value": paper, "tolerance": 0.01},
+                  compute="gain", args=args, cause=_cause("resolution", "nested_shortfall", label="wide"))
+        row = evaluate_claims([c], list(both.values()))[0]
+        assert row.evidence.numbers["smallest_gain"] == pytest.approx(0.7)
+        assert (row.cause == "resolution") is holds, row.evidence.result
+
+
+def test_audit_json_and_front_page_carry_causes_and_their_counts(plane, tmp_path):
+    from reports._audit import audit_html, audit_summary, cause_counts
+
+    stores, value, *_ = plane
+    base = dict(id="t", figure="EtaOptt0", claim="c", paper_value="p", compute="stat",
+                args={"scene": "plane", "reduction": "best", "statistic": "max"})
+    at = {"scaled_period": 1.0}
+    claims = [Claim(**{**base, "id": "agree", "expect": {"value": float(value.max()), "tolerance": 1e-9}}),
+              Claim(**{**base, "id": "domain", "expect": {"value": float(value[:, 3].max()), "tolerance": 1e-9},
+                       "cause": _cause("domain", "recompute", label="range", override={"at": at})}),
+              Claim(**{**base, "id": "open", "expect": {"value": 9.0, "tolerance": 1e-9}})]
+    rows = evaluate_claims(claims, list(stores.values()))
+    assert cause_counts(rows)["domain"] == 1 and cause_counts(rows)["unexplained"] == 1
+    doc = json.loads(write_audit_json(rows, tmp_path / "audit.json").read_text())
+    by = {o["id"]: o for o in doc}
+    assert by["agree"]["cause"] is None and by["agree"]["evidence"] is None
+    assert by["domain"]["cause"] == "domain" and by["domain"]["why"] == "because"
+    assert by["domain"]["evidence"]["check"] == "recompute" and by["domain"]["evidence"]["holds"] is True
+    assert by["domain"]["evidence"]["numbers"]["recomputed"] == pytest.approx(value[:, 3].max())
+    assert by["open"]["cause"] == "unexplained" and by["open"]["evidence"] is None
+    html = audit_html(rows)
+    assert "1 differ with a computed cause</span> (domain 1)" in html and "1 unexplained</span>" in html
+    assert "check <code>recompute</code>: holds" in html
+    assert "1 agree, 2 differ (domain 1; 1 unexplained), 0 not run" in audit_summary(tmp_path / "audit.json")
+
+
+def test_distinct_in_best_ten_counts_the_optima_the_papers_figures_draw():
+    """The paper draws "the ten most efficient local optima (with repetition)": the distinct
+    optima among the ten best starts, walking the kept optima in rank order."""
+    d4 = ("anisotropy_ratio", "max_wavenumber", "p", "rank")
+    mult = np.array([[[[5, 1, 0]]], [[[12, 3, 0]]], [[[9, 1, 2]]], [[[0, 0, 0]]]])  # 4 ratios, 3 ranks
+    start = np.where(mult > 0, 0, -1)
+    ds = xr.Dataset({"optimum_multiplicity": (d4, mult), "optimum_start": (d4, start),
+                     "optimum_relative_efficiency": (d4, -np.ones(mult.shape))},
+                    coords={"anisotropy_ratio": [0.25, 0.5, 1.0, 2.0], "max_wavenumber": [1], "p": [0.0]})
+    from reports._claim_values import optima_role_array
+
+    sd = _store("force_laws", ds, kind="optima")
+    shown = optima_role_array(sd, "distinct_in_best_ten").values.ravel()
+    # 6 starts: both drawn; 15: the best alone covers ten; 12: 9 + 1 = ten, the third not drawn
+    assert shown[:3].tolist() == [2.0, 1.0, 2.0] and np.isnan(shown[3])
+    assert optima_role_array(sd, "distinct").values.ravel()[:3].tolist() == [2.0, 2.0, 3.0]

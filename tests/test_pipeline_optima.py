@@ -261,3 +261,31 @@ def test_near_p_two_is_flagged_not_looped(tmp_path):
     kept = ds.optimum_start.values
     for cell in np.ndindex(kept.shape[:3]):
         assert not np.any(at_bound[cell][kept[cell][kept[cell] >= 0]])
+
+
+def test_a_start_ending_at_rest_is_no_optimum():
+    """Issue 28: minimising the signed lambda, starts that move forwards can end at the
+    zero-amplitude stationary point (phi constant, lambda = 0, gradient ~1e-8). Each such start
+    sat at its own constant phi, so the reduction kept every one as another "distinct optimum"
+    (6 at 2^-4, Kmax 1 with 48 starts, where the paper finds one). A motion spanning no more
+    than STILL_AMPLITUDE is not kept; a real optimum with a small amplitude is."""
+    from pipeline._optima import STILL_AMPLITUDE
+
+    scene = tiny()
+    scene = replace(scene, keep=replace(scene.keep, best=scene.n_starts))  # room for every start
+    coefficients = np.zeros(scene.shape + (3,))
+    coefficients[..., 0] = np.linspace(0.3, 2.9, scene.shape[-1])  # every start at its own A0
+    coefficients[..., 1] = 0.5
+    coefficients[..., 0, 1] = 1e-4  # start 0 at rest: phi spans 2e-4 rad (as measured: 3e-5 .. 2e-4)
+    coefficients[..., 1, 1] = 0.02                   # start 1 a small but real motion (0.04 rad)
+    rel = np.full(scene.shape, -0.2)
+    rel[..., 0] = -1e-9
+    data = {"status": np.zeros(scene.shape, dtype=np.int8), "U": np.full(scene.shape, -1.0),
+            "efficiency": 3 * rel, "relative_efficiency": rel,
+            "scaled_period": np.full(scene.shape, 2.0), "coefficients": coefficients,
+            "gradient_norm": np.full(scene.shape, 1e-8), "period_at_bound": np.zeros(scene.shape, dtype=np.int8)}
+    assert 2e-4 < STILL_AMPLITUDE < 0.04
+    out = reduce_optima(scene, data)
+    for cell in np.ndindex(*scene.shape[:3]):
+        kept = set(out["optimum_start"][cell][out["optimum_start"][cell] >= 0].tolist())
+        assert 0 not in kept and 1 in kept
