@@ -413,6 +413,13 @@ def trap_clip(h, cap):
 #: at the converged solution a step next to a turning point may exceed its ``trap_ceiling``
 #: by this factor before the round is rejected (the shooting's last shift moves u a little)
 TRAP_SLACK = 2.0
+#: ... and its ceiling, which the next sweep keeps over the whole recorded step
+#: (``WeightModel.max_step``), splits the step into at most this many: the step next to the
+#: turning point gets the cap from that sweep's own ``trap_limit`` (from the converged u(0),
+#: where its u is the converged one).  The cap itself as the ceiling split a step of 0.014
+#: next to a flat turning point into steps of 4.5e-9 (u there 9e-8, in the friction's band):
+#: STEP_BUDGET_EXCEEDED after 4,000 (``test_a_long_step_at_a_flat_turning_point_is_split``)
+TRAP_SPAN = 64.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -452,7 +459,7 @@ def trapped_steps(code, params, phys, point_stops, W, N, ceilings):
                              t + 0.5 * h, W[U, n]), ACCEPT_STEP)
         evaluations += 1
         if h > TRAP_SLACK * cap:
-            ceilings[n] = min(ceilings[n], cap)
+            ceilings[n] = min(ceilings[n], max(cap, h / TRAP_SPAN))
             count += 1
     return count, evaluations
 
