@@ -623,8 +623,9 @@ def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
     """``periodic.sweep.trapped_steps`` on the steps between the kinematic stops of the
     optimiser's flat turning point (``test_engine_regressions``), with u = -9e-8 on the step
     of 0.014 between the turning points at tau 0.02555 and 0.0398 (as the shooting left it
-    there): its trap cap (at the step's end) is 4.5e-9, and as that step's ceiling, which the next sweep keeps over the step's
-    whole length, it asked for 3e6 steps (STEP_BUDGET_EXCEEDED).  The ceiling is at least
+    there): its trap cap (at the step's end) is 4.5e-9, and as that step's ceiling, which
+    the next sweep keeps over the step's whole length, it asked for 3e6 steps
+    (STEP_BUDGET_EXCEEDED).  The ceiling is at least
     the step over TRAP_SPAN; where the cap is larger, the cap."""
     from test_engine_regressions import _flat_turning_point_start
 
