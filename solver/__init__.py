@@ -18,7 +18,7 @@ from .adjoint.gradient import (DiscreteSolution, FixedGrid, GradientResult, adap
 from .model.kinematics import Fourier, Harmonic, PowerLaw, period_grid
 from .model.limits import fast_limit_velocity, kinematic_speed, quasi_static_velocity
 from .model.physics import Physics, physical_from_scaled, scaled_from_physical
-from .adjoint.optimize import OptimizeResult, optimize_motion
+from .adjoint.optimize import OptimizeResult, OptimizerOptions, optimize_motion
 from .solve import (ENGINES, METHODS, Engine, SolveResult, snake_order, solve_fixed_grid,
                     solve_periodic)
 from .status import STATUS_REASONS, status_reason  # noqa: E402
@@ -36,5 +36,5 @@ __all__ = [
     "FixedGrid", "GradientResult", "adaptive_grid", "discrete_objective", "discrete_solution",
     "DiscreteSolution", "family_parameters",
     "force_partials", "objective_gradient", "with_family_parameters", "OptimizeResult",
-    "optimize_motion",
+    "optimize_motion", "OptimizerOptions",
 ]

@@ -56,7 +56,7 @@ class Engine:
 #: bump a version with every change of its engine's discretisation or error control
 ENGINES = {
     "periodic": Engine("periodic", "event-driven 3-stage Radau IIA (order 5) with one-pass "
-                       "error control (periodic.driver)", "5.2"),
+                       "error control (periodic.driver)", "5.3"),
     "march": Engine("march", "explicit Heun RK2 (order 2) from rest, period by period, on "
                     "doubled uniform grids with a Richardson estimate (march.driver)", "2.1"),
 }

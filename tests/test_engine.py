@@ -604,3 +604,54 @@ def test_stage_newton_at_an_infinite_slope_converges_to_the_roots():
                 assert np.max(np.abs(dx)) <= 10 * atol, (h, u_n, guess, dx)
                 cases += 1
     assert cases == 210
+
+
+def test_an_exact_fixed_point_stays():
+    """``periodic.shooting.bracketed_newton_update`` with g = 0 exactly keeps u0 and the
+    bracket (it bisected to the bracket's middle: a body that sticks in every period, M = 0,
+    returned u(1) = u(0) exactly on its second loose sweep, and the shooting was thrown from
+    -2.6e-3 to -116; ``test_the_optimisers_flat_turning_point_converges_within_rtol``)."""
+    from solver.periodic.shooting import bracketed_newton_update
+
+    assert bracketed_newton_update(-2.5e-3, 0.0, 1.0, -231.0, 5e-4) == (-2.5e-3, -231.0, 5e-4)
+    # and a nonzero residual still moves it (Newton inside the bracket, else bisection)
+    assert bracketed_newton_update(-2.5e-3, 1e-4, 1.0, -231.0, 5e-4)[0] == -2.5e-3 + 1e-4
+    assert bracketed_newton_update(-2.5e-3, 1.0, 1.0, -231.0, 5e-4)[0] == 0.5 * (-2.5e-3 + 5e-4)
+
+
+def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
+    """``periodic.sweep.trapped_steps`` on the steps between the kinematic stops of the
+    optimiser's flat turning point (``test_engine_regressions``), with u = -9e-8 on the step
+    of 0.014 between the turning points at tau 0.02555 and 0.0398 (as the shooting left it
+    there): its trap cap (at the step's end) is 4.5e-9, and as that step's ceiling, which
+    the next sweep keeps over the step's whole length, it asked for 3e6 steps
+    (STEP_BUDGET_EXCEEDED).  The ceiling is at least
+    the step over TRAP_SPAN; where the cap is larger, the cap."""
+    from test_engine_regressions import _flat_turning_point_start
+
+    kin, phys = _flat_turning_point_start()
+    code, params = kin.kernel_encoding()
+    row = params[0].copy()
+    stops = np.empty(switching.MAX_STOPS)
+    n_stops, omax = switching.kinematic_stops(code, row, kin.corners()[0].copy(), stops)
+    turning = switching.turning_stops(code, row, stops, n_stops, omax)
+    point_stops = sweep.Stops(stops, np.zeros(n_stops, dtype=np.bool_), turning, n_stops)
+    j = int(np.argmin(abs(stops[:n_stops] - 0.025553882)))
+    assert turning[j] == turning[j + 1] == switching.TURNING  # not simple: no TRAP_FLOOR
+    N = n_stops
+    W = sweep.new_workspace(N)
+    W[sweep.T, :N] = stops[:n_stops]
+    W[sweep.T, N] = 1.0
+    W[sweep.U, :N + 1] = 1e-2
+    W[sweep.U, j] = -9e-8
+    ceilings = np.full(N, np.inf)
+    count, _ = sweep.trapped_steps(code, row, _point_physics(phys), point_stops, W, N, ceilings)
+    assert count >= 1
+    h = W[sweep.T, j + 1] - W[sweep.T, j]
+    cap = sweep.trap_ceiling(code, row, _point_physics(phys), stops[j + 1], stops[j] + 0.5 * h,
+                             -9e-8)
+    assert cap < 1e-8 and h > 1e-2
+    assert ceilings[j] == h / sweep.TRAP_SPAN
+    flagged = np.isfinite(ceilings)
+    steps = np.diff(W[sweep.T, :N + 1])
+    assert np.all(ceilings[flagged] >= steps[flagged] / sweep.TRAP_SPAN)

@@ -171,3 +171,26 @@ def test_a_failed_bfgs_step_close_to_the_optimum_asks_for_newton():
                   result=SimpleNamespace(u0=0.0), first_gradient_norm=2.0)
     out = optimizer_step(_WrongGradient(), state, max_step=0.5, newton_switch=np.inf, max_condition=1e12)
     assert out.stalled and not out.stop_reason and out.iteration == 0
+
+
+def test_options_travel_as_one_bundle_and_keywords_still_work():
+    """``OptimizerOptions`` holds the settings; a keyword of ``optimize_motion`` replaces its
+    field (the pipeline's call keeps working), an unknown keyword is a TypeError, and the
+    same settings either way give the same optimisation (bit for bit)."""
+    from solver.adjoint.optimize import OptimizerOptions
+
+    physics = solver.Physics.from_scaled(2.0 ** -4, 2.0)
+    start = solver.Harmonic(1.0, 0.5)
+    by_keyword = optimize_motion(start, physics, grid=64, gtol=1e-6, max_iterations=40,
+                                 max_step=0.25)
+    options = OptimizerOptions(gtol=1e-6, max_iterations=40, max_step=0.25)
+    by_options = optimize_motion(start, physics, grid=64, options=options)
+    overridden = optimize_motion(start, physics, grid=64,
+                                 options=OptimizerOptions(gtol=1e-6, max_iterations=5),
+                                 max_iterations=40, max_step=0.25)
+    for res in (by_options, overridden):
+        assert np.array_equal(res.parameters, by_keyword.parameters)
+        assert (res.iterations, res.solves, res.stop_reason) == (
+            by_keyword.iterations, by_keyword.solves, by_keyword.stop_reason)
+    with pytest.raises(TypeError, match="gtool"):
+        optimize_motion(start, physics, grid=64, gtool=1e-6)

@@ -457,22 +457,10 @@ def variables(template, physics, start, period_range=(1e-3, 1e4)):
             np.append(upper, log_t + math.log(period_range[1])))
 
 
-def optimize_motion(family_template, physics_template, start=None, *, objective="efficiency",
-                    gtol=1e-7, max_iterations=200, grid=None, grid_rtol=1e-6, grid_rounds=3,
-                    max_step=0.5, newton_switch=1e-5, max_condition=1e12,
-                    period_range=(1e-3, 1e4), ill_condition_threshold=1e6, power=None,
-                    direction=None):
-    """Maximise |lambda| (or |U|, or |U| at fixed P) over a family's parameters and the period.
+@dataclass(frozen=True)
+class OptimizerOptions:
+    """The settings of ``optimize_motion`` (each also a keyword of it, which overrides these).
 
-    Parameters
-    ----------
-    family_template : Harmonic | Fourier | PowerLaw
-        One point; fixes the structure (K, concavity flags) and the default start.
-    physics_template : Physics
-        One point; mu_n, mu_s, p, delta are fixed, its period is the default start.
-    start : array_like, optional
-        Family parameters (``family_parameters`` order) then the period T.
-        For Fourier B1 is set to 0 (phase).
     objective : {"efficiency", "speed", "speed_at_power"}
         Maximise |lambda| (eq. lambdap), |U| (eq. U), or |U| subject to P = ``power``
         (eq. powerp), keeping the sign of the start.  "speed_at_power" eliminates the
@@ -481,14 +469,19 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         the exact one along the constraint.  At fixed P, maximising |U| is maximising
         |lambda| = |U|^(p+1)/P on that surface, a different problem from the unconstrained
         maximum of |lambda| (which picks its own P).
+    power : float, optional
+        The fixed mean power of "speed_at_power" (default: P at the start).
+    direction : {None, -1, +1}
+        Sign of U sought: None keeps the sign at the start (maximise |objective| in its
+        basin); -1 minimises the objective as the paper does ("by minimizing lambda, the
+        algorithm chooses motions with U < 0"), so a start moving forwards crosses U = 0.
     gtol : float
         Stop when the projected gradient norm (variables: parameters, log T) is below it.
     max_iterations : int
         Accepted steps per grid round.
-    grid : FixedGrid or int, optional
-        A fixed grid (no re-adaptation), or a number of uniform steps; default: the step
-        sequence of the order-5 engine's solve at ``grid_rtol`` (``adaptive_grid``),
-        re-adapted at the optimum up to ``grid_rounds`` times.
+    grid_rtol, grid_rounds : float, int
+        Without a ``grid`` the steps are those of the order-5 engine's solve at ``grid_rtol``
+        (``adaptive_grid``), re-adapted at the optimum up to ``grid_rounds`` times.
     max_step : float
         Longest step in the variables (the damping of the line search).
     newton_switch : float
@@ -503,22 +496,62 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         (BFGS alone left 4 of them at |g| ~ 1e-7 with no progress).
     max_condition : float
         Hessian condition number at which the search stops as ill-conditioned.
-    period_range : (float, float)
-        Box for T relative to the starting period (T runs away as p -> 2).
     ill_condition_threshold : float
         A search that ends unconverged, or at a bound, is diagnosed from the difference
         Hessian at its end: ill-conditioned above this condition number.
-    power : float, optional
-        The fixed mean power of "speed_at_power" (default: P at the start).
-    direction : {None, -1, +1}
-        Sign of U sought: None keeps the sign at the start (maximise |objective| in its
-        basin); -1 minimises the objective as the paper does ("by minimizing lambda, the
-        algorithm chooses motions with U < 0"), so a start moving forwards crosses U = 0.
+    period_range : (float, float)
+        Box for T relative to the starting period (T runs away as p -> 2).
+    """
+
+    objective: str = "efficiency"
+    power: float | None = None
+    direction: int | None = None
+    gtol: float = 1e-7
+    max_iterations: int = 200
+    grid_rtol: float = 1e-6
+    grid_rounds: int = 3
+    max_step: float = 0.5
+    newton_switch: float = 1e-5
+    max_condition: float = 1e12
+    ill_condition_threshold: float = 1e6
+    period_range: tuple = (1e-3, 1e4)
+
+
+def optimize_motion(family_template, physics_template, start=None, *, grid=None, options=None,
+                    **settings):
+    """Maximise |lambda| (or |U|, or |U| at fixed P) over a family's parameters and the period.
+
+    Parameters
+    ----------
+    family_template : Harmonic | Fourier | PowerLaw
+        One point; fixes the structure (K, concavity flags) and the default start.
+    physics_template : Physics
+        One point; mu_n, mu_s, p, delta are fixed, its period is the default start.
+    start : array_like, optional
+        Family parameters (``family_parameters`` order) then the period T.
+        For Fourier B1 is set to 0 (phase).
+    grid : FixedGrid or int, optional
+        A fixed grid (no re-adaptation), or a number of uniform steps; default: the step
+        sequence of the order-5 engine's solve at ``grid_rtol`` (``adaptive_grid``),
+        re-adapted at the optimum up to ``grid_rounds`` times.
+    options : OptimizerOptions, optional
+        The settings (default ``OptimizerOptions()``).
+    **settings
+        Fields of ``OptimizerOptions`` by name (objective=..., gtol=..., ...), replacing
+        those of ``options``; another name is a TypeError.
 
     Returns
     -------
     OptimizeResult
     """
+    unknown = sorted(set(settings) - set(OptimizerOptions.__dataclass_fields__))
+    if unknown:
+        raise TypeError(f"optimize_motion: unknown setting(s) {', '.join(unknown)} (the fields "
+                        f"of OptimizerOptions)")
+    opts = replace(options if options is not None else OptimizerOptions(), **settings)
+    objective, power, direction = opts.objective, opts.power, opts.direction
+    gtol, max_iterations = opts.gtol, opts.max_iterations
+    grid_rtol, grid_rounds = opts.grid_rtol, opts.grid_rounds
     if objective not in OBJECTIVES:
         raise ValueError(f"objective: expected one of {OBJECTIVES}, got {objective!r}")
     constrained = objective == "speed_at_power"
@@ -526,7 +559,7 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         raise ValueError("one parameter point at a time")
     t_start = time.perf_counter()
     names, full, free, lower, upper = variables(family_template, physics_template, start,
-                                                period_range)
+                                                opts.period_range)
     if constrained:  # the period is fixed by P = power, not a variable
         free, lower, upper = free[:-1], lower[:-1], upper[:-1]
     kin = with_family_parameters(family_template, full[:-1])
@@ -565,8 +598,9 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         if hinv is not None and state.g is not None:
             state = replace(state, hinv=hinv)
         while not _terminate(problem, state, gtol, max_iterations):
-            state = optimizer_step(problem, state, max_step=max_step, newton_switch=newton_switch,
-                                   max_condition=max_condition)
+            state = optimizer_step(problem, state, max_step=opts.max_step,
+                                   newton_switch=opts.newton_switch,
+                                   max_condition=opts.max_condition)
         totals["iterations"] += state.iteration
         totals["newton_steps"] += state.newton_steps
         _drain(problem, totals)
@@ -609,7 +643,7 @@ def optimize_motion(family_template, physics_template, start=None, *, objective=
         if H is not None:
             eig = np.abs(np.linalg.eigvalsh(H))
             cond = float(eig.max() / max(eig.min(), 1e-300))
-            ill = cond > ill_condition_threshold
+            ill = cond > opts.ill_condition_threshold
         # T at its bound: the optimum runs off to T -> infinity (p -> 2, where lambda becomes
         # invariant under T): the paper's ill-conditioned regime, reported rather than chased
         ill = ill or "period" in bound_names

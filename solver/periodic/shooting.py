@@ -32,7 +32,14 @@ def bracketed_newton_update(u0, g, one_minus_M, lo, hi):
     """Newton's step on u(0) for the shooting residual g = u(1) - u(0) with 1 - M its
     derivative, kept inside the bracket [lo, hi] of the fixed point (g > 0 below it, g < 0
     above it) and bisecting where Newton leaves the bracket (the map need not be monotone:
-    the anisotropic law can amplify, M > 1 or M < 0).  Returns (new u0, lo, hi)."""
+    the anisotropic law can amplify, M > 1 or M < 0).  Returns (new u0, lo, hi).
+
+    g = 0 exactly is the fixed point, and u0 stays: as the bracket's new upper end, Newton's
+    u0 did not lie strictly inside it, and the bisection threw a loose shooting that stood
+    on its fixed point to the bracket's middle (-116 for -2.6e-3; a body that sticks in
+    every period forgets u(0), M = 0, and its second sweep returned u(1) = u(0) exactly)."""
+    if g == 0.0:
+        return u0, lo, hi
     if g > 0.0:
         lo = max(lo, u0)
     else:

@@ -433,6 +433,14 @@ def trap_clip(h, cap):
 #: at the converged solution a step next to a turning point may exceed its ``trap_ceiling``
 #: by this factor before the round is rejected (the shooting's last shift moves u a little)
 TRAP_SLACK = 2.0
+#: ... and its ceiling, which the next sweep keeps over the whole recorded step
+#: (``WeightModel.max_step``), splits the step into at most this many: the step next to the
+#: turning point gets the cap from that sweep's own ``trap_limit`` (from the converged u(0),
+#: where its u is the converged one).  The cap itself as the ceiling split a step of 0.014
+#: next to a flat turning point into steps of 4.5e-9 (u there 9e-8, in the friction's band):
+#: STEP_BUDGET_EXCEEDED after 4,000
+#: (``tests/test_engine.py::test_a_trapped_step_is_split_into_at_most_trap_span_steps``)
+TRAP_SPAN = 64.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -447,10 +455,10 @@ def trapped_steps(code, params, phys, point_stops, W, N, ceilings):
     map gains a fixed point in the band that the node weights (by 1 / (1 - M) of the
     discrete M) do not see as ill-conditioned: estimates of 0.1 .. 0.9 rtol for errors up to
     10 rtol.  Each step over TRAP_SLACK times its ceiling gets it in ``ceilings`` (min with
-    what is there).  Not at a corner of phi (a power law's turning point), where a body at
-    rest in the band has a ceiling of ACCEPT_STEP: judged there too, the stress power laws'
-    steps doubled (mean n_tau 222 -> 434 at rtol 1e-3) and 22 solves exceeded the step
-    budget (2 without), where no solve had been off.  Returns (how many, evaluations of F)."""
+    what is there), but at least the step over TRAP_SPAN.  Not at a corner of phi (a power
+    law's turning point), where a body at rest in the band has a ceiling of ACCEPT_STEP:
+    judged there too, the stress power laws' steps doubled (mean n_tau 222 -> 434 at rtol
+    1e-3) and 22 solves exceeded the step budget (2 without), where no solve had been off.  Returns (how many, evaluations of F)."""
     stops, stop_is_corner = point_stops.times, point_stops.is_corner
     stop_is_turning, n_stops = point_stops.is_turning, point_stops.count
     count = 0
@@ -472,7 +480,7 @@ def trapped_steps(code, params, phys, point_stops, W, N, ceilings):
                              t + 0.5 * h, W[U, n]), ACCEPT_STEP)
         evaluations += 1
         if h > TRAP_SLACK * cap:
-            ceilings[n] = min(ceilings[n], cap)
+            ceilings[n] = min(ceilings[n], max(cap, h / TRAP_SPAN))
             count += 1
     return count, evaluations
 
