@@ -329,7 +329,7 @@ def _record(W, n, t0, h, u_n, sol, err, kin, end_kind):
 
 
 @njit(cache=True, error_model="numpy")
-def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol, dtau):
+def _first_crossing(step, atol, dtau):
     """The earliest sign change of a state switching function across the step, sampled at
     its start, its stages and its end along the solution: (k, theta_a, theta_b, f_a, f_b),
     or k = -1 where there is none.
@@ -341,7 +341,9 @@ def _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol, dtau):
     hold is no corner; cut there, a sweep at delta 1e-10 took 1e5 steps of 1e-11).  Not
     both sides beyond it: a step cut to an event located on a longer step's polynomial can
     end just past the corner, inside the band (measured: such steps kept the corner 3 % of
-    the step inside and were rejected, 1e3 rtol over, down to steps of 1e-6)."""
+    the step inside and were rejected, 1e3 rtol over, down to steps of 1e-6).  ``step``: a
+    ``periodic.switching.SolvedStep``."""
+    u_n, sol, kin, S0, om0 = step.u_n, step.sol, step.kin, step.S0, step.om0
     best_k = -1
     best_a = 2.0
     best_b = 2.0
@@ -574,8 +576,7 @@ def find_event(code, params, phys, step, atol, first_cut, memo):
     """
     t0, h, u_n, sol, kin, S0, om0, f0 = step
     theta = 2.0
-    k, a, b, fa, fb = _first_crossing(code, params, t0, h, u_n, sol, kin, S0, om0, atol,
-                                      phys.dtau)
+    k, a, b, fa, fb = _first_crossing(step, atol, phys.dtau)
     if k >= 0:
         theta = locate_state_event(k, code, params, step, Bracket(a, b, fa, fb), 0.0)
     band = EVENT_BAND * phys.dtau
