@@ -241,6 +241,17 @@ def toward(stores, claim, m, *, label: str, compute=None, args=None, override=No
                                               "miss_finer": miss1})
 
 
+def _converged_magnitude(stores, scene: str, quantity: str):
+    """(the scene's store, |``quantity``| where the solve converged) or NotComputed."""
+    sd = scene_store(stores, scene)
+    if quantity not in sd.ds:
+        raise NotComputed(f"store {scene} has no quantity {quantity!r}")
+    da = abs(sd.ds[quantity])
+    if "status" in sd.ds:
+        da = da.where(sd.ds["status"] == 0)
+    return sd, da
+
+
 def subgrid_max(stores, claim, m, *, scene: str, quantity: str, at: dict, dims: list, strides: list,
                 tolerance: float | None = None) -> Evidence:
     """The maximum of |``quantity``| over sub-grids of the stored field (every ``s``-th sample along
@@ -248,12 +259,7 @@ def subgrid_max(stores, claim, m, *, scene: str, quantity: str, at: dict, dims: 
     best-aligned placement. Holds when the paper's value lies in that span for a grid coarser than
     ours (± ``tolerance``, default the claim's) and the worst-aligned maxima rise toward ours as the
     grid is refined (the maximum is not yet converged in the sampling)."""
-    sd = scene_store(stores, scene)
-    if quantity not in sd.ds:
-        raise NotComputed(f"store {scene} has no quantity {quantity!r}")
-    da = abs(sd.ds[quantity])
-    if "status" in sd.ds:
-        da = da.where(sd.ds["status"] == 0)
+    sd, da = _converged_magnitude(stores, scene, quantity)
     da, _ = select(da, at=at)
     paper = claim.expect["value"]
     tol = claim.expect.get("tolerance", 0.0) if tolerance is None else tolerance
@@ -286,12 +292,7 @@ def region_near_optimal(stores, claim, m, *, scene: str, quantity: str, cells: l
     the maximum of |``quantity``| over ``region`` (the paper's place, ranges per axis) against the
     maximum over the whole panel. Holds when every ratio is at least ``share`` (the top contour
     covers the paper's place)."""
-    sd = scene_store(stores, scene)
-    if quantity not in sd.ds:
-        raise NotComputed(f"store {scene} has no quantity {quantity!r}")
-    da = abs(sd.ds[quantity])
-    if "status" in sd.ds:
-        da = da.where(sd.ds["status"] == 0)
+    _, da = _converged_magnitude(stores, scene, quantity)
     ratios, words = [], []
     for c in cells:
         panel, _ = select(da, at=c)

@@ -12,23 +12,13 @@ from hypothesis import given, settings, strategies as st
 
 import solver
 from solver.periodic import driver
+from solver.tools import bench_sweep
 from solver.tools.bench import solution_error
 
 
-def _grid(n=8, family="harmonic", ratio=16.0, scaled_period=0.5, delta=1e-3):
-    """An n x n grid in A0 x A1/A0, in snake order, as (kinematics, physics)."""
-    A0, R = np.meshgrid(np.linspace(0.2, 1.4, n), np.linspace(0.1, 0.9, n), indexing="ij")
-    order = solver.snake_order((n, n))
-    a0, a1 = A0.ravel()[order], (R * A0).ravel()[order]
-    if family == "harmonic":
-        kin = solver.Harmonic(A0=a0, A1=a1)
-    else:
-        m = a0.size
-        kin = solver.PowerLaw(a0, a1, np.full(m, 0.4), np.full(m, 3.0), np.ones(m, bool),
-                              np.full(m, 1.0), np.zeros(m, bool))
-    phys = solver.Physics.from_scaled(anisotropy_ratio=ratio, scaled_period=scaled_period, p=0.0,
-                                      delta=delta).take(np.zeros(n * n, dtype=int))
-    return kin, phys
+def _grid(n=8, family="harmonic", ratio=16.0, scaled_period=0.5):
+    """An n x n grid in A0 x A1/A0, in snake order, as (kinematics, physics): the bench's."""
+    return bench_sweep.grid(family, ratio, scaled_period, n)
 
 
 def _runs(n, length):
