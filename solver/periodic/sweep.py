@@ -44,6 +44,8 @@ from .switching import (N_STATE_FUNCTIONS, SIMPLE_TURNING, STOP, TANGENTIAL, Bra
                          state_function)
 
 # ---------------------------------------------------------------- workspace fields
+# (rows of one float64 array, not a NamedTuple of arrays: numba grows, copies and passes the
+# sweep's state as one contiguous block, and frozen sweeps rewrite its columns in place)
 T = 0            # node times tau_n, n = 0 .. N (tau_N = 1)
 U = 1            # u at the nodes
 STAGE = 2        # stage values U_1..U_3 of step n: rows STAGE .. STAGE + 2
