@@ -120,21 +120,17 @@ def iter_chunks(shape, chunks):
     return itertools.product(*(range(n) for n in chunk_grid(shape, chunks)))
 
 
-#: points of one sweep (``chunk_sweeps``): a chunk is cut into sweeps of this many points in
-#: snake order (``solver.snake_order``), so that a task's sweeps share its cores; a constant, never a timing
-SWEEP_POINTS = 64
-
-
 def chunk_sweeps(shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
     """How a chunk of ``shape`` is solved as sweeps: (order, runs) for
     ``solver.solve_periodic(..., sweeps=runs)`` on the chunk's points taken in ``order``
-    (``solver.snake_order``), runs cutting it into sweeps of ``SWEEP_POINTS``.  A function of the
+    (``solver.snake_order``), runs cutting it into sweeps of ``solver.SWEEP_POINTS`` (so that a task's sweeps share its
+    cores; a constant, never a timing).  A function of the
     chunk's shape alone: warm starts never cross a chunk's boundary, so a chunk's values
     depend only on its own points, and a resumed store equals an uninterrupted run."""
-    from solver import snake_order
+    from solver import snake_order, sweep_runs
 
     order = snake_order(shape)
-    runs = np.unique(np.r_[np.arange(0, order.size, SWEEP_POINTS), order.size]).astype(np.int64)
+    runs = sweep_runs(order.size)
     return order, runs
 
 

@@ -19,8 +19,8 @@ from .model.kinematics import Fourier, Harmonic, PowerLaw, period_grid
 from .model.limits import fast_limit_velocity, kinematic_speed, quasi_static_velocity
 from .model.physics import Physics, physical_from_scaled, scaled_from_physical
 from .adjoint.optimize import OptimizeResult, OptimizerOptions, optimize_motion
-from .solve import (ENGINES, METHODS, Engine, SolveResult, snake_order, solve_fixed_grid,
-                    solve_periodic)
+from .solve import (ENGINES, METHODS, SWEEP_POINTS, Engine, SolveResult, snake_order,
+                    solve_fixed_grid, solve_periodic, sweep_runs)
 from .status import STATUS_REASONS, status_reason  # noqa: E402
 from ._warmup import KERNEL_SETS, kernel_cache, warm_up  # noqa: E402  (compile ahead: pipeline's driver)
 
@@ -31,7 +31,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Fourier", "Harmonic", "PowerLaw", "Physics", "SolveResult", "STATUS_REASONS", "METHODS",
     "ENGINES", "Engine", "status_reason",
-    "solve_periodic", "snake_order", "solve_fixed_grid", "force_and_slope", "power_density", "period_grid", "fast_limit_velocity",
+    "solve_periodic", "snake_order", "sweep_runs", "SWEEP_POINTS", "solve_fixed_grid", "force_and_slope", "power_density", "period_grid", "fast_limit_velocity",
     "quasi_static_velocity", "kinematic_speed", "physical_from_scaled", "scaled_from_physical",
     "FixedGrid", "GradientResult", "adaptive_grid", "discrete_objective", "discrete_solution",
     "DiscreteSolution", "family_parameters",

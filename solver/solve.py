@@ -243,6 +243,21 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     return _result(out, physics, method, start)
 
 
+#: points of one sweep where a caller cuts a batch into sweeps (``sweep_runs``): the
+#: pipeline's chunks, ``tools.bench_sweep``, ``tools.honesty --sweeps``
+SWEEP_POINTS = 64
+
+
+def sweep_runs(n_points, length=SWEEP_POINTS):
+    """``solve_periodic``'s ``sweeps`` offsets that cut ``n_points`` points, in order, into
+    sweeps of ``length`` (the last shorter): (n_sweeps + 1,) int64 from 0 to n_points.
+
+    >>> sweep_runs(150).tolist()
+    [0, 64, 128, 150]
+    """
+    return np.unique(np.r_[np.arange(0, n_points, length), n_points]).astype(np.int64)
+
+
 def snake_order(shape: tuple[int, ...]) -> np.ndarray:
     """The flat C-order indices of a grid of ``shape`` in snake (boustrophedon) order: the
     last axis runs forward, then backward, ..., each axis reversing whenever the axis before

@@ -121,9 +121,9 @@ def test_sweeps_and_their_chunk_layout_are_hashed():
 
 def test_a_swept_chunk_is_its_snake_ordered_sweeps(tmp_path):
     """``compute_chunk`` with sweeps stores what ``solve_periodic`` gives the chunk's points in
-    snake order as sweeps of SWEEP_POINTS, put back in grid order (computed here directly)."""
+    snake order as sweeps of ``solver.SWEEP_POINTS``, put back in grid order (computed here directly)."""
     import solver
-    from pipeline._grid import SWEEP_POINTS, chunk_region, region_parameters, scene_chunks
+    from pipeline._grid import chunk_region, region_parameters, scene_chunks
     from pipeline._store import create_skeleton
     from pipeline._sweep import compute_chunk
     from pipeline_cases import read_store
@@ -142,7 +142,7 @@ def test_a_swept_chunk_is_its_snake_ordered_sweeps(tmp_path):
     phys = solver.Physics.from_scaled(anisotropy_ratio=params["anisotropy_ratio"][order],
                                       scaled_period=params["scaled_period"][order], p=params["p"][order],
                                       delta=params["delta"][order])
-    runs = np.unique(np.r_[np.arange(0, order.size, SWEEP_POINTS), order.size])
+    runs = np.r_[np.arange(0, order.size, solver.SWEEP_POINTS), order.size]
     res = solver.solve_periodic(kin, phys, rtol=scene.rtol, sweeps=runs)
     want = np.empty(order.size)
     want[order] = res.scaled_efficiency

@@ -22,7 +22,7 @@ def _grid(n=8, family="harmonic", ratio=16.0, scaled_period=0.5):
 
 
 def _runs(n, length):
-    return np.unique(np.r_[np.arange(0, n, length), n]).astype(np.int64)
+    return solver.sweep_runs(n, length)
 
 
 @pytest.mark.parametrize("family,ratio,scaled_period,rtol", [

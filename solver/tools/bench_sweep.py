@@ -9,7 +9,7 @@ What is measured
    for a harmonic and a power-law family (duty cycle 0.5, closing exponent 2, opening 3):
    8 grids, 8,192 points at ``--n`` 32; p = 0, delta = 1e-3.
 2. Cold: ``solve_periodic`` on every point of a grid, each from nothing.  Warm: the grid's
-   points in snake order (``solver.snake_order``) cut into sweeps of SWEEP_POINTS
+   points in snake order (``solver.snake_order``) cut into sweeps of ``solver.SWEEP_POINTS``
    (``solve_periodic(..., sweeps=...)``), as the pipeline solves a chunk with
    ``[solver] sweeps = true``.  Both at rtol 1e-4 and 1e-7, the median wall time of
    ``--repeats`` calls, after one untimed call that compiles.  solves/s = points / time.
@@ -40,10 +40,8 @@ import numpy as np
 
 import solver
 from solver.periodic.driver import N_COSTS
-from solver.tools.honesty import References, engine_digest, judge
+from solver.tools.honesty import References, Solves, engine_digest, judge
 
-#: points of one sweep (as ``pipeline._grid.SWEEP_POINTS``)
-SWEEP_POINTS = 64
 RTOLS = (1e-4, 1e-7)
 REFERENCE_RTOL = 1e-9
 RATIOS = (2.0 ** -4, 2.0 ** 4)
@@ -90,15 +88,11 @@ def references(cases, cache_dir, n):
         np.savez(path, U=U, P=P)
     out = []
     for k, (_, kin, phys) in enumerate(cases):
-        ok = np.isfinite(U[k]) & np.isfinite(P[k])
-        reference = _Solves(U[k], P[k], ok)
+        status = np.where(np.isfinite(U[k]) & np.isfinite(P[k]), 0, 1)
+        reference = Solves(U[k], P[k], status, np.zeros(len(kin), dtype=np.int64),
+                           np.zeros(len(kin)), 0.0)
         out.append(References.from_solves(reference, None, phys, solver.kinematic_speed(kin)))
     return out
-
-
-class _Solves:
-    def __init__(self, U, P, converged):
-        self.U, self.P, self.converged = U, P, converged
 
 
 def timed(run, repeats):
@@ -116,7 +110,7 @@ def solve_all(cases, rtol, warm, repeats):
     """Every grid cold or as sweeps: (results, seconds summed over grids)."""
     results, total = [], 0.0
     for _, kin, phys in cases:
-        runs = np.unique(np.r_[np.arange(0, len(kin), SWEEP_POINTS), len(kin)]) if warm else None
+        runs = solver.sweep_runs(len(kin)) if warm else None
         r, s = timed(lambda: solver.solve_periodic(kin, phys, rtol=rtol, sweeps=runs), repeats)
         results.append(r)
         total += s
@@ -147,7 +141,7 @@ def benchmark(n, repeats, cache_dir):
     cases = grids(n)
     points = sum(len(k) for _, k, _ in cases)
     print(f"bench_sweep: {len(cases)} grids of {n} x {n}, {points} points, {os.cpu_count()} cores, "
-          f"sweeps of {SWEEP_POINTS} points in snake order, median of {repeats} calls")
+          f"sweeps of {solver.SWEEP_POINTS} points in snake order, median of {repeats} calls")
     for _, kin, phys in cases[::4]:  # compile (not timed)
         solver.solve_periodic(_head(kin, 4), phys.take(np.arange(4)), rtol=1e-3,
                               sweeps=np.array([0, 2, 4]))

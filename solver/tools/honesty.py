@@ -5,7 +5,7 @@ Run as ``python -m solver.tools.honesty [--method M ...] [--set S ...] [--rtol R
 [--check-rtol R] [--agreement 0.1] [--cache-dir out/honesty] [--sweeps]``.
 
 With ``--sweeps`` the engine solves each set as warm-started sweeps
-(``solve_periodic(..., sweeps=...)``) of SWEEP_POINTS in a neighbour order
+(``solve_periodic(..., sweeps=...)``) of ``solver.SWEEP_POINTS`` in a neighbour order
 (``neighbour_order``), so that the warm path meets the same standard as cold solves.
 
 A solve that returns status 0 claims an error of at most ``rtol`` in the solver's norm
@@ -366,13 +366,13 @@ class Solves:
     @classmethod
     def run(cls, kinematics, physics, method, rtol, order=None):
         """One batched solve; with ``order`` (a permutation of the points, ``neighbour_order``)
-        the points are solved in that order as warm-started sweeps of SWEEP_POINTS
+        the points are solved in that order as warm-started sweeps of ``solver.SWEEP_POINTS``
         (``solve_periodic(..., sweeps=...)``), the results put back in the set's order."""
         start = time.perf_counter()
         if order is None:
             r = solver.solve_periodic(kinematics, physics, method=method, rtol=rtol)
             return cls(r.U, r.P, r.status, r.n_tau, r.error_estimate, time.perf_counter() - start)
-        runs = np.unique(np.r_[np.arange(0, order.size, SWEEP_POINTS), order.size])
+        runs = solver.sweep_runs(order.size)
         r = solver.solve_periodic(kinematics.take(order), physics.take(order), method=method,
                                   rtol=rtol, sweeps=runs)
         back = np.empty_like(order)
@@ -524,10 +524,6 @@ class Settings:
     refresh: bool = False
     reuse: bool = False
     reference_file: Path = REFERENCE_FILE
-
-
-#: points of one sweep with ``--sweeps`` (as the pipeline's ``_grid.SWEEP_POINTS``)
-SWEEP_POINTS = 64
 
 
 def neighbour_order(kinematics, physics):
