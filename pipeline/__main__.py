@@ -89,6 +89,8 @@ def _run_one(scene, store, args, session=None) -> int:
     except (StoreMismatch, StoreBusy) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
+    if summary.timing:
+        print(summary.timing_line(), flush=True)  # where the time went; the summary line last
     print(summary.line(), flush=True)
     return 0
 
@@ -146,9 +148,10 @@ def main(argv=None) -> int:
             return EXIT_BAD_SCENE
     t0 = time.perf_counter()
     # Compile the solver's kernels once, here, for every scene; the workers load them from the cache.
-    warm_up_kernels(tuple(dict.fromkeys(k for scene in scenes for k in kind_of(scene).kernel_sets(scene))))
+    kernel_sets = tuple(dict.fromkeys(k for scene in scenes for k in kind_of(scene).kernel_sets(scene)))
+    warm_up_kernels(kernel_sets)
     # One pool of workers for every scene: each worker imports the solver and loads its kernels once.
-    with Session(args.scheduler or "processes", args.workers) as session:
+    with Session(args.scheduler or "processes", args.workers, kernel_sets) as session:
         for name, scene in zip(names, scenes):
             rc = _run_one(scene, out / f"{name}.zarr", args, session)
             if rc:

@@ -107,6 +107,11 @@ class SceneKind:
         done = read_done(store)
         return [tuple(int(i) for i in idx) for idx in zip(*np.nonzero(~done))]
 
+    def chunk_cost(self, scene, index: tuple[int, ...]) -> float:
+        """Relative cost of chunk ``index`` where the kind can tell it from the scene (tasks
+        run longest first); equal by default (tasks run in chunk order)."""
+        return 0.0
+
     def steps(self, scene) -> tuple[Step, ...]:
         return ()
 

@@ -59,8 +59,8 @@ import numpy as np
 
 from ._kind import RunContext, SceneKind, Step
 from ._scene import Execution, ParseContext, parse_axis, parse_value, scene_hash
-from ._store import (ATTRS_KEY, FORMAT_VERSION, STATE_GROUP, create_array, mark_done, open_group,
-                     provenance, read_arrays, write_arrays, write_region)
+from ._store import (ATTRS_KEY, FORMAT_VERSION, STATE_GROUP, ChunkWrite, SolvedChunk, create_array, open_group,
+                     provenance, read_arrays, store_chunk, write_arrays)
 
 __all__ = ["OPTIMA", "OptimaKind", "OptimaScene", "parse_optima_scene", "distinct_optima",
            "fourier_samples", "STOP_CODES", "KIND_VERSION", "create_optima_skeleton",
@@ -587,10 +587,9 @@ def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: fl
     }
 
 
-def compute_optima_chunk(store: str, scene: OptimaScene, chunks: tuple[int, ...],
-                         index: tuple[int, ...]) -> dict:
-    """Optimise every start of chunk ``index`` (one cell, ``starts_per_task`` starts), write its
-    arrays, then mark it done.  ``chunks`` is the store's layout, (1, 1, 1, starts per task)."""
+def solve_optima_chunk(scene: OptimaScene, chunks: tuple[int, ...], index: tuple[int, ...]) -> SolvedChunk:
+    """Optimise every start of chunk ``index`` (one cell, ``starts_per_task`` starts); its arrays,
+    unwritten.  ``chunks`` is the store's layout, (1, 1, 1, starts per task)."""
     i_r, i_k, i_p, i_c = index
     c = scene.starts_per_task
     first, last = i_c * c, min((i_c + 1) * c, scene.n_starts)
@@ -612,15 +611,20 @@ def compute_optima_chunk(store: str, scene: OptimaScene, chunks: tuple[int, ...]
     values = {k: v.reshape(shape4) for k, v in values.items()}
     region = (slice(i_r, i_r + 1), slice(i_k, i_k + 1), slice(i_p, i_p + 1), slice(first, last))
     chunks = tuple(chunks)
-    path = Path(store)
-    write_region(path, region, index, chunks, scene.shape, values)
     n_c = scene.n_coefficients
     coefficients = np.array([r.get("coefficients", np.full(n_c, np.nan)) for r in records])
-    write_region(path, region + (slice(0, n_c),), tuple(index) + (0,), chunks + (n_c,),
-                 scene.shape + (n_c,), {"coefficients": coefficients.reshape(shape4 + (n_c,))})
-    mark_done(path, index)  # last: a chunk without its marker is recomputed on resume
-    return {"points": n, "failures": int(np.count_nonzero(values["status"] == STOP_CODES["error"])),
-            "seconds": float(np.nansum(values["seconds"]))}
+    writes = (ChunkWrite(region, tuple(index), chunks, scene.shape, values),
+              ChunkWrite(region + (slice(0, n_c),), tuple(index) + (0,), chunks + (n_c,), scene.shape + (n_c,),
+                         {"coefficients": coefficients.reshape(shape4 + (n_c,))}))
+    return SolvedChunk(writes=writes, points=n,
+                       failures=int(np.count_nonzero(values["status"] == STOP_CODES["error"])),
+                       seconds=float(np.nansum(values["seconds"])))
+
+
+def compute_optima_chunk(store: str, scene: OptimaScene, chunks: tuple[int, ...],
+                         index: tuple[int, ...]) -> dict:
+    """Optimise chunk ``index``, write its arrays, then mark it done (``_store.store_chunk``)."""
+    return store_chunk(Path(store), tuple(index), solve_optima_chunk(scene, chunks, index))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -691,13 +695,19 @@ class OptimaKind(SceneKind):
 
     names = (KIND,)
     rate_unit = "optimisations/s"
-    chunk_task = staticmethod(compute_optima_chunk)
+    solve_chunk = staticmethod(solve_optima_chunk)
 
     def parse(self, doc, ctx, text):
         return parse_optima_scene(doc, ctx, text)
 
     def create_skeleton(self, run: RunContext) -> None:
         create_optima_skeleton(run.store, run.scene)
+
+    def chunk_cost(self, scene, index: tuple[int, ...]) -> float:
+        """An optimisation's cost grows with Kmax (2 Kmax + 2 variables, a difference Hessian
+        of as many gradients): the chunks of the largest Kmax run first, so that no long task
+        starts last (per-start times in docs/validation.md, "Pipeline at scale")."""
+        return float(scene.max_wavenumbers[index[1]])
 
     def steps(self, scene) -> tuple[Step, ...]:
         return (Step("reductions", "reductions_complete", reduce_step),)

@@ -25,9 +25,9 @@ from pathlib import Path
 from ._kind import RunContext, SceneKind
 from ._registry import kind_of
 from ._scene import engine_versions
-from ._schedule import Progress, Scheduler, Session, compute
+from ._schedule import Progress, Scheduler, Session, Task, compute, take_start_seconds
 from ._store import (STATE_FLAGS, StoreMismatch, consolidate, is_complete, open_existing, record_run,
-                     remove_partials, run_lock, set_state)
+                     remove_partials, run_lock, set_state, store_chunk)
 
 __all__ = ["RunSummary", "Session", "default_store", "run_scene", "warm_up_kernels"]
 
@@ -47,6 +47,8 @@ class RunSummary:
     solve_seconds: float
     reductions_computed: bool
     series_computed: bool = False
+    #: where the time went (``time_budget``); None when nothing was computed
+    timing: dict | None = None
 
     @property
     def solves_per_second(self) -> float:
@@ -59,6 +61,18 @@ class RunSummary:
         return (f"{self.scene}: {self.points} points ({self.computed_points} computed now in "
                 f"{self.computed_chunks}/{self.total_chunks} chunks), {self.failures} failures, "
                 f"wall {self.wall_seconds:.1f} s, {self.solves_per_second:.0f} solves/s -> {self.store}")
+
+    def timing_line(self, parts: int = 4) -> str:
+        """Where the time went: wall, solving summed over the workers, parallel efficiency
+        (solving / (wall x workers)) and the ``parts`` largest other parts [worker-seconds]."""
+        t = self.timing
+        if not t:
+            return ""
+        other = list(t["not_solving_worker_seconds"].items())[:parts]
+        rest = ", ".join(f"{name} {seconds:.1f}" for name, seconds in other)
+        return (f"{self.scene}: time: wall {t['wall_seconds']:.1f} s x {t['workers']} workers; solving "
+                f"{t['solve_worker_seconds']:.1f} worker-s, efficiency {100 * t['efficiency']:.0f} %; "
+                f"not solving (worker-s): {rest}")
 
 
 def default_store(scene) -> Path:
@@ -95,7 +109,7 @@ def open_run(scene, store, scheduler, workers, session, progress, echo):
     name = scheduler or scene.execution.scheduler
     workers = workers or scene.execution.workers
     own = session is None or session.name != name or session.workers != workers
-    sched = Scheduler(name, workers) if own else session
+    sched = Scheduler(name, workers, kind_of(scene).kernel_sets(scene)) if own else session
     n_workers = workers or sched.n_workers
     try:
         with run_lock(store):
@@ -103,6 +117,17 @@ def open_run(scene, store, scheduler, workers, session, progress, echo):
     finally:
         if own:
             sched.close()
+
+
+def start_workers(run: RunContext, kind: SceneKind, echo) -> None:
+    """Have the kernels ready where the tasks run.  A pool of worker processes is started
+    (``Scheduler.start``: each loads the kernels once, the first of them compiling them when
+    numba's cache is empty while the others wait); where this process runs the tasks itself
+    (synchronous, threads) or they run on a cluster, the kernels are compiled or loaded here."""
+    if run.scheduler.name == "processes":
+        run.scheduler.start()
+        return
+    warm_up_kernels(kind.kernel_sets(run.scene), echo)
 
 
 def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool) -> dict:
@@ -156,38 +181,72 @@ def check_layout(run: RunContext, kind: SceneKind, meta: dict, pending) -> None:
         "start over, or choose another --store")
 
 
-def run_chunks(chunk_task, store: str, scene, chunks: tuple[int, ...], indices) -> dict:
-    """One task: ``chunk_task`` on each chunk of ``indices`` in turn (each written whole and then
-    marked done by ``chunk_task``); the sum of their ``points``, ``failures`` and ``seconds``."""
-    total = {"points": 0, "failures": 0, "seconds": 0.0}
-    for idx in indices:
-        r = chunk_task(store, scene, chunks, idx)
+def run_chunks(solve_chunk, store: str, scene, chunks: tuple[int, ...], indices) -> dict:
+    """One task: ``solve_chunk`` on each chunk of ``indices`` in turn, each stored whole and then
+    marked done (``_store.store_chunk``) by a writer thread while the next chunk is solved (the
+    solver's kernels release the GIL), so a chunk's fsyncs do not hold up the solving; at most
+    one chunk waits to be written.
+
+    Returns the sums of the chunks' ``points``, ``failures``, ``seconds`` (solving),
+    ``write_seconds`` and ``mark_seconds`` (in the writer thread, overlapping the solving),
+    ``write_wait_seconds`` (the solving held up waiting for the writer), ``task_seconds``
+    (the task's wall time), ``task_cpu_seconds``, and the worker's start-up on its first task
+    (``_schedule.take_start_seconds``).
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    total = {"points": 0, "failures": 0, "seconds": 0.0, "write_seconds": 0.0, "mark_seconds": 0.0}
+    wait = 0.0
+
+    def collect(future):
+        nonlocal total, wait
+        tw = time.perf_counter()
+        r = future.result()
+        wait += time.perf_counter() - tw
         total = {k: total[k] + r[k] for k in total}
-    return total
+
+    with ThreadPoolExecutor(1, thread_name_prefix="chunk-writer") as writer:
+        writing = None
+        for idx in indices:
+            solved = solve_chunk(scene, chunks, idx)
+            if writing is not None:
+                collect(writing)
+            writing = writer.submit(store_chunk, Path(store), tuple(idx), solved)
+        if writing is not None:
+            collect(writing)
+    return {**total, "write_wait_seconds": wait, "task_seconds": time.perf_counter() - t0,
+            "task_cpu_seconds": time.process_time() - c0, **take_start_seconds()}
 
 
-def compute_chunks(run: RunContext, kind: SceneKind, meta: dict, pending) -> list[dict]:
+def compute_chunks(run: RunContext, kind: SceneKind, meta: dict, pending, clock: Clock | None = None) -> list[dict]:
     """Tasks of ``kind.chunks_per_task`` consecutive pending chunks, fanned out on the run's
     scheduler; their results."""
     if not pending:
         return []
-    import dask
-
     chunks = tuple(int(c) for c in meta["layout"]["chunks"])
     per_task = max(1, int(kind.chunks_per_task(run, chunks, pending)))
+    if clock is not None:
+        clock.lap("plan")
     groups = [pending[i:i + per_task] for i in range(0, len(pending), per_task)]
+    # the longest tasks first (where the kind can tell), so no long task starts last
+    costs = [sum(kind.chunk_cost(run.scene, idx) for idx in group) for group in groups]
+    groups = [groups[i] for i in sorted(range(len(groups)), key=lambda i: -costs[i])]  # stable
     label = run.scene.kind
 
     def key(group):
         first = f"pipeline-{label}-" + "-".join(map(str, group[0]))
         return first if len(group) == 1 else f"{first}-and-{len(group) - 1}"
 
-    tasks = [dask.delayed(run_chunks, pure=False)(kind.chunk_task, str(run.store), run.scene, chunks, group,
-                                                  dask_key_name=key(group)) for group in groups]
+    tasks = [Task(key(group), run_chunks, (kind.solve_chunk, str(run.store), run.scene, chunks, group))
+             for group in groups]
     total = int(_chunk_count(meta))
     bar = Progress(len(tasks), per_task * run.scene.n_points / total, run.scene.name, run.progress,
                    unit="tasks" if per_task > 1 else "chunks", rate_unit=kind.rate_unit)
-    return compute(tasks, run.scheduler, bar)
+    results = compute(tasks, run.scheduler, bar)
+    if clock is not None:
+        clock.lap("chunks")
+    return results
 
 
 def _chunk_count(meta: dict) -> int:
@@ -197,20 +256,86 @@ def _chunk_count(meta: dict) -> int:
     return count
 
 
-def finish(run: RunContext, kind: SceneKind, state: dict, chunks_computed: bool) -> list[str]:
+def finish(run: RunContext, kind: SceneKind, state: dict, chunks_computed: bool,
+           clock: Clock | None = None) -> tuple[list[str], dict[str, list[dict]]]:
     """Run the kind's steps whose state flag is unset (all that depend on the chunks, after
-    chunks were computed); each flag is set once its step is done.  The names of the steps run."""
+    chunks were computed); each flag is set once its step is done.  The names of the steps run,
+    and per step the timings of the tasks it ran (a step's ``run`` may return a list of them)."""
     if chunks_computed:
         reset = {s.state: False for s in kind.steps(run.scene) if s.after_chunks}
         set_state(run.store, chunks_complete=True, **reset)
         state = {**state, "chunks_complete": True, **reset}
-    ran = []
+    ran, timings = [], {}
     for step in kind.steps(run.scene):
         if not state.get(step.state):
-            step.run(run)
+            timings[step.name] = list(step.run(run) or [])
             set_state(run.store, **{step.state: True})
             ran.append(step.name)
-    return ran
+            if clock is not None:
+                clock.lap(step.name)
+    return ran, timings
+
+
+class Clock:
+    """Wall seconds of the driver's phases, in order (``lap(name)`` closes the running phase)."""
+
+    def __init__(self):
+        self.t0 = self.t = time.perf_counter()
+        self.c = time.process_time()
+        self.phases: dict[str, float] = {}
+        self.cpu: dict[str, float] = {}  # the driver's CPU seconds per phase
+
+    def lap(self, name: str) -> None:
+        now, cpu = time.perf_counter(), time.process_time()
+        self.phases[name] = self.phases.get(name, 0.0) + now - self.t
+        self.cpu[name] = self.cpu.get(name, 0.0) + cpu - self.c
+        self.t, self.c = now, cpu
+
+    @property
+    def wall(self) -> float:
+        return time.perf_counter() - self.t0
+
+
+def _sum(results, key) -> float:
+    return float(sum(r.get(key, 0.0) for r in results))
+
+
+def time_budget(clock: Clock, workers: int, chunk_results: list[dict], step_results: dict[str, list[dict]]) -> dict:
+    """Where the run's time went, in worker-seconds of a budget ``wall x workers``.
+
+    ``solve``: seconds inside the solver (or optimiser), summed over the tasks of the chunks
+    and of the steps (polish, series).  The rest, by part: the driver's phases while the
+    workers wait (each phase's wall x workers, its tasks' own time taken out), and inside the
+    tasks the workers' start-up (imports, kernels), the chunks' writes and done markers.
+    ``efficiency`` = solve / (wall x workers).
+    """
+    wall = clock.wall
+    budget = wall * workers
+    tasks = list(chunk_results) + [r for rs in step_results.values() for r in rs]
+    solve = _sum(tasks, "seconds")
+    parts = {}
+    for name, seconds in clock.phases.items():
+        inside = step_results.get(name, chunk_results if name == "chunks" else [])
+        task_seconds = _sum(inside, "task_seconds") + _sum(inside, "start_seconds")
+        if name == "chunks" or name in step_results:
+            # the phase's worker time not spent in its tasks: scheduling, waiting for the last task
+            parts[f"{name}: idle or scheduling"] = max(0.0, seconds * workers - task_seconds)
+        else:
+            parts[name] = seconds * workers
+    parts["worker start-up"] = _sum(tasks, "start_seconds")
+    parts["waiting for chunk writes"] = _sum(chunk_results, "write_wait_seconds")
+    in_tasks = _sum(tasks, "task_seconds") - solve - parts["waiting for chunk writes"]
+    parts["in tasks, besides solving and writing"] = max(0.0, in_tasks)
+    return {"wall_seconds": round(wall, 3), "workers": workers, "solve_worker_seconds": round(solve, 3),
+            "efficiency": round(solve / budget, 4) if budget > 0 else 0.0,
+            "phases_wall_seconds": {k: round(v, 3) for k, v in clock.phases.items()},
+            "driver_cpu_seconds": {k: round(v, 3) for k, v in clock.cpu.items()},
+            "tasks_cpu_seconds": round(_sum(tasks, "task_cpu_seconds"), 3),
+            "worker_start_cpu_seconds": round(_sum(tasks, "start_cpu_seconds"), 3),
+            "writer_thread_seconds": {"writes (fsync included)": round(_sum(chunk_results, "write_seconds"), 3),
+                                      "done markers": round(_sum(chunk_results, "mark_seconds"), 3)},
+            "not_solving_worker_seconds": {k: round(v, 3) for k, v in
+                                           sorted(parts.items(), key=lambda kv: -kv[1]) if v >= 0.0005}}
 
 
 def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None = None,
@@ -229,30 +354,39 @@ def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None =
     each worker imports the solver and loads its kernels once (``python -m pipeline paper``).
     """
     kind = kind_of(scene)
-    t_start = time.perf_counter()
+    clock = Clock()
     with open_run(scene, store, scheduler, workers, session, progress, echo) as run:
+        early = open_existing(run.store) if run.store.exists() else None
+        if early is None or not is_complete(early["state"]) or overwrite:
+            run.scheduler.start()  # the workers start while this process prepares the store
         meta = prepare_store(run, kind, overwrite)
         pending = kind.pending_chunks(run.store)
         check_layout(run, kind, meta, pending)
+        clock.lap("setup")
         if pending or not is_complete(meta["state"]):
-            warm_up_kernels(kind.kernel_sets(scene), echo)
+            start_workers(run, kind, echo)
+            clock.lap("warm-up")
         t_solve = time.perf_counter()
-        results = compute_chunks(run, kind, meta, pending)
+        results = compute_chunks(run, kind, meta, pending, clock)
         solve_seconds = time.perf_counter() - t_solve if pending else 0.0
         computed_points = sum(r["points"] for r in results)
-        ran = finish(run, kind, meta["state"], bool(pending))
+        ran, step_results = finish(run, kind, meta["state"], bool(pending), clock)
         failures = kind.failures(run.store, scene)
+        timing = None
         if pending or ran or not is_complete(meta["state"]):
             set_state(run.store, **{flag: True for flag in STATE_FLAGS})
+            clock.lap("record")
+            timing = time_budget(clock, run.n_workers, results, step_results)
             record_run(run.store, {
                 "finished": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-                "wall_seconds": round(time.perf_counter() - t_start, 3),
+                "wall_seconds": round(clock.wall, 3),
                 "solve_seconds": round(solve_seconds, 3), "computed_points": computed_points,
                 "computed_chunks": len(pending), "total_chunks": _chunk_count(meta), "failures": failures,
-                "scheduler": run.scheduler.name, "workers": run.n_workers})
+                "scheduler": run.scheduler.name, "workers": run.n_workers,
+                "threads_per_worker": run.scheduler.threads, "timing": timing})
             consolidate(run.store)
     return RunSummary(scene=scene.name, store=str(run.store), points=scene.n_points,
                       computed_points=computed_points, computed_chunks=len(pending),
                       total_chunks=_chunk_count(meta), failures=failures,
-                      wall_seconds=time.perf_counter() - t_start, solve_seconds=solve_seconds,
-                      reductions_computed="reductions" in ran, series_computed="series" in ran)
+                      wall_seconds=clock.wall, solve_seconds=solve_seconds,
+                      reductions_computed="reductions" in ran, series_computed="series" in ran, timing=timing)

@@ -1,9 +1,10 @@
 """Where tasks run: the dask schedulers, a shared worker pool, and a text progress bar.
 
-``compute(tasks, scheduler, progress)`` runs a list of ``dask.delayed`` tasks on one of dask's
-local schedulers ("processes", "threads", "synchronous") or on a dask.distributed cluster
-("tcp://host:port", also "tls://", "inproc://", "ucx://") and returns their results in order.
-Tasks are keyed ``pipeline-...`` so the progress bar counts them and nothing else.
+``compute(tasks, scheduler, progress)`` runs a list of :class:`Task` on a pool of worker
+processes ("processes", the default: the tasks go to the pool directly, in the order given),
+on one of dask's other local schedulers ("threads", "synchronous") or on a dask.distributed
+cluster ("tcp://host:port", also "tls://", "inproc://", "ucx://") and returns their results in
+order.  Tasks are keyed ``pipeline-...`` so the progress bar counts them and nothing else.
 """
 
 from __future__ import annotations
@@ -11,8 +12,11 @@ from __future__ import annotations
 import os
 import sys
 import time
+from dataclasses import dataclass
+from typing import Callable
 
-__all__ = ["DISTRIBUTED_PREFIXES", "LOCAL_SCHEDULERS", "Progress", "Scheduler", "Session", "compute"]
+__all__ = ["DISTRIBUTED_PREFIXES", "LOCAL_SCHEDULERS", "Progress", "Scheduler", "Session", "Task", "compute",
+           "threads_per_worker", "usable_cores"]
 
 LOCAL_SCHEDULERS = ("processes", "threads", "synchronous")
 #: addresses of a dask.distributed scheduler
@@ -53,17 +57,80 @@ class Progress:
             print(msg, file=sys.stderr, flush=True)
 
 
+def usable_cores() -> int:
+    """Cores this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def threads_per_worker(workers: int, cores: int | None = None) -> int:
+    """numba threads for each of ``workers`` worker processes so that workers x threads = cores
+    (at least 1): more oversubscribes the cores, and an OpenMP thread that waits for a
+    descheduled sibling spins (measured in docs/validation.md, "Pipeline at scale")."""
+    return max(1, (cores or usable_cores()) // max(1, workers))
+
+
+#: seconds the worker process spent starting (imports, the solver's kernels loaded), reported
+#: once, with the first task it runs (``take_start_seconds``)
+_worker_start = {"seconds": 0.0, "cpu": 0.0}
+
+
+def _start_worker(threads: int, kernel_sets: tuple[str, ...]) -> None:
+    """Initializer of a pool's worker process: its numba thread count, then the solver and its
+    kernels loaded once, before any task (so no task's timing pays for them)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    os.environ["NUMBA_NUM_THREADS"] = str(threads)  # read when numba is first imported
+    import pipeline  # noqa: F401  (the tasks' modules, imported once here)
+
+    if kernel_sets:
+        import solver
+
+        cache = solver.kernel_cache()
+        if cache.populated or not cache.path:
+            solver.warm_up(kernel_sets)
+        else:
+            # numba's cache is empty (a first run): one worker compiles, the others wait and load
+            import fcntl
+
+            with open(os.path.join(os.path.dirname(cache.path), ".twolink-compile.lock"), "w") as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX)
+                solver.warm_up(kernel_sets)
+    import numba
+
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    _worker_start["seconds"] += time.perf_counter() - t0
+    _worker_start["cpu"] += time.process_time() - c0
+
+
+def _ready() -> int:
+    return os.getpid()
+
+
+def take_start_seconds() -> dict:
+    """This worker's start-up not yet reported (zeros after the first call), as task timing
+    keys: ``start_seconds`` (wall) and ``start_cpu_seconds``."""
+    out = {"start_seconds": _worker_start["seconds"], "start_cpu_seconds": _worker_start["cpu"]}
+    _worker_start.update(seconds=0.0, cpu=0.0)
+    return out
+
+
 class Scheduler:
     """Where tasks run: a scheduler name (or cluster address) and a local worker count.
 
     One process pool serves every ``compute`` on "processes" until ``close``, so each worker
-    process imports the solver (and loads its compiled kernels) once.  Use as a context manager;
-    a ``Session`` is the same object shared by several runs (``python -m pipeline paper``).
+    process imports the solver (and loads the compiled kernels of ``kernel_sets``) once, with
+    :func:`threads_per_worker` numba threads.  ``start()`` spawns the workers at once, so they
+    start while the driver prepares the store.  Use as a context manager; a ``Session`` is the
+    same object shared by several runs (``python -m pipeline paper``).
     """
 
-    def __init__(self, name: str, workers: int | None):
+    def __init__(self, name: str, workers: int | None, kernel_sets: tuple[str, ...] = ()):
         self.name, self.workers = name, workers
+        self.kernel_sets = tuple(kernel_sets)
         self._pool = None
+        self._ready = []
 
     @property
     def distributed(self) -> bool:
@@ -73,16 +140,30 @@ class Scheduler:
     def n_workers(self) -> int:
         """Local workers ("processes", "threads": ``workers`` or every core); 1 otherwise."""
         if self.name in ("processes", "threads"):
-            return self.workers or os.cpu_count() or 1
+            return self.workers or usable_cores()
         return 1
+
+    @property
+    def threads(self) -> int:
+        """numba threads of each worker process (``threads_per_worker``)."""
+        return threads_per_worker(self.n_workers)
 
     def pool(self):
         if self._pool is None:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
 
-            self._pool = ProcessPoolExecutor(self.n_workers, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(self.n_workers, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_start_worker,
+                                             initargs=(self.threads, self.kernel_sets))
         return self._pool
+
+    def start(self) -> "Scheduler":
+        """Spawn the worker processes now (on "processes"; a no-op otherwise), without waiting."""
+        if self.name == "processes" and self._pool is None:
+            pool = self.pool()
+            self._ready = [pool.submit(_ready) for _ in range(self.n_workers)]
+        return self
 
     def close(self):
         if self._pool is not None:
@@ -100,16 +181,51 @@ class Scheduler:
 Session = Scheduler
 
 
-def compute(tasks, scheduler: Scheduler, progress: Progress) -> list:
-    """Run the delayed ``tasks`` on ``scheduler``; their results in order.  ``progress`` is
-    advanced once per finished task whose key starts with ``pipeline-``."""
+@dataclass(frozen=True)
+class Task:
+    """One task: ``func(*args)``, a module-level function and picklable arguments; ``key``
+    names it (``pipeline-...``) on dask's schedulers."""
+
+    key: str
+    func: Callable
+    args: tuple
+
+
+def compute(tasks: list[Task], scheduler: Scheduler, progress: Progress) -> list:
+    """Run ``tasks`` on ``scheduler``; their results in order.  ``progress`` is advanced once
+    per finished task.
+
+    On "processes" the tasks go straight to the scheduler's pool in the order given (so a kind
+    can put its longest tasks first), all queued at once; on the other schedulers through dask
+    (``dask.delayed``).  The first task to raise cancels those not yet started and raises here.
+    """
+    if scheduler.name == "processes":
+        from concurrent.futures import FIRST_EXCEPTION, wait
+
+        pool = scheduler.pool()
+        futures = [pool.submit(t.func, *t.args) for t in tasks]
+        index = {f: i for i, f in enumerate(futures)}
+        results = [None] * len(futures)
+        todo = set(futures)
+        try:
+            while todo:
+                done, todo = wait(todo, return_when=FIRST_EXCEPTION)
+                for f in done:
+                    results[index[f]] = f.result()  # raises the task's exception
+                    progress.update()
+        except BaseException:
+            for f in futures:
+                f.cancel()
+            raise
+        return results
     import dask
 
+    delayed = [dask.delayed(t.func, pure=False)(*t.args, dask_key_name=t.key) for t in tasks]
     if scheduler.distributed:
         from distributed import Client, as_completed
 
         with Client(scheduler.name, set_as_default=False) as client:
-            futures = client.compute(tasks)
+            futures = client.compute(delayed)
             index = {f.key: i for i, f in enumerate(futures)}
             results = [None] * len(futures)
             for fut in as_completed(futures, loop=client.loop):
@@ -126,7 +242,5 @@ def compute(tasks, scheduler: Scheduler, progress: Progress) -> list:
     kwargs = {"scheduler": scheduler.name}
     if scheduler.name == "threads":
         kwargs["num_workers"] = scheduler.n_workers
-    if scheduler.name == "processes":
-        kwargs["pool"] = scheduler.pool()
     with _Count():
-        return list(dask.compute(*tasks, **kwargs))
+        return list(dask.compute(*delayed, **kwargs))

@@ -22,15 +22,14 @@ larger, the quantity ``error_estimate`` claims to bound by rtol.
 from __future__ import annotations
 
 import math
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ._kind import RunContext, SceneKind
-from ._store import (ATTRS_KEY, FORMAT_VERSION, NOT_COMPUTED, STATE_GROUP, create_array, mark_done, open_group,
-                     provenance, read_arrays, status_meanings, write_region)
+from ._store import (ATTRS_KEY, FORMAT_VERSION, NOT_COMPUTED, STATE_GROUP, ChunkWrite, SolvedChunk, create_array,
+                     open_group, provenance, read_arrays, status_meanings, store_chunk)
 from ._study_scene import STUDY_KINDS, StudyScene, parse_study_scene
 
 __all__ = ["STUDY", "StudyKind", "compute_study_chunk", "create_study_skeleton", "result_dims", "study_arrays",
@@ -398,15 +397,14 @@ def _baselines(scene, case, ref, T, vscale):
 # ---------------------------------------------------------------------------
 
 
-def compute_study_chunk(store: str, scene: StudyScene, chunks: tuple[int], index: tuple[int]) -> dict:
-    """Solve the points of chunk ``index`` (``chunks``: the layout, (points per chunk,)), write
-    whole chunks of every result array, then mark it done."""
+def solve_study_chunk(scene: StudyScene, chunks: tuple[int], index: tuple[int]) -> SolvedChunk:
+    """Solve the points of chunk ``index`` (``chunks``: the layout, (points per chunk,)) by every
+    method at every tolerance; whole chunks of every result array, unwritten."""
     import numba
 
     import solver
 
     (points_per_chunk,), (index,) = chunks, index
-    store_path = Path(store)
     lo, hi = index * points_per_chunk, min((index + 1) * points_per_chunk, scene.n_points)
     vscale = point_parameters_vscale(scene, lo, hi)
     # One numba thread per solve: a single point gains nothing from the solver's prange over
@@ -426,15 +424,16 @@ def compute_study_chunk(store: str, scene: StudyScene, chunks: tuple[int], index
     for name, (adims, dtype, _, _) in spec.items():
         value = np.stack([np.asarray(r[name]) for r in rows]).astype(dtype)
         groups.setdefault(value.shape[1:], {})[name] = value
-    for rest, values in groups.items():
-        shape = (scene.n_points,) + rest
-        chunks = (points_per_chunk,) + rest
-        region = (slice(lo, hi),) + tuple(slice(0, n) for n in rest)
-        write_region(store_path, region, (index,) + (0,) * len(rest), chunks, shape, values)
-    time.sleep(float(os.environ.get("TWOLINK_PIPELINE_MARKER_DELAY", "0") or 0))  # test hook, as for grids
-    mark_done(store_path, (index,))
+    writes = tuple(ChunkWrite((slice(lo, hi),) + tuple(slice(0, n) for n in rest), (index,) + (0,) * len(rest),
+                              (points_per_chunk,) + rest, (scene.n_points,) + rest, values)
+                   for rest, values in groups.items())
     failures = int(sum(np.count_nonzero(r["status"] != 0) for r in rows))
-    return {"points": hi - lo, "failures": failures, "seconds": seconds}
+    return SolvedChunk(writes=writes, points=hi - lo, failures=failures, seconds=seconds)
+
+
+def compute_study_chunk(store: str, scene: StudyScene, chunks: tuple[int], index: tuple[int]) -> dict:
+    """Solve chunk ``index``, write its arrays, then mark it done (``_store.store_chunk``)."""
+    return store_chunk(Path(store), tuple(index), solve_study_chunk(scene, chunks, index))
 
 
 def point_parameters_vscale(scene: StudyScene, lo: int, hi: int) -> np.ndarray:
@@ -449,7 +448,7 @@ class StudyKind(SceneKind):
 
     names = STUDY_KINDS
     rate_unit = "points/s"
-    chunk_task = staticmethod(compute_study_chunk)
+    solve_chunk = staticmethod(solve_study_chunk)
 
     def parse(self, doc, ctx, text):
         return parse_study_scene(doc, ctx, text)

@@ -8,33 +8,30 @@ task), then every reduction of the stored grid, whose polishing fans out again.
 
 from __future__ import annotations
 
-import os
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from ._grid import (calibrate_points_per_task, chunk_region, chunk_sweeps, chunks_per_task, region_parameters,
+from ._grid import (chunk_region, chunk_sweeps, chunks_per_task, region_parameters,
                     scene_chunks, solve_points)
 from ._kind import RunContext, SceneKind, Step
 from ._reduce import grid_reduction, objective, polish_cells
 from ._scene import Scene, parse_grid_scene
-from ._schedule import Progress, compute
-from ._store import create_skeleton, mark_done, read_arrays, reduction_arrays, write_arrays, write_region
+from ._schedule import Progress, Task, compute, take_start_seconds
+from ._store import (ChunkWrite, SolvedChunk, create_skeleton, read_arrays, reduction_arrays, store_chunk,
+                     write_arrays)
 
-__all__ = ["GRID", "GridKind", "compute_chunk", "compute_series", "reduce_grid"]
+#: points one task aims at (about 0.5-2 s of one core's solving at rtol 1e-4)
+TASK_POINTS = 1024
+#: tasks per worker at least, where the scene has the chunks for them
+TASKS_PER_WORKER = 16
+
+__all__ = ["GRID", "GridKind", "compute_chunk", "compute_series", "reduce_grid", "solve_chunk"]
 
 
-def compute_chunk(store: str, scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> dict:
-    """Solve every point of chunk ``index``, write its outputs, then mark it done.
-
-    Returns
-    -------
-    dict
-        ``points``, ``failures`` (nonzero status) and ``seconds`` spent in the solver.
-    """
-    store_path = Path(store)
+def solve_chunk(scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> SolvedChunk:
+    """Solve every point of chunk ``index`` of the layout ``chunks``: its outputs, unwritten."""
     region = chunk_region(index, scene.shape, chunks)
     params = region_parameters(scene, region)
     rshape = tuple(sl.stop - sl.start for sl in region)
@@ -52,27 +49,32 @@ def compute_chunk(store: str, scene: Scene, chunks: tuple[int, ...], index: tupl
         values = solve_points(scene.family, params, scene.outputs, method=scene.method, rtol=scene.rtol)
     seconds = time.perf_counter() - t0
     values = {k: np.asarray(v).reshape(rshape) for k, v in values.items()}
-    write_region(store_path, region, index, chunks, scene.shape, values)
-    # Test hook: widen the window between data and marker, where a kill leaves a half-done chunk.
-    time.sleep(float(os.environ.get("TWOLINK_PIPELINE_MARKER_DELAY", "0") or 0))
-    mark_done(store_path, index)  # last: a chunk without its marker is recomputed on resume
-    return {"points": int(np.prod(rshape)), "failures": int(np.count_nonzero(values["status"] != 0)),
-            "seconds": seconds}
+    return SolvedChunk(writes=(ChunkWrite(region, tuple(index), tuple(chunks), scene.shape, values),),
+                       points=int(np.prod(rshape)), failures=int(np.count_nonzero(values["status"] != 0)),
+                       seconds=seconds)
 
 
-def compute_series(store: str, scene: Scene) -> int:
+def compute_chunk(store: str, scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> dict:
+    """Solve chunk ``index``, write its outputs, then mark it done (``_store.store_chunk``)."""
+    return store_chunk(Path(store), tuple(index), solve_chunk(scene, chunks, index))
+
+
+def compute_series(store: str, scene: Scene) -> dict:
     """Solve the scene's series points and write u(tau), resampled to uniform nodes tau_k = k/n_tau
-    by periodic linear interpolation of the solver's final grid. Returns the number of failures."""
+    by periodic linear interpolation of the solver's final grid. Returns the number of
+    ``failures`` and the task's timing."""
     import warnings
 
     import zarr
 
+    t0, c0 = time.perf_counter(), time.process_time()
     s = scene.series
     params = {d: np.array([dict(p)[d] for p in s.points], dtype=np.float64) for d in scene.dims}
     for k, v in scene.fixed:
         params[k] = np.full(len(s.points), v)
     out = solve_points(scene.family, params, (), method=scene.method, rtol=scene.rtol, series=True)
     tau = np.arange(s.n_tau) / s.n_tau
+    seconds = time.perf_counter() - t0
     u = np.full((len(s.points), s.n_tau), np.nan)
     for i, (ui, ti) in enumerate(zip(out["u"], out["tau"])):
         if out["status"][i] == 0 and ui.size:
@@ -81,15 +83,27 @@ def compute_series(store: str, scene: Scene) -> int:
         warnings.simplefilter("ignore")
         zarr.open_array(store=store, path="series_u", mode="r+")[...] = u
         zarr.open_array(store=store, path="series_status", mode="r+")[...] = out["status"]
-    return int(np.count_nonzero(out["status"] != 0))
+    return {"failures": int(np.count_nonzero(out["status"] != 0)), "seconds": seconds,
+            "task_seconds": time.perf_counter() - t0, "task_cpu_seconds": time.process_time() - c0,
+            **take_start_seconds()}
 
 
-def reduce_grid(run: RunContext) -> None:
+def timed_polish(scene: Scene, r, cells: list[dict]) -> tuple[list[dict], dict]:
+    """``polish_cells`` in a task, with the task's timing (all of it solving: each evaluation is
+    a solver call)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    records = polish_cells(scene, r, cells)
+    seconds = time.perf_counter() - t0
+    return records, {"seconds": seconds, "task_seconds": seconds, "task_cpu_seconds": time.process_time() - c0,
+                     **take_start_seconds()}
+
+
+def reduce_grid(run: RunContext) -> list[dict]:
     """Compute every reduction of the scene from the stored grid and write its arrays; the grid
-    optima of a polished reduction are refined in tasks (batches of cells)."""
-    import dask
-
+    optima of a polished reduction are refined in tasks (batches of cells).  The polish tasks'
+    timings."""
     scene, store, sched = run.scene, run.store, run.scheduler
+    timings = []
     for r in scene.reductions:
         names = {r.quantity, *r.report}
         data = read_arrays(store, sorted(names))
@@ -117,14 +131,15 @@ def reduce_grid(run: RunContext) -> None:
             # compass batches all cells of a task into each solver call: one task per worker;
             # the scipy methods call the solver point by point: smaller tasks balance better.
             per_worker = 1 if r.polish_method == "compass" else 4
-            n_tasks = max(1, min(len(cells), per_worker * (sched.workers or os.cpu_count() or 1)))
+            n_tasks = max(1, min(len(cells), per_worker * run.n_workers))
             batches = [list(range(i, len(cells), n_tasks)) for i in range(n_tasks)] if cells else []
-            tasks = [dask.delayed(polish_cells, pure=False)(scene, r, [cells[i] for i in b],
-                                                           dask_key_name=f"pipeline-polish-{r.name}-{j}")
+            tasks = [Task(f"pipeline-polish-{r.name}-{j}", timed_polish, (scene, r, [cells[i] for i in b]))
                      for j, b in enumerate(batches)]
             bar = Progress(len(tasks), len(cells) / max(1, len(tasks)), f"polish {r.name}", run.progress,
                            unit="tasks", rate_unit="optima/s")
             results = compute(tasks, sched, bar) if tasks else []
+            timings += [t for _, t in results]
+            results = [records for records, _ in results]
             pol = {name: np.full(rshape, fill, dtype=dtype) for name, (dtype, fill, _) in spec.items()
                    if name.startswith(f"{r.name}_polished")}
             base = f"{r.name}_polished"
@@ -144,21 +159,21 @@ def reduce_grid(run: RunContext) -> None:
                     pol[f"{base}_evaluations"][pos] = rec["evaluations"]
             out.update(pol)
         write_arrays(store, out)
+    return timings
 
 
-def series_step(run: RunContext) -> None:
-    """u(tau) at the scene's series points, in one task."""
-    import dask
-
-    task = dask.delayed(compute_series, pure=False)(str(run.store), run.scene, dask_key_name="pipeline-series")
-    compute([task], run.scheduler, Progress(1, len(run.scene.series.points), f"{run.scene.name} series", run.progress))
+def series_step(run: RunContext) -> list[dict]:
+    """u(tau) at the scene's series points, in one task; its timing."""
+    task = Task("pipeline-series", compute_series, (str(run.store), run.scene))
+    return compute([task], run.scheduler,
+                   Progress(1, len(run.scene.series.points), f"{run.scene.name} series", run.progress))
 
 
 class GridKind(SceneKind):
     """The parameter grid (``_scene.Scene``): chunks of grid points, then series and reductions."""
 
     names = ("grid",)
-    chunk_task = staticmethod(compute_chunk)
+    solve_chunk = staticmethod(solve_chunk)
 
     def parse(self, doc, ctx, text):
         return parse_grid_scene(doc, ctx, text)
@@ -171,22 +186,17 @@ class GridKind(SceneKind):
         create_skeleton(run.store, run.scene, self.chunk_layout(run.scene))
 
     def chunks_per_task(self, run: RunContext, chunks: tuple[int, ...], pending: list) -> int:
-        """Chunks of about ``[execution] points_per_task`` points per task, else of about
-        ``TASK_SECONDS`` of work from a timed probe (``_grid.calibrate_points_per_task``),
-        leaving each worker about 4 tasks.  Only the grouping of chunks into tasks depends on
-        the timing; the chunks themselves, and so every stored value, do not."""
+        """Chunks of about ``[execution] points_per_task`` points per task, else
+        ``TASK_POINTS`` points but at least ``TASKS_PER_WORKER`` tasks per worker (so the last
+        tasks leave cores idle briefly): from counts alone, no timing probe (it cost the driver
+        a kernel load and a solve before any work fanned out; docs/validation.md).  Only the
+        grouping of chunks into tasks depends on it; the chunks, and every stored value, do not."""
         scene = run.scene
         per_chunk = int(np.prod(chunks))
         if scene.execution.points_per_task is not None:
             return chunks_per_task(scene.execution.points_per_task, per_chunk)
-        if len(pending) <= run.n_workers:
-            return 1  # one chunk per worker at most: nothing to group, no probe needed
-        target, rate = calibrate_points_per_task(scene, run.n_workers)
-        k = min(chunks_per_task(target, per_chunk), max(1, len(pending) // (4 * max(1, run.n_workers))))
-        if run.progress:
-            run.echo(f"{scene.name}: probe {rate:,.0f} solves/s per worker -> {k} chunk{'s' * (k > 1)} "
-                     f"of {per_chunk} points per task", file=sys.stderr)
-        return k
+        return max(1, min(chunks_per_task(TASK_POINTS, per_chunk),
+                          len(pending) // (TASKS_PER_WORKER * max(1, run.n_workers))))
 
     def steps(self, scene) -> tuple[Step, ...]:
         steps = []

@@ -17,8 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline import StoreBusy, StoreMismatch, load_scene, run_scene
+from pipeline import RunContext, StoreBusy, StoreMismatch, load_scene, parse_scene, run_scene
 from pipeline.__main__ import main
+from pipeline._schedule import Scheduler
 from pipeline._store import lock_path, run_lock
 from pipeline_cases import REPO, assert_stores_equal, cli, read_store, small_scene_text, write_scene
 
@@ -251,32 +252,57 @@ def test_task_size_is_calibrated_by_a_probe(tmp_path):
     assert "small" in proc.stdout and "total" in proc.stdout
 
 
-def test_stores_do_not_depend_on_the_probe(tmp_path, monkeypatch):
-    """Issue 29: one scene run under a slow and a fast probe (5 and 5,000 solves/s per worker)
-    gives equal stores, every array (data and pipeline_state) included; only the number of
-    chunks per task differs."""
+def test_stores_do_not_depend_on_the_task_grouping(tmp_path, monkeypatch):
+    """Issue 29, issue 34: one scene run with one chunk per task and with four gives equal
+    stores, every array (data and pipeline_state) included; the grouping comes from counts
+    (``_sweep.TASK_POINTS``, ``TASKS_PER_WORKER``), never from a timing probe."""
+    import pipeline._grid as grid
     import pipeline._sweep as sweep
     from pipeline._store import store_meta
 
-    # 16 chunks of 4 points (1 x 1 x 1 x 4); no points_per_task: the probe groups them into tasks.
+    def no_probe(*args, **kwargs):
+        raise AssertionError("task sizes must not come from a timing probe")
+
+    monkeypatch.setattr(grid, "calibrate_points_per_task", no_probe)
+    # 16 chunks of 4 points (1 x 1 x 1 x 4); no points_per_task: counts group them into tasks.
     text = small_scene_text().replace("points_per_chunk = 8\npoints_per_task = 8\n", "points_per_chunk = 4\n")
     scene = load_scene(write_scene(tmp_path, text))
-    stores, lines = [], []
-    # (points per task, solves/s per worker) as the probe would report them, slow and fast
-    for target, rate in ((4, 5.0), (20000, 5000.0)):
-        monkeypatch.setattr(sweep, "calibrate_points_per_task", lambda scene, workers, t=target, r=rate: (t, r))
-        store = tmp_path / f"probe{rate:g}.zarr"
-        said = []
-        summary = run_scene(scene, store, scheduler="synchronous", progress=True,
-                            echo=lambda *a, **k: said.append(" ".join(map(str, a))))
+    stores, groupings = [], []
+    for task_points in (4, 16):
+        monkeypatch.setattr(sweep, "TASK_POINTS", task_points)
+        monkeypatch.setattr(sweep, "TASKS_PER_WORKER", 1)
+        with Scheduler("synchronous", None) as sched:
+            ctx = RunContext(scene, tmp_path / "x.zarr", sched, 1, False, print)
+            groupings.append(sweep.GRID.chunks_per_task(ctx, (1, 1, 1, 4), [(0,)] * 16))
+        store = tmp_path / f"tasks{task_points}.zarr"
+        summary = run_scene(scene, store, scheduler="synchronous", progress=False)
         assert summary.computed_chunks == summary.total_chunks == 16
-        lines += [m for m in said if "probe" in m]
         stores.append(store)
-    assert lines == ["small: probe 5 solves/s per worker -> 1 chunk of 4 points per task",
-                     "small: probe 5,000 solves/s per worker -> 4 chunks of 4 points per task"]
+    assert groupings == [1, 4]
     assert store_meta(stores[0])["layout"] == store_meta(stores[1])["layout"]
     assert read_store(stores[0])["pipeline_state/chunk_done"].shape == (2, 2, 4, 1)
     assert_stores_equal(stores[0], stores[1])
+
+
+def test_tasks_are_sized_by_counts():
+    """Without ``points_per_task``: ``TASK_POINTS`` points per task, but at least
+    ``TASKS_PER_WORKER`` tasks per worker where the chunks allow (harmonic_grid's 144 chunks of
+    256 points: 4 chunks per task on 2 workers, 1 on 16); with it, as many chunks as fit."""
+    import pipeline._sweep as sweep
+
+    scene = load_scene(REPO / "workflows" / "harmonic_grid.toml")
+    chunks = (1, 1, 4, 64)
+    pending = [(0,)] * 144
+
+    def per_task(workers, s=scene):
+        with Scheduler("synchronous", None) as sched:
+            return sweep.GRID.chunks_per_task(RunContext(s, Path("x.zarr"), sched, workers, False, print),
+                                              chunks, pending)
+
+    assert sweep.TASK_POINTS // 256 == 4 and sweep.TASKS_PER_WORKER == 16
+    assert [per_task(w) for w in (1, 2, 4, 16)] == [4, 4, 2, 1]
+    given = parse_scene(scene.text.replace("[solver]", "[execution]\npoints_per_task = 2048\n\n[solver]"), "g.toml")
+    assert per_task(16, given) == 8
 
 
 def test_store_of_another_chunk_layout_is_refused_until_complete(reference, tmp_path, capsys):

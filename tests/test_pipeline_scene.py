@@ -192,7 +192,7 @@ def test_chunks_tile_the_grid(shape, target):
 def test_chunk_shape_is_a_function_of_the_scene_only(tmp_path, monkeypatch):
     """Issue 29: where chunks begin follows from the grid's shape and [execution]
     points_per_chunk, never from a timing, the scheduler, the workers or points_per_task."""
-    import pipeline._sweep as sweep
+    import pipeline._grid as grid
     from pipeline._kind import RunContext
     from pipeline._registry import kind_of
     from pipeline._schedule import Scheduler
@@ -218,7 +218,7 @@ def test_chunk_shape_is_a_function_of_the_scene_only(tmp_path, monkeypatch):
     def no_probe(*args, **kwargs):
         raise AssertionError("the chunk layout must not depend on a timing probe")
 
-    monkeypatch.setattr(sweep, "calibrate_points_per_task", no_probe)
+    monkeypatch.setattr(grid, "calibrate_points_per_task", no_probe)
     for i, scene in enumerate([scenes[0], chunked]):
         store = tmp_path / f"s{i}.zarr"
         with Scheduler("synchronous", None) as sched:
