@@ -9,6 +9,7 @@ Public API::
 The command line is ``python -m pipeline run workflows/<scene>.toml``.
 """
 
+from ._export import cf_dataset, to_netcdf
 from ._kind import RunContext, SceneKind, Step
 from ._registry import KINDS, load_scene, parse_scene
 from ._run import RunSummary, default_store, run_scene
@@ -18,4 +19,4 @@ from ._store import StoreBusy, StoreMismatch
 
 __all__ = ["Axis", "Execution", "KINDS", "Reduction", "RunContext", "RunSummary", "Scene", "SceneError", "SceneKind",
            "Series", "Session", "Step", "StoreBusy", "StoreMismatch", "default_store", "load_scene", "parse_scene",
-           "run_scene"]
+           "cf_dataset", "run_scene", "to_netcdf"]

@@ -271,8 +271,10 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
     shape = scene.shape
     for name in scene.outputs + ("status",):
         dtype, fill = output_dtype(name)
-        attrs = {"long_name": QUANTITIES.get(name) or DIAGNOSTICS.get(name) or "solver status"}
+        # the paper's nondimensional quantities (lengths in link lengths, mu_n mu_s = 1): units "1"
+        attrs = {"long_name": QUANTITIES.get(name) or DIAGNOSTICS.get(name) or "solver status", "units": "1"}
         if name == "status":
+            del attrs["units"]
             attrs["flag_meanings"] = status_meanings(scene.method)
             attrs["long_name"] = "solver status: 0 converged; any other code is a failure (outputs NaN)"
         create_array(g, name, shape=shape, chunks=chunks, dtype=dtype, fill=fill, dims=scene.dims, attrs=attrs)

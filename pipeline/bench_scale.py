@@ -24,8 +24,9 @@ not a measurement (the per-worker start-up and the file system of a bigger machi
 
 The last line is one JSON object: ``scene``, ``points``, ``cores``, ``rows`` (one per worker
 count: ``workers``, ``wall_seconds``, ``solves_per_s``, ``speedup``, ``scaling_efficiency``,
-``parallel_efficiency``, ``engine_<mode>_solves_per_s``, ``ratio_to_engine_<mode>``) and
-``projection``.
+``parallel_efficiency``, ``cpu_seconds`` (the command's, driver and workers),
+``engine_<mode>_solves_per_s``, ``engine_<mode>_cpu_seconds``, ``ratio_to_engine_<mode>``) and
+``projection``.  On a shared machine compare the CPU seconds: wall times there measure the load.
 """
 
 from __future__ import annotations
@@ -76,35 +77,41 @@ def engine_points(scene, mode: str) -> tuple[dict, np.ndarray | None]:
     return {k: v[perm] for k, v in params.items()}, np.asarray(offsets)
 
 
-def time_engine(scene, mode: str, threads: int, repeats: int) -> float:
-    """Best wall seconds of ``repeats`` engine calls on every point (``engine_points``)."""
+def time_engine(scene, mode: str, threads: int, repeats: int) -> tuple[float, float]:
+    """Best wall seconds of ``repeats`` engine calls on every point (``engine_points``), and the
+    CPU seconds of that call (this process, all its threads)."""
     import numba
 
     from ._grid import solve_points
 
     params, sweeps = engine_points(scene, mode)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    best = np.inf
+    best = (np.inf, np.inf)
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         solve_points(scene.family, params, scene.outputs, method=scene.method, rtol=scene.rtol, sweeps=sweeps)
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, (time.perf_counter() - t0, time.process_time() - c0))
     return best
 
 
-def time_pipeline(scene_path: str, workers: int, directory: Path) -> tuple[float, dict]:
+def time_pipeline(scene_path: str, workers: int, directory: Path) -> tuple[float, float, dict]:
     """Wall seconds of the whole ``python -m pipeline run`` on ``workers`` workers into a fresh
-    store, and the store's run record."""
+    store, its CPU seconds (driver and workers), and the store's run record."""
+    import resource
+
     from ._store import store_meta
 
     store = directory / f"w{workers}.zarr"
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "pipeline", "run", str(scene_path), "--store", str(store),
                            "--workers", str(workers), "--no-progress"], capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime
     if proc.returncode != 0:
         raise RuntimeError(f"pipeline run --workers {workers} failed: {proc.stderr.strip()[-2000:]}")
-    return wall, store_meta(store).get("run", {})
+    return wall, cpu, store_meta(store).get("run", {})
 
 
 def projection(row: dict, run: dict, n: int) -> dict:
@@ -165,9 +172,11 @@ def main(argv=None) -> int:
         for w in counts:
             row = {"workers": w}
             for mode in modes:
-                seconds = time_engine(scene, mode, w, args.repeats)
+                seconds, cpu = time_engine(scene, mode, w, args.repeats)
                 row[f"engine_{mode}_solves_per_s"] = round(n / seconds, 1)
-            wall, run = time_pipeline(args.scene, w, Path(tmp))
+                row[f"engine_{mode}_cpu_seconds"] = round(cpu, 2)
+            wall, cpu, run = time_pipeline(args.scene, w, Path(tmp))
+            row["cpu_seconds"] = round(cpu, 2)
             timing = run.get("timing") or {}
             row.update(wall_seconds=round(wall, 3), solves_per_s=round(n / wall, 1),
                        parallel_efficiency=timing.get("efficiency"))
@@ -179,11 +188,12 @@ def main(argv=None) -> int:
     for row in rows:
         row["speedup"] = round(row["solves_per_s"] / base["solves_per_s"] * base["workers"], 3)
         row["scaling_efficiency"] = round(row["speedup"] / row["workers"], 3)
-        engine = "  ".join(f"engine {m} {row[f'engine_{m}_solves_per_s']:>8,.0f}/s "
-                           f"(pipeline {100 * row[f'ratio_to_engine_{m}']:.0f} %)" for m in modes)
+        engine = "  ".join(f"engine {m} {row[f'engine_{m}_solves_per_s']:>8,.0f}/s, cpu "
+                           f"{row[f'engine_{m}_cpu_seconds']:.1f} s (pipeline {100 * row[f'ratio_to_engine_{m}']:.0f} %)"
+                           for m in modes)
         eff = row["parallel_efficiency"]
         print(f"workers {row['workers']:>3d}: pipeline {row['solves_per_s']:>8,.0f} solves/s, wall "
-              f"{row['wall_seconds']:7.2f} s, speed-up {row['speedup']:5.2f}, scaling efficiency "
+              f"{row['wall_seconds']:7.2f} s, cpu {row['cpu_seconds']:.1f} s, speed-up {row['speedup']:5.2f}, scaling efficiency "
               f"{100 * row['scaling_efficiency']:3.0f} %, solving {100 * (eff or 0):3.0f} % of wall x workers;  "
               f"{engine}", flush=True)
     last = max(range(len(rows)), key=lambda i: rows[i]["workers"])

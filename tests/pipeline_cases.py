@@ -110,3 +110,27 @@ def assert_stores_equal(a: Path, b: Path) -> None:
     for name in va:
         assert va[name].dtype == vb[name].dtype, name
         np.testing.assert_array_equal(va[name], vb[name], err_msg=name)
+
+
+def assert_exports_to_netcdf(store: Path, tmp_path: Path) -> None:
+    """``pipeline.to_netcdf`` writes the store as netCDF that reads back with every data
+    variable equal to ``xarray.open_zarr``'s, CF flags on ``status`` (as many ``flag_values`` as
+    ``flag_meanings`` words) and ``units`` on every float output; while the raw
+    ``xarray.open_zarr(store).to_netcdf`` refuses the nested attributes (the negative control:
+    without the export's rewriting the check would fail)."""
+    import pytest
+    import xarray as xr
+
+    from pipeline import to_netcdf
+
+    raw = xr.open_zarr(str(store), zarr_format=3, consolidated=False)
+    with pytest.raises((TypeError, ValueError)):
+        raw.to_netcdf(tmp_path / "raw.nc")
+    path = to_netcdf(store, tmp_path / "export.nc")
+    with xr.open_dataset(path) as back:
+        assert sorted(back.data_vars) == sorted(raw.data_vars)
+        for name in raw.data_vars:
+            np.testing.assert_array_equal(back[name].values, raw[name].values, err_msg=name)
+        status = back["status"].attrs
+        assert len(status["flag_meanings"].split()) == len(np.atleast_1d(status["flag_values"])) >= 2
+        assert "pipeline" in back.attrs and isinstance(back.attrs["pipeline"], str)

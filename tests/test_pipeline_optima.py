@@ -247,6 +247,15 @@ def test_small_run_resumes_and_refuses_another_scene(tmp_path):
 
 
 @pytest.mark.slow
+def test_an_optima_store_exports_to_netcdf(tmp_path):
+    """Issue 34: an optima store through ``pipeline.to_netcdf`` reads back equal."""
+    from pipeline_cases import assert_exports_to_netcdf
+
+    store = tmp_path / "tiny.zarr"
+    run_scene(tiny(), store, progress=False)
+    assert_exports_to_netcdf(store, tmp_path)
+
+
 def test_near_p_two_is_flagged_not_looped(tmp_path):
     # p = 1.95: lambda nearly invariant under T; every start ends, flagged where ill-conditioned
     scene = tiny("[1.95]")

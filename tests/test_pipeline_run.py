@@ -172,6 +172,19 @@ def test_not_a_zarr_store_is_refused(tmp_path):
     assert (victim / "notes.txt").read_text() == "keep me"
 
 
+def test_a_grid_store_exports_to_netcdf(reference, tmp_path):
+    """Issue 34: a grid store through ``pipeline.to_netcdf`` (CF flags, JSON provenance) reads
+    back equal; its outputs carry ``units``."""
+    import xarray as xr
+
+    from pipeline_cases import assert_exports_to_netcdf
+
+    scene, store, _ = reference
+    assert_exports_to_netcdf(store, tmp_path)
+    with xr.open_dataset(tmp_path / "export.nc") as back:
+        assert all(back[name].attrs.get("units") == "1" for name in scene.outputs)
+
+
 def test_concurrent_run_is_refused_and_stale_lock_taken_over(tmp_path, capsys):
     path = write_scene(tmp_path, small_scene_text())
     store = tmp_path / "s.zarr"

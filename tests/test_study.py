@@ -247,6 +247,13 @@ def test_tiny_study_store_is_labelled_and_complete(tiny):
     assert (ds["seconds"].values > 0).all()
 
 
+def test_tiny_study_store_exports_to_netcdf(tiny, tmp_path):
+    """Issue 34: a study store through ``pipeline.to_netcdf`` reads back equal."""
+    from pipeline_cases import assert_exports_to_netcdf
+
+    assert_exports_to_netcdf(tiny[1], tmp_path)
+
+
 def test_tiny_study_rerun_resume_and_refusal(tiny):
     import zarr
 
