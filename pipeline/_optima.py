@@ -59,8 +59,8 @@ import numpy as np
 
 from ._kind import RunContext, SceneKind, Step
 from ._scene import Execution, ParseContext, parse_axis, parse_value, scene_hash
-from ._store import (ATTRS_KEY, FORMAT_VERSION, STATE_GROUP, ChunkWrite, SolvedChunk, create_array, open_group,
-                     provenance, read_arrays, store_chunk, write_arrays)
+from ._store import (ChunkWrite, SolvedChunk, create_array, finish_skeleton, new_group, read_arrays, store_chunk,
+                     write_arrays)
 
 __all__ = ["OPTIMA", "OptimaKind", "OptimaScene", "parse_optima_scene", "distinct_optima",
            "fourier_samples", "STOP_CODES", "KIND_VERSION", "create_optima_skeleton",
@@ -433,11 +433,6 @@ def distinct_optima(phi: np.ndarray, period: np.ndarray, score: np.ndarray, *, b
 # the store
 
 
-def _chunk_grid(scene: OptimaScene) -> tuple[int, ...]:
-    n_r, n_k, n_p, n_s = scene.shape
-    return (n_r, n_k, n_p, -(-n_s // scene.starts_per_task))
-
-
 def _start_chunks(scene: OptimaScene) -> tuple[int, ...]:
     return (1, 1, 1, min(scene.starts_per_task, scene.n_starts))
 
@@ -471,11 +466,7 @@ def reduction_specs(scene: OptimaScene) -> dict[str, tuple]:
 
 def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
     """Every array, coordinate and attribute, before any task runs (``_store`` conventions)."""
-    import shutil
-
-    if store.exists():
-        shutil.rmtree(store)
-    g = open_group(store, "w")
+    g = new_group(store)
     n_r, n_k, n_p, n_s = scene.shape
     n_c = scene.n_coefficients
     coords = {
@@ -529,19 +520,8 @@ def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
         shape = tuple(sizes[d] for d in dims)
         create_array(g, name, shape=shape, chunks=shape, dtype=dtype, fill=fill, dims=dims,
                      attrs={"long_name": long_name, "reduction": "distinct_optima"})
-    grid = _chunk_grid(scene)
-    sg = g.create_group(STATE_GROUP)
-    create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
-                 dims=tuple(f"chunk_{d}" for d in DIMS),
-                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
-    g.attrs[ATTRS_KEY] = {
-        "format_version": FORMAT_VERSION, "kind": KIND, "kind_version": KIND_VERSION,
-        "provenance": provenance(scene),
-        "layout": {"dims": list(DIMS), "shape": list(scene.shape), "chunks": list(chunks),
-                   "chunk_grid": list(grid)},
-        "state": {"skeleton_complete": True, "chunks_complete": False,
-                  "reductions_complete": False, "series_complete": True},
-    }
+    finish_skeleton(g, scene, dims=DIMS, shape=scene.shape, chunks=chunks,
+                    head={"kind": KIND, "kind_version": KIND_VERSION}, reductions_complete=False)
 
 
 # ---------------------------------------------------------------------------------------------

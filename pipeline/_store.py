@@ -39,6 +39,8 @@ __all__ = [
     "StoreBusy",
     "StoreMismatch",
     "create_skeleton",
+    "finish_skeleton",
+    "new_group",
     "open_existing",
     "output_dtype",
     "reduction_arrays",
@@ -255,6 +257,35 @@ def create_array(group, name, *, shape, chunks, dtype, fill, dims, attrs):
                               dimension_names=list(dims), attributes=attrs, overwrite=True)
 
 
+def new_group(store: Path):
+    """An empty root group at ``store`` (whatever was there removed: the caller decides whether
+    that is allowed); the first step of every kind's skeleton."""
+    if store.exists():
+        shutil.rmtree(store)
+    return open_group(store, "w")
+
+
+def finish_skeleton(g, scene, *, dims, shape, chunks, head: dict | None = None, layout: dict | None = None,
+                    reductions_complete: bool = False, series_complete: bool = True) -> None:
+    """The part of every kind's skeleton that is the same: the done markers (one per chunk of
+    the layout ``chunks`` over ``shape``, labelled ``chunk_<dim>``) and the ``pipeline``
+    attributes (``head`` first: ``kind`` and its version; provenance, layout, state), written
+    last, so that ``skeleton_complete`` is set only on a whole skeleton."""
+    grid = tuple(-(-int(s) // int(c)) for s, c in zip(shape, chunks))
+    sg = g.create_group(STATE_GROUP)
+    create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
+                 dims=tuple(f"chunk_{d}" for d in dims),
+                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+    g.attrs[ATTRS_KEY] = {
+        "format_version": FORMAT_VERSION, **(head or {}),
+        "provenance": provenance(scene),
+        "layout": {"dims": list(dims), "shape": [int(s) for s in shape], "chunks": [int(c) for c in chunks],
+                   "chunk_grid": list(grid), **(layout or {})},
+        "state": {"skeleton_complete": True, "chunks_complete": False,
+                  "reductions_complete": bool(reductions_complete), "series_complete": bool(series_complete)},
+    }
+
+
 def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
     """Create the whole store (every array, coordinate and attribute) before any task runs.
 
@@ -262,9 +293,7 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
     ``pipeline.state.skeleton_complete`` is set last, so a skeleton interrupted half-way is
     simply rebuilt by the next run.
     """
-    if store.exists():
-        shutil.rmtree(store)
-    g = open_group(store, "w")
+    g = new_group(store)
     for a in scene.axes:
         create_array(g, a.name, shape=(a.size,), chunks=(a.size,), dtype=np.float64, fill=np.nan,
                      dims=(a.name,), attrs={**axis_attrs(a.name), "spacing": a.spacing})[:] = a.array()
@@ -311,19 +340,8 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
         create_array(g, "series_status", shape=(n,), chunks=(n,), dtype=np.int8, fill=NOT_COMPUTED,
                      dims=("series_point",), attrs={"long_name": "solver status of the series points",
                                                     "flag_meanings": status_meanings(scene.method)})
-    grid = tuple(-(-s // c) for s, c in zip(shape, chunks))
-    sg = g.create_group(STATE_GROUP)
-    create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
-                 dims=tuple(f"chunk_{d}" for d in scene.dims),
-                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
-    g.attrs[ATTRS_KEY] = {
-        "format_version": FORMAT_VERSION,
-        "provenance": provenance(scene),
-        "layout": {"dims": list(scene.dims), "shape": list(shape), "chunks": list(chunks),
-                   "chunk_grid": list(grid)},
-        "state": {"skeleton_complete": True, "chunks_complete": False, "reductions_complete": False,
-                  "series_complete": scene.series is None},
-    }
+    finish_skeleton(g, scene, dims=scene.dims, shape=shape, chunks=chunks,
+                    reductions_complete=False, series_complete=scene.series is None)
 
 
 def open_existing(store: Path) -> dict | None:

@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from ._kind import RunContext, SceneKind
-from ._store import (ATTRS_KEY, FORMAT_VERSION, NOT_COMPUTED, STATE_GROUP, ChunkWrite, SolvedChunk, create_array,
-                     open_group, provenance, read_arrays, status_meanings, store_chunk)
+from ._store import (NOT_COMPUTED, ChunkWrite, SolvedChunk, create_array, finish_skeleton, new_group, read_arrays,
+                     status_meanings, store_chunk)
 from ._study_scene import STUDY_KINDS, StudyScene, parse_study_scene
 
 __all__ = ["STUDY", "StudyKind", "compute_study_chunk", "create_study_skeleton", "result_dims", "study_arrays",
@@ -200,11 +200,7 @@ def default_points_per_task(scene: StudyScene) -> int:
 
 def create_study_skeleton(store: Path, scene: StudyScene, points_per_chunk: int) -> None:
     """Every array, coordinate and attribute before any task runs (``skeleton_complete`` last)."""
-    import shutil
-
-    if store.exists():
-        shutil.rmtree(store)
-    g = open_group(store, "w")
+    g = new_group(store)
     dims = result_dims(scene)
     coords = {"point": np.arange(scene.n_points, dtype=np.int32),
               "method": np.arange(len(scene.methods), dtype=np.int32),
@@ -226,19 +222,8 @@ def create_study_skeleton(store: Path, scene: StudyScene, points_per_chunk: int)
     for name, (adims, dtype, fill, attrs) in study_arrays(scene).items():
         shape = tuple(dims[d] for d in adims)
         create_array(g, name, shape=shape, chunks=(c,) + shape[1:], dtype=dtype, fill=fill, dims=adims, attrs=attrs)
-    n_chunks = -(-scene.n_points // c)
-    sg = g.create_group(STATE_GROUP)
-    create_array(sg, "chunk_done", shape=(n_chunks,), chunks=(1,), dtype=np.uint8, fill=0, dims=("chunk_point",),
-                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
-    g.attrs[ATTRS_KEY] = {
-        "format_version": FORMAT_VERSION,
-        "kind": scene.kind,
-        "provenance": provenance(scene),
-        "layout": {"dims": ["point"], "shape": [scene.n_points], "chunks": [c], "chunk_grid": [n_chunks],
-                   "result_dims": dims},
-        "state": {"skeleton_complete": True, "chunks_complete": False, "reductions_complete": True,
-                  "series_complete": True},
-    }
+    finish_skeleton(g, scene, dims=("point",), shape=(scene.n_points,), chunks=(c,), head={"kind": scene.kind},
+                    layout={"result_dims": dims}, reductions_complete=True)
 
 
 # ---------------------------------------------------------------------------
