@@ -10,22 +10,29 @@ A run is a chain of small named steps, the same for every kind (pangeo-forge-rec
 A kind supplies the parts that differ:
 
 * ``create_skeleton(run)``: every array, coordinate and attribute of an empty store, before
-  any task runs (``pipeline.kind`` names the kind; format-1 grid stores carry no kind);
+  any task runs (``pipeline.kind`` names the kind; format-1 grid stores carry no kind): the
+  kind's own arrays between ``_store.new_group`` and ``_store.finish_skeleton`` (done
+  markers, provenance, layout, state: the same for every kind);
 * ``chunk_layout(scene)``: the chunk shape the scene's store must have, a function of the
   scene alone (never of a timing); a store of another layout with chunks still to compute is
   refused.  ``None`` (the default): whatever the kind's skeleton chose;
 * ``pending_chunks(store)``: the chunk indices without their done marker;
 * ``chunks_per_task(run, chunks, pending)``: how many consecutive pending chunks one task
-  computes (default 1); it may come from a timing, since it moves no chunk boundary;
-* ``chunk_task(store, scene, chunks, index)``: a module-level function, run inside a dask task
-  (picklable arguments only), that computes chunk ``index`` of the layout ``chunks``, writes
-  whole aligned chunks of its arrays (``_store.write_region``), then its done marker, and
-  returns ``{"points", "failures", "seconds"}``;
+  computes (default 1); it moves no chunk boundary, so no stored value depends on it;
+* ``solve_chunk(scene, chunks, index)``: a module-level function, run inside a task
+  (picklable arguments only), that computes chunk ``index`` of the layout ``chunks`` and
+  returns a ``_store.SolvedChunk`` (its whole aligned writes, points, failures, seconds
+  solving); the shared mechanics (``_store.store_chunk``, called by ``_run.run_chunks``)
+  write each whole and durable, then the done marker, for every kind alike;
+* ``chunk_cost(scene, index)``: relative cost of a chunk where the kind can tell (tasks run
+  longest first; default: equal);
 * ``steps(scene)``: driver-side :class:`Step` objects after the chunks (reductions), each
-  owning one flag of ``pipeline.state``;
+  owning one flag of ``pipeline.state`` (a step's ``run`` may return its tasks' timings, for
+  the run's time budget);
 * ``failures(store, scene)``: the count the run summary reports;
-* ``kernel_sets(scene)``: the solver kernel sets its tasks use, compiled once in the driver
-  before work fans out (``solver.warm_up``).
+* ``kernel_sets(scene)``: the solver kernel sets its tasks use, loaded once per worker
+  process when its pool starts (``_schedule.Scheduler``; compiled once, by one of them, when
+  numba's cache is empty), or in the driver where it runs the tasks itself.
 
 Which report section shows a store is for ``reports`` to choose from the store's kind; the
 pipeline never imports ``reports`` for it.
@@ -84,8 +91,8 @@ class SceneKind:
     names: tuple[str, ...] = ()
     #: unit of the progress bar's rate
     rate_unit = "solves/s"
-    #: the task computing one chunk: a module-level function (picklable by reference)
-    chunk_task: Callable[..., dict]
+    #: computes one chunk, unwritten: a module-level function (picklable by reference)
+    solve_chunk: Callable[..., object]
 
     def parse(self, doc: dict, ctx, text: str):
         """The validated scene of the TOML document ``doc`` (``ctx``: a ``ParseContext``)."""

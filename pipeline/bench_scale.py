@@ -17,10 +17,11 @@ core, and every core):
 
 Per worker count it prints solves/s, the speed-up over one worker, the scaling efficiency
 (speed-up / w) and the pipeline's throughput as a fraction of the engine's.  Then a projection
-(Amdahl): from the run at the most workers, the part that did not shrink with the workers
-(S = wall - sum of task seconds / w) and the part that did (P = sum of task seconds), the
-wall time on n workers is projected as S + P / n for n = 16 (and --project); a projection,
-not a measurement (the per-worker start-up and the file system of a bigger machine differ).
+(Amdahl, ``projection``): from the run at the most workers, the part that does not shrink
+with the workers (S) and the part that does (P), the wall time on n workers is projected as
+S + P / n for n = 16 (``--project``), once from wall times (idle machine) and once from CPU
+times (a shared machine); a projection, not a measurement (the per-worker start-up and the
+file system of a bigger machine differ).
 
 The last line is one JSON object: ``scene``, ``points``, ``cores``, ``rows`` (one per worker
 count: ``workers``, ``wall_seconds``, ``solves_per_s``, ``speedup``, ``scaling_efficiency``,
@@ -115,17 +116,32 @@ def time_pipeline(scene_path: str, workers: int, directory: Path) -> tuple[float
 
 
 def projection(row: dict, run: dict, n: int) -> dict:
-    """Amdahl from one measured run: S = wall - P / w, P = the tasks' seconds summed."""
+    """Amdahl from one measured run on w workers, two ways.
+
+    From wall times (an idle machine): P = the tasks' seconds summed (solving, and in the
+    tasks besides), S = wall - P / w; T(n) = S + P / n.
+    From CPU times (what a shared machine still measures): P = the tasks' CPU seconds, S = the
+    command's other CPU seconds (the driver's, every phase taken as serial, and one worker's
+    start-up: each worker starts in parallel with the others); T(n) = S + P / n.
+    """
     timing = run.get("timing") or {}
     w = row["workers"]
     parallel = float(timing.get("solve_worker_seconds", 0.0))
     parallel += sum(v for k, v in timing.get("not_solving_worker_seconds", {}).items()
                     if k in ("waiting for chunk writes", "in tasks, besides solving and writing"))
     serial = max(0.0, row["wall_seconds"] - parallel / w)
-    wall_n = serial + parallel / n
-    return {"from_workers": w, "serial_seconds": round(serial, 3), "parallel_worker_seconds": round(parallel, 3),
-            "serial_fraction": round(serial / (serial + parallel), 4) if serial + parallel > 0 else 0.0,
-            "workers": n, "projected_wall_seconds": round(wall_n, 3)}
+    tasks_cpu = float(timing.get("tasks_cpu_seconds", 0.0))
+    start_cpu = float(timing.get("worker_start_cpu_seconds", 0.0))
+    other_cpu = max(0.0, row["cpu_seconds"] - tasks_cpu - start_cpu)  # driver, and workers' spawn imports
+    serial_cpu = other_cpu + start_cpu / w
+    return {"from_workers": w, "workers": n,
+            "wall": {"serial_seconds": round(serial, 3), "parallel_worker_seconds": round(parallel, 3),
+                     "serial_fraction": round(serial / (serial + parallel), 4) if serial + parallel > 0 else 0.0,
+                     "projected_wall_seconds": round(serial + parallel / n, 3)},
+            "cpu": {"serial_seconds": round(serial_cpu, 3), "parallel_seconds": round(tasks_cpu, 3),
+                    "serial_fraction": round(serial_cpu / (serial_cpu + tasks_cpu), 4) if tasks_cpu > 0 else 0.0,
+                    "projected_wall_seconds": round(serial_cpu + tasks_cpu / n, 3),
+                    "projected_speedup_1_to_n": round((serial_cpu + tasks_cpu) / (serial_cpu + tasks_cpu / n), 2)}}
 
 
 def main(argv=None) -> int:
@@ -177,6 +193,7 @@ def main(argv=None) -> int:
                 row[f"engine_{mode}_cpu_seconds"] = round(cpu, 2)
             wall, cpu, run = time_pipeline(args.scene, w, Path(tmp))
             row["cpu_seconds"] = round(cpu, 2)
+            row["tasks_cpu_seconds"] = (run.get("timing") or {}).get("tasks_cpu_seconds")
             timing = run.get("timing") or {}
             row.update(wall_seconds=round(wall, 3), solves_per_s=round(n / wall, 1),
                        parallel_efficiency=timing.get("efficiency"))
@@ -198,13 +215,11 @@ def main(argv=None) -> int:
               f"{engine}", flush=True)
     last = max(range(len(rows)), key=lambda i: rows[i]["workers"])
     proj = projection(rows[last], runs[last], args.project)
-    proj["projected_speedup_over_1_worker"] = (round(base["wall_seconds"] * base["workers"] / proj["projected_wall_seconds"], 2)
-                                               if base["workers"] == 1 else None)
-    print(f"projection (Amdahl, not measured): from {proj['from_workers']} workers, serial "
-          f"{proj['serial_seconds']:.2f} s + {proj['parallel_worker_seconds']:.1f} worker-s in parallel -> "
-          f"{proj['projected_wall_seconds']:.2f} s on {args.project} workers"
-          + (f", {proj['projected_speedup_over_1_worker']}x over 1 worker" if proj["projected_speedup_over_1_worker"] else ""),
-          flush=True)
+    for how, p in (("wall", proj["wall"]), ("cpu", proj["cpu"])):
+        print(f"projection from {how} times (Amdahl, not measured): from {proj['from_workers']} workers, serial "
+              f"{p['serial_seconds']:.2f} s (fraction {p['serial_fraction']:.3f}) -> "
+              f"{p['projected_wall_seconds']:.2f} s on {args.project} workers"
+              + (f", {p['projected_speedup_1_to_n']}x over 1" if "projected_speedup_1_to_n" in p else ""), flush=True)
     print(json.dumps({"scene": scene.name, "points": n, "cores": cores, "rows": rows, "projection": proj,
                       "shared_machine_note": "wall times; compare rows of one run only"}))
     return 0
