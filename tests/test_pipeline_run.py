@@ -51,6 +51,43 @@ def test_first_run_computes_everything(reference):
     assert "64 points" in summary.line() and "solves/s" in summary.line() and "failures" in summary.line()
 
 
+def test_the_run_record_says_where_the_time_went(reference):
+    """Issue 34: the run record's ``timing`` splits wall x workers into solving and named parts
+    that add up to it (within the clock's rounding), and the summary prints the same figures."""
+    from pipeline._store import store_meta
+
+    scene, store, summary = reference
+    t = store_meta(store)["run"]["timing"]
+    budget = t["wall_seconds"] * t["workers"]
+    parts = t["not_solving_worker_seconds"]
+    assert 0 < t["solve_worker_seconds"] <= budget and 0 < t["efficiency"] <= 1
+    assert abs(t["solve_worker_seconds"] + sum(parts.values()) - budget) <= 0.05 * budget + 0.01, t
+    assert {"setup", "chunks: idle or scheduling", "reductions: idle or scheduling"} <= set(parts) | {
+        k for k, v in t["phases_wall_seconds"].items()}
+    assert {"setup", "plan", "chunks", "series", "reductions", "record"} <= set(t["phases_wall_seconds"])
+    line = summary.timing_line()
+    assert line.startswith("small: time: wall") and f"{100 * t['efficiency']:.0f} %" in line
+
+
+def test_workers_times_threads_is_the_cores():
+    """Issue 34: each of N worker processes runs cores // N numba threads (at least 1): N
+    processes of all-core thread pools oversubscribed the cores (docs/validation.md)."""
+    from pipeline._schedule import threads_per_worker
+
+    assert [threads_per_worker(w, 16) for w in (1, 2, 4, 16, 32)] == [16, 8, 4, 1, 1]
+    assert [threads_per_worker(w, 2) for w in (1, 2, 3)] == [2, 1, 1]
+    with Scheduler("processes", 2) as sched:
+        sched.start()
+        threads = {sched.pool().submit(_numba_threads).result() for _ in range(4)}
+    assert threads == {threads_per_worker(2)}
+
+
+def _numba_threads() -> int:
+    import numba
+
+    return numba.get_num_threads()
+
+
 def test_xarray_opens_store_with_labels(reference):
     xr = pytest.importorskip("xarray")
     scene, store, _ = reference
@@ -229,7 +266,8 @@ def test_sigkill_mid_run_then_resume_matches_uninterrupted(reference, tmp_path):
     # Same command again: only the unfinished chunks are computed.
     resumed = cli(*args)
     assert resumed.returncode == 0, resumed.stderr
-    line = resumed.stdout.strip().splitlines()[-1]
+    timing, line = resumed.stdout.strip().splitlines()[-2:]
+    assert timing.startswith("small: time: wall") and "x 2 workers" in timing and "efficiency" in timing
     assert f"({64 - 8 * len(done_before)} computed now in {8 - len(done_before)}/8 chunks)" in line, line
     assert not list(store.rglob("*.partial"))
     assert_stores_equal(store, ref_store)
