@@ -108,7 +108,8 @@ def open_run(scene, store, scheduler, workers, session, progress, echo):
     store = Path(store) if store is not None else default_store(scene)
     name = scheduler or scene.execution.scheduler
     workers = workers or scene.execution.workers
-    own = session is None or session.name != name or session.workers != workers
+    # the session's pool serves every run of its scheduler that asks for no other worker count
+    own = session is None or session.name != name or (workers is not None and session.n_workers != workers)
     sched = Scheduler(name, workers, kind_of(scene).kernel_sets(scene)) if own else session
     n_workers = workers or sched.n_workers
     try:
@@ -125,6 +126,11 @@ def start_workers(run: RunContext, kind: SceneKind, echo) -> None:
     numba's cache is empty while the others wait); where this process runs the tasks itself
     (synchronous, threads) or they run on a cluster, the kernels are compiled or loaded here."""
     if run.scheduler.name == "processes":
+        import solver
+
+        if not solver.kernel_cache().populated:
+            echo("compiling the solver's kernels (first run only), in the first worker ...", file=sys.stderr,
+                 flush=True)
         run.scheduler.start()
         return
     warm_up_kernels(kind.kernel_sets(run.scene), echo)

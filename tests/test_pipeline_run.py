@@ -276,6 +276,24 @@ def test_sigkill_mid_run_then_resume_matches_uninterrupted(reference, tmp_path):
     assert again.returncode == 0 and "nothing to do" in again.stdout
 
 
+def test_one_pool_serves_several_scenes(reference, tmp_path):
+    """Issue 34: runs sharing a ``Session`` (``paper``) use one pool: its workers start (imports,
+    kernels) once, reported by the first run only; the stores equal the synchronous one."""
+    from pipeline import Session
+    from pipeline._store import store_meta
+
+    scene, ref_store, _ = reference
+    with Session("processes", 2, ("periodic",)) as session:
+        stores = [tmp_path / f"{i}.zarr" for i in range(2)]
+        for store in stores:
+            run_scene(scene, store, session=session, progress=False)
+    starts = [store_meta(s)["run"]["timing"]["not_solving_worker_seconds"].get("worker start-up", 0.0)
+              for s in stores]
+    assert starts[0] > 0 and starts[1] == 0, starts
+    for store in stores:
+        assert_stores_equal(store, ref_store)
+
+
 def test_distributed_local_cluster_matches_local_scheduler(reference, tmp_path):
     distributed = pytest.importorskip("distributed")
     _, ref_store, _ = reference
