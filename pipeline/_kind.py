@@ -49,7 +49,19 @@ import numpy as np
 from ._schedule import Scheduler
 from ._store import read_done
 
-__all__ = ["RunContext", "SceneKind", "Step"]
+__all__ = ["RunContext", "SceneKind", "Step", "TASKS_PER_WORKER", "tasks_by_count"]
+
+#: tasks per worker at least, where a scene has the chunks for them: the last tasks then leave
+#: cores idle briefly (and a task of several chunks writes each while it solves the next)
+TASKS_PER_WORKER = 16
+
+
+def tasks_by_count(chunk_points: int, task_points: int, pending: int, workers: int) -> int:
+    """Chunks per task: as many as fit in ``task_points`` points, but at least
+    ``TASKS_PER_WORKER`` tasks per worker where ``pending`` chunks allow; at least one.  From
+    counts alone: no timing moves a task boundary (nor, ever, a chunk's)."""
+    fit = max(1, int(task_points) // max(1, int(chunk_points)))
+    return max(1, min(fit, int(pending) // (TASKS_PER_WORKER * max(1, int(workers)))))
 
 
 @dataclass(frozen=True)

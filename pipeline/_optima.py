@@ -57,7 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._kind import RunContext, SceneKind, Step
+from ._kind import RunContext, SceneKind, Step, tasks_by_count
 from ._scene import Execution, ParseContext, parse_axis, parse_value, scene_hash
 from ._store import (ChunkWrite, SolvedChunk, create_array, finish_skeleton, new_group, read_arrays, store_chunk,
                      write_arrays)
@@ -67,6 +67,8 @@ __all__ = ["OPTIMA", "OptimaKind", "OptimaScene", "parse_optima_scene", "distinc
            "compute_optima_chunk", "reduce_optima"]
 
 KIND = "optima"
+#: starts one task aims at (``OptimaKind.chunks_per_task``)
+TASK_STARTS = 16
 #: version of this kind's array layout (checked by readers beside FORMAT_VERSION)
 KIND_VERSION = 1
 DIMS = ("anisotropy_ratio", "max_wavenumber", "p", "start")
@@ -682,6 +684,13 @@ class OptimaKind(SceneKind):
 
     def create_skeleton(self, run: RunContext) -> None:
         create_optima_skeleton(run.store, run.scene)
+
+    def chunks_per_task(self, run: RunContext, chunks: tuple[int, ...], pending: list) -> int:
+        """Chunks of about ``TASK_STARTS`` starts per task, but at least
+        ``_kind.TASKS_PER_WORKER`` tasks per worker (``_kind.tasks_by_count``): fourier_optima's
+        432 chunks of 4 starts go 4 to a task on 2 workers (a task writes each chunk while it
+        optimises the next), 1 on 16.  The grouping moves no chunk boundary."""
+        return tasks_by_count(chunks[-1], TASK_STARTS, len(pending), run.n_workers)
 
     def chunk_cost(self, scene, index: tuple[int, ...]) -> float:
         """An optimisation's cost grows with Kmax (2 Kmax + 2 variables, a difference Hessian

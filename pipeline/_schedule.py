@@ -68,8 +68,14 @@ def usable_cores() -> int:
 def threads_per_worker(workers: int, cores: int | None = None) -> int:
     """numba threads for each of ``workers`` worker processes so that workers x threads = cores
     (at least 1): more oversubscribes the cores, and an OpenMP thread that waits for a
-    descheduled sibling spins (measured in docs/validation.md, "Pipeline at scale")."""
-    return max(1, (cores or usable_cores()) // max(1, workers))
+    descheduled sibling spins (measured in docs/validation.md, "Pipeline at scale").  A
+    ``NUMBA_NUM_THREADS`` set by the user caps each worker's threads."""
+    if cores is None:
+        cores = usable_cores()
+        limit = os.environ.get("NUMBA_NUM_THREADS", "")
+        if limit.isdigit() and int(limit) > 0:  # the user's own cap on numba threads holds
+            cores = min(cores, int(limit) * max(1, workers))
+    return max(1, cores // max(1, workers))
 
 
 #: seconds the worker process spent starting (imports, the solver's kernels loaded), reported

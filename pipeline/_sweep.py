@@ -15,7 +15,7 @@ import numpy as np
 
 from ._grid import (chunk_region, chunk_sweeps, chunks_per_task, region_parameters,
                     scene_chunks, solve_points)
-from ._kind import RunContext, SceneKind, Step
+from ._kind import RunContext, SceneKind, Step, tasks_by_count
 from ._reduce import grid_reduction, objective, polish_cells
 from ._scene import Scene, parse_grid_scene
 from ._schedule import Progress, Task, compute, take_start_seconds
@@ -24,8 +24,6 @@ from ._store import (ChunkWrite, SolvedChunk, create_skeleton, read_arrays, redu
 
 #: points one task aims at (about 0.5-2 s of one core's solving at rtol 1e-4)
 TASK_POINTS = 1024
-#: tasks per worker at least, where the scene has the chunks for them
-TASKS_PER_WORKER = 16
 
 __all__ = ["GRID", "GridKind", "compute_chunk", "compute_series", "reduce_grid", "solve_chunk"]
 
@@ -187,16 +185,15 @@ class GridKind(SceneKind):
 
     def chunks_per_task(self, run: RunContext, chunks: tuple[int, ...], pending: list) -> int:
         """Chunks of about ``[execution] points_per_task`` points per task, else
-        ``TASK_POINTS`` points but at least ``TASKS_PER_WORKER`` tasks per worker (so the last
-        tasks leave cores idle briefly): from counts alone, no timing probe (it cost the driver
+        ``TASK_POINTS`` points but at least ``_kind.TASKS_PER_WORKER`` tasks per worker
+        (``_kind.tasks_by_count``): from counts alone, no timing probe (it cost the driver
         a kernel load and a solve before any work fanned out; docs/validation.md).  Only the
         grouping of chunks into tasks depends on it; the chunks, and every stored value, do not."""
         scene = run.scene
         per_chunk = int(np.prod(chunks))
         if scene.execution.points_per_task is not None:
             return chunks_per_task(scene.execution.points_per_task, per_chunk)
-        return max(1, min(chunks_per_task(TASK_POINTS, per_chunk),
-                          len(pending) // (TASKS_PER_WORKER * max(1, run.n_workers))))
+        return tasks_by_count(per_chunk, TASK_POINTS, len(pending), run.n_workers)
 
     def steps(self, scene) -> tuple[Step, ...]:
         steps = []

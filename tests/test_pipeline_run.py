@@ -324,8 +324,9 @@ def test_task_size_is_calibrated_by_a_probe(tmp_path):
 def test_stores_do_not_depend_on_the_task_grouping(tmp_path, monkeypatch):
     """Issue 29, issue 34: one scene run with one chunk per task and with four gives equal
     stores, every array (data and pipeline_state) included; the grouping comes from counts
-    (``_sweep.TASK_POINTS``, ``TASKS_PER_WORKER``), never from a timing probe."""
+    (``_sweep.TASK_POINTS``, ``_kind.TASKS_PER_WORKER``), never from a timing probe."""
     import pipeline._grid as grid
+    import pipeline._kind as kind_module
     import pipeline._sweep as sweep
     from pipeline._store import store_meta
 
@@ -339,7 +340,7 @@ def test_stores_do_not_depend_on_the_task_grouping(tmp_path, monkeypatch):
     stores, groupings = [], []
     for task_points in (4, 16):
         monkeypatch.setattr(sweep, "TASK_POINTS", task_points)
-        monkeypatch.setattr(sweep, "TASKS_PER_WORKER", 1)
+        monkeypatch.setattr(kind_module, "TASKS_PER_WORKER", 1)
         with Scheduler("synchronous", None) as sched:
             ctx = RunContext(scene, tmp_path / "x.zarr", sched, 1, False, print)
             groupings.append(sweep.GRID.chunks_per_task(ctx, (1, 1, 1, 4), [(0,)] * 16))
@@ -368,10 +369,20 @@ def test_tasks_are_sized_by_counts():
             return sweep.GRID.chunks_per_task(RunContext(s, Path("x.zarr"), sched, workers, False, print),
                                               chunks, pending)
 
-    assert sweep.TASK_POINTS // 256 == 4 and sweep.TASKS_PER_WORKER == 16
+    from pipeline._kind import TASKS_PER_WORKER
+
+    assert sweep.TASK_POINTS // 256 == 4 and TASKS_PER_WORKER == 16
     assert [per_task(w) for w in (1, 2, 4, 16)] == [4, 4, 2, 1]
     given = parse_scene(scene.text.replace("[solver]", "[execution]\npoints_per_task = 2048\n\n[solver]"), "g.toml")
     assert per_task(16, given) == 8
+    # optima: 16 starts per task, >= 16 tasks per worker (fourier_optima: 432 chunks of 4 starts)
+    from pipeline._optima import OPTIMA
+
+    optima = load_scene(REPO / "workflows" / "fourier_optima.toml")
+    with Scheduler("synchronous", None) as sched:
+        counts = [OPTIMA.chunks_per_task(RunContext(optima, Path("x.zarr"), sched, w, False, print), (1, 1, 1, 4),
+                                         [(0,)] * 432) for w in (1, 2, 16)]
+    assert counts == [4, 4, 1]
 
 
 def test_store_of_another_chunk_layout_is_refused_until_complete(reference, tmp_path, capsys):
