@@ -10,10 +10,11 @@ The command line is ``python -m pipeline run workflows/<scene>.toml``.
 """
 
 from ._export import cf_dataset, to_netcdf
+from ._grid_scene import Reduction, Scene, Series
 from ._kind import RunContext, SceneKind, Step
 from ._registry import KINDS, load_scene, parse_scene
 from ._run import RunSummary, default_store, run_scene
-from ._scene import Axis, Execution, Reduction, Scene, SceneError, Series
+from ._scene import Axis, Execution, SceneError
 from ._schedule import Session
 from ._store import StoreBusy, StoreMismatch
 

@@ -12,9 +12,10 @@ import sys
 import time
 from pathlib import Path
 
+from ._grid_scene import Scene
 from ._registry import kind_of, load_scene, parse_scene
 from ._run import run_scene, warm_up_kernels
-from ._scene import Scene, SceneError
+from ._scene import SceneError
 from ._schedule import Session
 from ._store import StoreBusy, StoreMismatch
 

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ._scene import DEFAULT_POINTS_PER_CHUNK, Scene
+from ._grid_scene import DEFAULT_POINTS_PER_CHUNK, Scene
 
 __all__ = [
     "DEFAULT_POINTS_PER_CHUNK",

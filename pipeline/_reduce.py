@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._grid import solve_points
-from ._scene import Reduction, Scene
+from ._grid_scene import Reduction, Scene
 
 __all__ = ["grid_reduction", "polish_cells", "objective"]
 

@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from ._scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs, engine_versions
+from ._grid_scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
+from ._scene import engine_versions
 
 __all__ = [
     "ATTRS_KEY",

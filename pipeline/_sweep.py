@@ -15,9 +15,9 @@ import numpy as np
 
 from ._grid import (chunk_region, chunk_sweeps, chunks_per_task, region_parameters,
                     scene_chunks, solve_points)
+from ._grid_scene import Scene, parse_grid_scene
 from ._kind import RunContext, SceneKind, Step, tasks_by_count
 from ._reduce import grid_reduction, objective, polish_cells
-from ._scene import Scene, parse_grid_scene
 from ._schedule import Progress, Task, compute, take_start_seconds
 from ._store import (ChunkWrite, SolvedChunk, create_skeleton, read_arrays, reduction_arrays, store_chunk,
                      write_arrays)
@@ -168,7 +168,7 @@ def series_step(run: RunContext) -> list[dict]:
 
 
 class GridKind(SceneKind):
-    """The parameter grid (``_scene.Scene``): chunks of grid points, then series and reductions."""
+    """The parameter grid (``_grid_scene.Scene``): chunks of grid points, then series and reductions."""
 
     names = ("grid",)
     solve_chunk = staticmethod(solve_chunk)
