@@ -1,5 +1,8 @@
 """Scene kind "optima": ensembles of local optimisations of Fourier motions (section "Optimal motions").
 
+The scene's schema is ``_optima_scene``; this module holds its compute (one optimisation per
+start), its store and its reduction.
+
 A scene ``[scene] kind = "optima"`` runs, for every (anisotropy ratio mu_n/mu_s, Kmax, p),
 many optimisations of phi(tau) = A_0 + sum_{k <= Kmax} A_k cos 2 pi k tau + B_k sin 2 pi k tau
 (eq. Fourier) and the period from random starts as the paper does: A_0 and A_1 uniform on
@@ -48,33 +51,25 @@ dissipation break it (lambda changes), so time-reversed motions are distinct opt
 
 from __future__ import annotations
 
-import math
 import sys
 import time
-import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ._kind import RunContext, SceneKind, Step, tasks_by_count
-from ._scene import Execution, ParseContext, parse_axis, parse_value, scene_hash
+from ._optima_scene import DIMS, KIND, STOP_CODES, OptimaScene, parse_optima_scene
 from ._store import (ChunkWrite, SolvedChunk, create_array, finish_skeleton, new_group, read_arrays, store_chunk,
                      write_arrays)
 
-__all__ = ["OPTIMA", "OptimaKind", "OptimaScene", "parse_optima_scene", "distinct_optima",
-           "fourier_samples", "STOP_CODES", "KIND_VERSION", "create_optima_skeleton",
-           "compute_optima_chunk", "reduce_optima"]
+__all__ = ["OPTIMA", "OptimaKind", "distinct_optima", "fourier_samples", "STOP_CODES", "KIND_VERSION",
+           "create_optima_skeleton", "compute_optima_chunk", "reduce_optima"]
 
-KIND = "optima"
 #: starts one task aims at (``OptimaKind.chunks_per_task``)
 TASK_STARTS = 16
 #: version of this kind's array layout (checked by readers beside FORMAT_VERSION)
 KIND_VERSION = 1
-DIMS = ("anisotropy_ratio", "max_wavenumber", "p", "start")
-#: optimiser stop reasons as the int8 ``status`` of a start; -1 not computed
-STOP_CODES = {"gradient_tolerance": 0, "max_iterations": 1, "line_search_failed": 2,
-              "ill_conditioned": 3, "solve_failed": 4, "no_progress": 5, "error": 6}
 NOT_COMPUTED = -1
 #: per-start float arrays and their descriptions (mu_n mu_s = 1: scaled = unscaled)
 START_FLOATS = {
@@ -93,251 +88,6 @@ START_INTS = {
     "gradient_evaluations": "adjoint gradient evaluations",
     "n_steps": "steps of the final fixed tau grid",
 }
-_OBJECTIVES = ("efficiency", "speed", "speed_at_power")
-
-_TOP_KEYS = {
-    "scene": "kind, name, title, figure, family",
-    "axes": "anisotropy_ratio, max_wavenumber, p",
-    "fixed": "delta",
-    "starts": "num, seed, scaled_period",
-    "optimizer": "objective, power, gtol, max_iterations, grid_rtol, grid_rounds",
-    "keep": "best, n_tau, phi_tolerance, period_tolerance, accept",
-    "quick": "overrides for `pipeline paper --quick`: max_wavenumber, p, starts, max_iterations",
-    "execution": "starts_per_task, scheduler, workers, store (not hashed)",
-}
-
-
-# ---------------------------------------------------------------------------------------------
-# the scene
-
-
-@dataclass(frozen=True)
-class Optimizer:
-    """Settings of ``solver.optimize_motion`` for every start."""
-
-    objective: str = "efficiency"
-    direction: int = 0  # 0: keep the start's sign; -1: minimise (the paper's U < 0)
-    power: float | None = None
-    gtol: float = 1e-7
-    max_iterations: int = 300
-    grid_rtol: float = 1e-4
-    grid_rounds: int = 3
-
-
-@dataclass(frozen=True)
-class Keep:
-    """The reduction: ``best`` distinct optima per cell, compared on ``n_tau`` samples."""
-
-    best: int = 10
-    n_tau: int = 128
-    phi_tolerance: float = 0.02
-    period_tolerance: float = 0.01
-    accept: tuple[str, ...] = ("gradient_tolerance",)
-    accept_gradient_norm: float = 0.0
-
-
-@dataclass(frozen=True)
-class OptimaScene:
-    """A validated optima scene; ``science`` is hashed, ``execution`` is not."""
-
-    path: str
-    name: str
-    title: str
-    figure: str
-    family: str
-    anisotropy_ratios: tuple[float, ...]
-    max_wavenumbers: tuple[int, ...]
-    exponents: tuple[float, ...]
-    delta: float
-    n_starts: int
-    seed: int
-    start_scaled_period: float
-    optimizer: Optimizer
-    keep: Keep
-    starts_per_task: int
-    execution: Execution
-    quick: dict = field(compare=False, repr=False, default_factory=dict)
-    science: dict = field(compare=False, repr=False, default_factory=dict)
-    text: str = field(default="", compare=False, repr=False)
-    kind: str = KIND
-
-    @property
-    def hash(self) -> str:
-        return scene_hash(self.science)
-
-    @property
-    def dims(self) -> tuple[str, ...]:
-        return DIMS
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        return (len(self.anisotropy_ratios), len(self.max_wavenumbers), len(self.exponents),
-                self.n_starts)
-
-    @property
-    def n_points(self) -> int:
-        """Optimisations in the scene (one per start and cell)."""
-        return int(np.prod(self.shape))
-
-    @property
-    def n_coefficients(self) -> int:
-        return 2 * max(self.max_wavenumbers) + 1
-
-    def start_values(self) -> np.ndarray:
-        """(A_0, A_1) of every start, shape (n_starts, 2): uniform on (0, 1), seeded."""
-        return np.random.default_rng(self.seed).uniform(0.0, 1.0, size=(self.n_starts, 2))
-
-    def quick_variant(self) -> "OptimaScene":
-        """The scene with its ``[quick]`` overrides (``pipeline paper --quick``)."""
-        if not self.quick:
-            return self
-        doc = tomllib.loads(self.text)
-        q = doc.pop("quick")
-        for key in ("max_wavenumber", "p"):
-            if key in q:
-                doc["axes"][key] = q[key]
-        if "starts" in q:
-            doc["starts"]["num"] = q["starts"]
-        if "max_iterations" in q:
-            doc.setdefault("optimizer", {})["max_iterations"] = q["max_iterations"]
-        return _build(ParseContext(f"{self.path} (quick)"), doc, self.text)
-
-
-_STARTS_KEYS = {"num": "random starts per cell", "seed": "seed of the starts' generator",
-                "scaled_period": "starting scaled period"}
-_OPTIMIZER_KEYS = {"objective": "efficiency, speed or speed_at_power",
-                   "direction": "start (keep the start's sign; default) or negative (minimise, as the paper)",
-                   "power": "target mean power of speed_at_power (mu_n mu_s = 1)",
-                   "gtol": "gradient-norm tolerance", "max_iterations": "steps per grid round",
-                   "grid_rtol": "rtol of the adaptive tau grid", "grid_rounds": "grid re-adaptations"}
-_KEEP_KEYS = {"best": "distinct optima kept per cell", "n_tau": "phi samples per period",
-              "phi_tolerance": "max |dphi| [rad] of equal optima",
-              "period_tolerance": "relative scaled-period difference of equal optima",
-              "accept": "stop reasons of the starts eligible",
-              "accept_gradient_norm": "also eligible: any stop reason with a final gradient norm below this"}
-_EXECUTION_KEYS = {"starts_per_task": "", "scheduler": "", "workers": "", "store": ""}
-
-
-def parse_optima_scene(doc: dict, ctx: ParseContext, text: str) -> OptimaScene:
-    """Validate a parsed TOML ``doc`` of kind "optima" (errors name the key, one line)."""
-    return _build(ctx, doc, text)
-
-
-def _positive(ctx, obj, key, upper=math.inf) -> float:
-    v = ctx.number(obj, key)
-    if not 0 < v <= upper:
-        raise ctx.err(key, f"must be in (0, {upper:g}], got {v:g}")
-    return v
-
-
-def _wavenumbers(ctx, obj, key) -> tuple[int, ...]:
-    if not isinstance(obj, list) or not obj:
-        raise ctx.err(key, "must be a non-empty array of integers >= 1")
-    vals = tuple(ctx.integer(v, f"{key}[{i}]", lo=1) for i, v in enumerate(obj))
-    if any(b <= a for a, b in zip(vals, vals[1:])):
-        raise ctx.err(key, "must be strictly increasing")
-    if vals[-1] > 64:
-        raise ctx.err(key, f"Kmax {vals[-1]} is beyond 64 (2 Kmax + 2 parameters per optimisation)")
-    return vals
-
-
-def _build(ctx: ParseContext, doc: dict, text: str) -> OptimaScene:
-    ctx.table(doc, "", _TOP_KEYS, required=("scene", "axes", "starts"))
-    head = ctx.table(doc["scene"], "scene", {"kind": "", "name": "", "title": "", "figure": "",
-                                             "family": ""}, required=("name",))
-    name = ctx.string(head["name"], "scene.name")
-    if not name.isidentifier():
-        raise ctx.err("scene.name", f"must be an identifier, got {name!r}")
-    family = ctx.string(head.get("family", "fourier"), "scene.family", ("fourier",))
-    axes = ctx.table(doc["axes"], "axes", {"anisotropy_ratio": "", "max_wavenumber": "", "p": ""},
-                     required=("anisotropy_ratio", "max_wavenumber"))
-    ratios = parse_axis(ctx, "anisotropy_ratio", axes["anisotropy_ratio"], "axes.anisotropy_ratio")
-    kmax = _wavenumbers(ctx, axes["max_wavenumber"], "axes.max_wavenumber")
-    exponents = (parse_axis(ctx, "p", axes["p"], "axes.p").values if "p" in axes else (0.0,))
-    fixed = ctx.table(doc.get("fixed", {}), "fixed", {"delta": ""})
-    delta = parse_value(ctx, "delta", fixed.get("delta", 1e-5), "fixed.delta")
-    if delta == 0 and min(exponents) == 0:
-        raise ctx.err("fixed.delta", "delta = 0 needs p > 0")
-
-    starts = ctx.table(doc["starts"], "starts", _STARTS_KEYS, required=("num",))
-    n_starts = ctx.integer(starts["num"], "starts.num", lo=1)
-    seed = ctx.integer(starts.get("seed", 0), "starts.seed", lo=0)
-    start_period = _positive(ctx, starts.get("scaled_period", 2.0), "starts.scaled_period")
-
-    opt = ctx.table(doc.get("optimizer", {}), "optimizer", _OPTIMIZER_KEYS)
-    objective = ctx.string(opt.get("objective", "efficiency"), "optimizer.objective", _OBJECTIVES)
-    power = None
-    if objective == "speed_at_power":
-        if "power" not in opt:
-            raise ctx.err("optimizer.power", "missing: speed_at_power needs the target power")
-        power = _positive(ctx, opt["power"], "optimizer.power")
-    elif "power" in opt:
-        raise ctx.err("optimizer.power", "only allowed with objective = \"speed_at_power\"")
-    direction = ctx.string(opt.get("direction", "start"), "optimizer.direction",
-                           ("negative", "start"))
-    optimizer = Optimizer(
-        objective=objective, direction=-1 if direction == "negative" else 0, power=power,
-        gtol=_positive(ctx, opt.get("gtol", 1e-7), "optimizer.gtol", 1.0),
-        max_iterations=ctx.integer(opt.get("max_iterations", 300), "optimizer.max_iterations", lo=1),
-        grid_rtol=_positive(ctx, opt.get("grid_rtol", 1e-4), "optimizer.grid_rtol", 0.1),
-        grid_rounds=ctx.integer(opt.get("grid_rounds", 3), "optimizer.grid_rounds", lo=1))
-
-    kp = ctx.table(doc.get("keep", {}), "keep", _KEEP_KEYS)
-    accept = ctx.names(kp.get("accept", ["gradient_tolerance"]), "keep.accept",
-                       tuple(k for k in STOP_CODES if k != "error"))
-    keep = Keep(best=ctx.integer(kp.get("best", 10), "keep.best", lo=1),
-                n_tau=ctx.integer(kp.get("n_tau", 128), "keep.n_tau", lo=8),
-                phi_tolerance=_positive(ctx, kp.get("phi_tolerance", 0.02), "keep.phi_tolerance"),
-                period_tolerance=_positive(ctx, kp.get("period_tolerance", 0.01),
-                                           "keep.period_tolerance"),
-                accept=accept,
-                accept_gradient_norm=ctx.number(kp.get("accept_gradient_norm", 0.0),
-                                                "keep.accept_gradient_norm"))
-    if not 0 <= keep.accept_gradient_norm < 1:
-        raise ctx.err("keep.accept_gradient_norm", f"must be in [0, 1), got {keep.accept_gradient_norm:g}")
-
-    quick = ctx.table(doc.get("quick", {}), "quick", {"max_wavenumber": "", "p": "", "starts": "",
-                                                      "max_iterations": ""})
-    if "max_wavenumber" in quick:
-        _wavenumbers(ctx, quick["max_wavenumber"], "quick.max_wavenumber")
-    if "p" in quick:
-        parse_axis(ctx, "p", quick["p"], "quick.p")
-    if "starts" in quick:
-        ctx.integer(quick["starts"], "quick.starts", lo=1)
-    if "max_iterations" in quick:
-        ctx.integer(quick["max_iterations"], "quick.max_iterations", lo=1)
-
-    ex = ctx.table(doc.get("execution", {}), "execution", _EXECUTION_KEYS)
-    per_task = ctx.integer(ex.get("starts_per_task", 4), "execution.starts_per_task", lo=1)
-    execution = Execution(
-        points_per_task=per_task,
-        scheduler=ctx.string(ex.get("scheduler", "processes"), "execution.scheduler",
-                             ("processes", "threads", "synchronous")),
-        workers=ctx.integer(ex["workers"], "execution.workers", lo=1) if "workers" in ex else None,
-        store=ctx.string(ex["store"], "execution.store") if "store" in ex else None)
-
-    science = {
-        "kind": KIND, "name": name, "family": family,
-        "axes": {"anisotropy_ratio": list(ratios.values), "max_wavenumber": list(kmax),
-                 "p": list(exponents)},
-        "fixed": {"delta": delta},
-        "starts": {"num": n_starts, "seed": seed, "scaled_period": start_period},
-        "optimizer": {"objective": objective, "direction": direction, "power": power, "gtol": optimizer.gtol,
-                      "max_iterations": optimizer.max_iterations,
-                      "grid_rtol": optimizer.grid_rtol, "grid_rounds": optimizer.grid_rounds},
-        "keep": {"best": keep.best, "n_tau": keep.n_tau, "phi_tolerance": keep.phi_tolerance,
-                 "period_tolerance": keep.period_tolerance, "accept": list(accept),
-                 "accept_gradient_norm": keep.accept_gradient_norm},
-        # chunking over starts decides the store layout, so it is part of the hash
-        "starts_per_task": per_task,
-    }
-    return OptimaScene(
-        path=ctx.file, name=name, title=ctx.string(head.get("title", ""), "scene.title"),
-        figure=ctx.string(head.get("figure", ""), "scene.figure"), family=family,
-        anisotropy_ratios=ratios.values, max_wavenumbers=kmax, exponents=tuple(exponents),
-        delta=delta, n_starts=n_starts, seed=seed, start_scaled_period=start_period,
-        optimizer=optimizer, keep=keep, starts_per_task=per_task, execution=execution,
-        quick=dict(quick), science=science, text=text)
 
 
 # ---------------------------------------------------------------------------------------------

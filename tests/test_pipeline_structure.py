@@ -92,3 +92,20 @@ def test_the_checks_fail_on_a_planted_cycle_and_private_name(tmp_path):
     assert import_cycles(graph) == [["_a", "_b", "_a"]]
     assert private_imports(graph) == ["_b: from _a import _secret"]
     assert set(graph["_c"]) == {"_a", "_b"}
+
+
+def test_each_kind_keeps_its_schema_apart_and_the_shared_parser_knows_no_kind():
+    """Every kind has the same shape (issue 34): its scene's schema in a ``_<kind>_scene``
+    module, its compute and steps in another; the shared parser (``_scene``: errors, value
+    checks, axes, hashing) imports no sibling, so no kind's schema can hide in it."""
+    from pipeline import KINDS, load_scene
+
+    assert sibling_imports(REPO / "pipeline")["_scene"] == {}
+    shipped = {"grid": "quick", "optima": "fourier_optima", "accuracy": "accuracy", "stiffness": "stiffness"}
+    assert set(shipped) == set(KINDS)
+    for kind, name in shipped.items():
+        scene = load_scene(REPO / "workflows" / f"{name}.toml")
+        schema, compute = type(scene).__module__, type(KINDS[kind]).__module__
+        assert scene.kind == kind
+        assert schema.startswith("pipeline._") and schema.endswith("_scene") and schema != "pipeline._scene", schema
+        assert compute != schema, (kind, compute)
