@@ -94,13 +94,13 @@ def _start_worker(threads: int, kernel_sets: tuple[str, ...]) -> None:
         import solver
 
         cache = solver.kernel_cache()
-        if cache.populated or not cache.path:
+        if cache.populated or not cache.directory:
             solver.warm_up(kernel_sets)
         else:
             # numba's cache is empty (a first run): one worker compiles, the others wait and load
             import fcntl
 
-            with open(os.path.join(os.path.dirname(cache.path), ".twolink-compile.lock"), "w") as lock:
+            with open(os.path.join(os.path.dirname(cache.directory), ".twolink-compile.lock"), "w") as lock:
                 fcntl.flock(lock, fcntl.LOCK_EX)
                 solver.warm_up(kernel_sets)
     import numba
