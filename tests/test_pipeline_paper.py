@@ -87,3 +87,26 @@ def test_paper_with_a_bad_scene_runs_nothing(tmp_path, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "solver.rtol: must be in (0, 0.1], got 2" in err and err.count("\n") == 1
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("populated", [False, True])
+def test_a_pool_worker_starts_on_an_empty_and_on_a_populated_kernel_cache(tmp_path, monkeypatch, populated):
+    """Regression (3a636d2): with numba's cache empty (a fresh checkout) every worker of the
+    processes pool read a field KernelCache does not have, and the run died with
+    BrokenProcessPool.  The empty cache must take the compile lock beside the cache directory
+    and warm up; a populated one warms up without it."""
+    import numba
+
+    from pipeline import _schedule
+
+    cache_dir = tmp_path / "cache"
+    cache_dir.mkdir()
+    warmed = []
+    monkeypatch.setenv("NUMBA_NUM_THREADS", str(numba.config.NUMBA_NUM_THREADS))
+    monkeypatch.setattr(solver, "kernel_cache", lambda: solver._warmup.KernelCache(str(cache_dir), populated))
+    monkeypatch.setattr(solver, "warm_up", lambda sets: warmed.append(tuple(sets)))
+    threads = numba.get_num_threads()
+    _schedule._start_worker(threads, ("periodic",))
+    assert warmed == [("periodic",)]
+    assert (tmp_path / ".twolink-compile.lock").exists() == (not populated)
+    assert numba.get_num_threads() == threads
