@@ -138,7 +138,8 @@ def optima_role_array(sd, role: str):
     (``relative_efficiency``), ``scaled_period``, ``phi_max``, ``phi_min`` [rad], the number
     of distinct optima kept (``distinct``), or the number of distinct optima among the ten most
     efficient starts counted with repetition (``distinct_in_best_ten``, what the paper's figures
-    draw)."""
+    draw), the share of all starts that reached the best optimum (``share_at_best``) or the
+    second (``second_share``), and the second optimum's |λ|/λub (``second_relative_efficiency``)."""
     ds = sd.ds
     if "optimum_relative_efficiency" not in ds:
         raise NotComputed(f"store {sd.name} holds no kept optima")
@@ -152,6 +153,20 @@ def optima_role_array(sd, role: str):
     if role == "distinct":
         kept = (ds["optimum_start"] >= 0).sum("rank")
         return kept.where(kept > 0).astype(float)
+    if role in ("share_at_best", "second_share"):
+        # the ensemble as the paper states it ("the same across all initializations"): the share
+        # of every start of the cell (failed ones included) that reached the best kept optimum,
+        # equal within the store's keep tolerances (phi_tolerance rad, period_tolerance relative);
+        # or the share that reached the second-best one (its basin)
+        n = ds.sizes["start"] if "start" in ds.sizes else None
+        if not n:
+            raise NotComputed(f"store {sd.name} has no start dimension")
+        mult = ds["optimum_multiplicity"].where(ds["optimum_start"] >= 0, 0)
+        k = 0 if role == "share_at_best" else 1
+        share = mult.isel(rank=k).astype(float) / float(n)
+        return share.where((ds["optimum_start"] >= 0).any("rank"))
+    if role == "second_relative_efficiency":
+        return abs(ds["optimum_relative_efficiency"].isel(rank=1))
     if role == "distinct_in_best_ten":
         # the paper's figures: "the ten most efficient local optima (with repetition)"; the kept
         # optima are ranked by |lambda|, each reached by `multiplicity` accepted starts
@@ -534,6 +549,14 @@ def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=N
     b = b.drop_vars([c for c in b.coords if c not in b.dims], errors="ignore")
     with np.errstate(invalid="ignore", divide="ignore"):
         r = a / b
+    if test and test.get("figure_equal"):
+        # the shared rule "figure" (reports/CAUSES.md): equal to two significant digits,
+        # |a - b| <= half a unit in the second significant digit of the larger
+        big = np.maximum(abs(a), abs(b))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            half = 0.5 * 10.0 ** (np.floor(np.log10(big)) - 1)
+        r = xr.where(abs(a - b) <= half, 1.0, 0.0).where(np.isfinite(r))
+        test = {"min": 1.0}
     value, where, index = _collapse(r, statistic, test)
     m = Measurement(value=value, where=where, failed=_failures(r, excluded))
     res = []
