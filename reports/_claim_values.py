@@ -322,6 +322,28 @@ def _edges(sd, reduction, cell_sel) -> tuple:
     return tuple(out)
 
 
+def _edge_shares(sd, reduction, sel) -> tuple:
+    """For a statistic over many cells: per continuous arg-max axis, how many of the selected
+    cells have their optimum at an end of the scanned range (said in the verdict)."""
+    red = _reduction(sd, reduction)
+    out = []
+    for ax in red.get("over", []):
+        if ax not in sd.ds.coords or ax in ("closing_shape", "opening_shape"):
+            continue
+        try:
+            arg = np.asarray(sel(grid_role_array(sd, reduction, ax)[0]).values, dtype=np.float64).ravel()
+        except (NotComputed, IndexError, ValueError, KeyError):
+            continue
+        arg = arg[np.isfinite(arg)]
+        coord = np.asarray(sd.ds[ax].values, dtype=np.float64)
+        span = float(coord.max() - coord.min()) or 1.0
+        for end, bound in (("lower", coord.min()), ("upper", coord.max())):
+            k = int(np.sum(np.abs(arg - bound) <= 1e-6 * span))
+            if k:
+                out.append(f"{axis_name(ax)} at the {end} end of its scanned range ({bound:.3g}) in {k} of {arg.size} cells")
+    return tuple(out)
+
+
 def _cell(arr, index):
     """Cell ``index`` (into the flattened values) of ``arr``; ``arr`` itself when it is one cell."""
     if index is None or arr.size <= 1:
@@ -462,6 +484,8 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
             m.error, m.error_value = f"grid optimum: {axis_name(role)} within one grid step ({step:.3g})", step
         if index is not None or statistic == "only":
             m.edges = _edges(sd, reduction, lambda arr: _cell(src.sel(arr), index))
+        elif not source.get("peak_over"):
+            m.edges = _edge_shares(sd, reduction, src.sel)
     elif source.get("quantity"):
         m.resolution = _grid_text(sd, sd.dims) + f"; solver rtol {sd.rtol:g}"
         m.error = f"solver rtol {sd.rtol:g}"
@@ -474,6 +498,9 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
         if location:
             m.neighbours = _neighbour_coords(da, index, location)
             m.coarse = f"{axis_name(location)} located on its grid"
+            if m.neighbours:  # the shared rule "grid": a located coordinate is known to one step
+                m.error_value = max(abs(n - value) for n in m.neighbours)
+                m.error = f"{axis_name(location)} located on its grid: within one step ({m.error_value:.3g})"
         else:
             spread, words = _neighbour_spread(da, index, _SAMPLED)
             if words:
