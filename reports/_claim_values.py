@@ -491,6 +491,8 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
         m.error = f"solver rtol {sd.rtol:g}"
     else:
         m.resolution, m.error = _optima_resolution(sd)
+        if source.get("role") == "share_at_best" and index is not None and math.isfinite(value) and value < 1:
+            m.where += "; " + _basins(sd, src.sel, index)
         if not counted and isinstance(value, float) and math.isfinite(value):
             m.error_value = abs(value) * float(sd.science.get("optimizer", {}).get("grid_rtol", math.nan))
     is_axis = reduction and source.get("role", "value") in _reduction(sd, reduction).get("over", [])
@@ -528,6 +530,24 @@ def _unsampled_end(da, index, ranges) -> str:
                 return (f"the extremum is at our {end}most sample {value_text(d, c)} of the claim's range, which "
                         f"extends to {value_text(d, bound)}: the grid does not sample that end")
     return ""
+
+
+def _basins(sd, sel, index) -> str:
+    """The starts of the cell ``index`` that did not reach its best optimum, in words: how many
+    reached each other kept optimum (its basin's share) and its |λ|/λub, and how many reached
+    none kept (failed, or not accepted)."""
+    ds = sd.ds
+    n = ds.sizes["start"]
+    mult = _cell(sel(ds["optimum_multiplicity"].where(ds["optimum_start"] >= 0, 0)), index)
+    rel = _cell(sel(abs(ds["optimum_relative_efficiency"])), index)
+    mult = np.asarray(mult.values).ravel()
+    rel = np.asarray(rel.values).ravel()
+    others = [f"{int(k)} at |λ|/λub {r:.3g} ({100 * (1 - r / rel[0]):.0f} % below the best)"
+              for k, r in zip(mult[1:], rel[1:]) if k > 0]
+    lost = n - int(mult.sum())
+    return (f"{int(mult[0])} of {n} starts at the best optimum (|λ|/λub {rel[0]:.3g})"
+            + (f"; other optima: {', '.join(others)}" if others else "")
+            + (f"; {lost} starts at no kept optimum (stopped, not accepted, or at rest)" if lost else ""))
 
 
 def _optima_resolution(sd):
