@@ -25,7 +25,7 @@ EXIT_REFUSED = 3
 #: cause checks of the reproduction audit, reports/claims.toml).
 PAPER_SCENES = ("quick", "harmonic_grid", "harmonic_diagonals", "harmonic_optimum", "duty_cycle",
                 "linear_two_phase", "exponent_sets", "power_law", "fourier_optima", "force_laws",
-                "linear_two_phase_box", "fourier_optima_edge", "exponent_sets_3", "exponent_sets_7", "accuracy",
+                "linear_two_phase_box", "fourier_optima_edge", "exponent_sets_coarse", "exponent_sets_fine", "accuracy",
                 "stiffness")
 WORKFLOWS = Path(__file__).resolve().parent.parent / "workflows"
 

@@ -318,6 +318,13 @@ def _grid(stores, a: dict) -> list:
     return out
 
 
+def _rtol(sd) -> float:
+    """The solver tolerance of a store's values (the τ-grid rtol of an optima store)."""
+    if sd.meta.get("kind", "grid") == "optima":
+        return float(sd.science.get("optimizer", {}).get("grid_rtol", 0.0))
+    return float(getattr(sd, "rtol", 0.0) or 0.0)
+
+
 def _paths(stores, a: dict) -> set:
     return {str(scene_store(stores, s).path) for s, _ in _reductions_of(a)}
 
@@ -327,12 +334,16 @@ def _paths(stores, a: dict) -> set:
 # ---------------------------------------------------------------------------
 
 
-def _trend(values: list[float]) -> tuple[bool, float, str]:
-    """(converging, extrapolated limit, why not) of a sequence ordered coarse -> fine."""
+def _trend(values: list[float], noise: float = 0.0) -> tuple[bool, float, str]:
+    """(converging, extrapolated limit, why not) of a sequence ordered coarse -> fine; a change
+    no larger than ``noise`` (the levels' own solver tolerance) is no change."""
     d = np.diff(np.asarray(values, dtype=np.float64))
     if d.size < 2 or not np.all(np.isfinite(d)):
         return False, math.nan, "fewer than three finite levels"
+    d = np.where(np.abs(d) <= noise, 0.0, d)
     if np.all(d == 0):
+        return True, float(values[-1]), ""
+    if d[-1] == 0:  # settled within the noise at the finest levels
         return True, float(values[-1]), ""
     signs = np.sign(d[d != 0])
     if not (np.all(signs > 0) or np.all(signs < 0)):
@@ -351,18 +362,21 @@ def converges(stores, claim, m, *, levels: list, paper_level: int | None = None,
     with ``paper_evidence``) reaches the paper's accepted set."""
     if len(levels) < 3:
         raise ValueError("a resolution cause needs three or more levels")
-    vals, words, domains = [], [], []
+    vals, words, domains, rtols = [], [], [], []
     for lv in levels:
         m2, a = _measure(stores, claim, lv.get("compute"), lv.get("args"), lv.get("override"))
         if isinstance(m2.value, tuple):
             raise ValueError("a resolution series needs a scalar value")
         vals.append(m2.value)
         domains.append(_domain(stores, a))
+        rtols += [_rtol(scene_store(stores, sc)) for sc, _ in _reductions_of(a)]
         words.append(f"{lv['label']} ({lv['resolution']}): {_num(m2.value)}")
     ours = m.value
     is_level = any(math.isclose(v, ours, rel_tol=1e-12, abs_tol=1e-15) for v in vals)
     same_domain = all(dm == domains[0] for dm in domains)
-    ok, limit, why_not = _trend(vals)
+    # the noise floor: each value is within its solver's rtol, a ratio within twice that
+    noise = 2 * max(rtols) * max(abs(v) for v in vals) if rtols and all(map(math.isfinite, vals)) else 0.0
+    ok, limit, why_not = _trend(vals, noise)
     finest = vals[-1]
 
     def decide(expect):
@@ -383,7 +397,7 @@ def converges(stores, claim, m, *, levels: list, paper_level: int | None = None,
     result = ("; ".join(words) + ". " + ("; ".join(problems) + "." if problems else
               f"Converging; {how} " + ("meets" if holds else "does not meet")
               + f" the paper's {claim.paper_value} ({tolerance_text(claim.expect)})."))
-    ev = Evidence("converges", holds, result, {"levels": vals, "ours": ours, "limit": limit,
+    ev = Evidence("converges", holds, result, {"levels": vals, "ours": ours, "limit": limit, "noise": noise,
                                                "same_domain": same_domain, "converging": ok})
     ev.control = _reflected_control(decide, claim, m, "resolution: the paper's value moved where the refinement "
                                                        "cannot reach")

@@ -533,6 +533,13 @@ def test_converges_fails_when_the_levels_diverge_or_change_domain():
     stores, levels, top = _levels([0.92, 0.96, 0.98], extents=[np.linspace(0, 3.0, 9), None, None])
     row = _row(_with_cause(claim, _cause("resolution", "converges", levels=levels)), stores)
     assert row.cause == "unexplained" and "different domains" in row.evidence.result
+    # settled: the last change within the levels' solver tolerance; the limit is the finest value,
+    # which does not reach a paper's value beyond it
+    stores, levels, top = _levels([0.96, 0.98, 0.98 * (1 + 1e-5)])
+    row = _row(_with_cause(_stat_claim({"value": top, "tolerance": 1e-3 * top}, scene="lvl2"),
+                           _cause("resolution", "converges", levels=levels)), stores)
+    assert row.cause == "unexplained" and row.evidence.numbers["converging"]
+    assert row.evidence.numbers["limit"] == pytest.approx(0.98 * top, rel=1e-4)
     # fewer than three levels cannot show convergence
     row = _row(_with_cause(claim, _cause("resolution", "converges", levels=levels[1:])), stores)
     assert row.cause == "unexplained" and "could not run" in row.evidence.result
