@@ -289,7 +289,8 @@ def audit_html(rows, figure_anchor=lambda label: f"fig-{label}") -> str:
             differing.append(f"<li><a href='#claim-{esc(c.id)}'><code>{esc(c.id)}</code></a>: "
                              f"<b class='cause-{esc(r.cause)}'>{esc(r.cause)}</b> — ours {esc(_num(m.value) if m else 'n/a')}"
                              f", paper {esc(c.paper_value)}"
-                             + (f"; evidence: {esc(r.evidence.result)}" if r.evidence else "; no cause registered")
+                             + (f"; evidence: {esc(r.evidence.result)}" if r.evidence else
+                                f"; no cause registered; what the data say: {esc(r.reason)}")
                              + (f"; control ({'passed' if r.evidence.control.get('passed') else 'FAILED'}): "
                                 f"{esc(r.evidence.control.get('result', ''))}"
                                 if r.evidence and r.evidence.control else "") + "</li>")
