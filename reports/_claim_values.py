@@ -138,7 +138,8 @@ def optima_role_array(sd, role: str):
     (``relative_efficiency``), ``scaled_period``, ``phi_max``, ``phi_min`` [rad], the number
     of distinct optima kept (``distinct``), or the number of distinct optima among the ten most
     efficient starts counted with repetition (``distinct_in_best_ten``, what the paper's figures
-    draw), the share of all starts that reached the best optimum (``share_at_best``) or the
+    draw), the share of all starts that reached the best optimum (``share_at_best``), the share
+    of the starts that reached any kept optimum that reached the best (``share_of_optima_at_best``), or the
     second (``second_share``), and the second optimum's |λ|/λub (``second_relative_efficiency``)."""
     ds = sd.ds
     if "optimum_relative_efficiency" not in ds:
@@ -165,6 +166,12 @@ def optima_role_array(sd, role: str):
         k = 0 if role == "share_at_best" else 1
         share = mult.isel(rank=k).astype(float) / float(n)
         return share.where((ds["optimum_start"] >= 0).any("rank"))
+    if role == "share_of_optima_at_best":
+        # the starts that converged to an optimum (a kept, moving optimum: accepted, not at
+        # rest), and the share of them at the best one
+        mult = ds["optimum_multiplicity"].where(ds["optimum_start"] >= 0, 0)
+        total = mult.sum("rank")
+        return (mult.isel(rank=0).astype(float) / total.where(total > 0)).where(total > 0)
     if role == "second_relative_efficiency":
         return abs(ds["optimum_relative_efficiency"].isel(rank=1))
     if role == "distinct_in_best_ten":
@@ -636,6 +643,8 @@ def monotone(stores, *, scene, along: str, direction="increasing", slack=0.0, di
         pairs += int(ok.sum())
     m = Measurement(value=float(min(shares)), where=f"{pairs} adjacent pairs along "
                     + ", ".join(axis_name(d) for d in dims or [along]), failed=_failures(da, excluded))
+    # a share of n pairs is resolved to one pair (the shared rule "grid": one step of what is counted)
+    share_error = 1.0 / pairs if pairs else math.nan
     if source.get("quantity"):
         m.resolution = _grid_text(sd, sd.dims) + f"; solver rtol {sd.rtol:g}"
         m.error = f"solver rtol {sd.rtol:g}"
@@ -644,6 +653,8 @@ def monotone(stores, *, scene, along: str, direction="increasing", slack=0.0, di
         m.resolution = _grid_text(sd, [a for a in red.get("over", []) if a in sd.ds.sizes])
     else:
         m.resolution, m.error = _optima_resolution(sd)
+    m.error = (m.error + "; " if m.error else "") + f"a share of {pairs} pairs: one pair is {share_error:.2g}"
+    m.error_value = share_error
     return m
 
 
