@@ -499,7 +499,7 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
     else:
         m.resolution, m.error = _optima_resolution(sd)
         if source.get("role") == "share_at_best" and index is not None and math.isfinite(value) and value < 1:
-            m.where += "; " + _basins(sd, src.sel, index)
+            m.where += "; " + _basins(sd, _cell(da, index))
         if not counted and isinstance(value, float) and math.isfinite(value):
             m.error_value = abs(value) * float(sd.science.get("optimizer", {}).get("grid_rtol", math.nan))
     is_axis = reduction and source.get("role", "value") in _reduction(sd, reduction).get("over", [])
@@ -539,16 +539,15 @@ def _unsampled_end(da, index, ranges) -> str:
     return ""
 
 
-def _basins(sd, sel, index) -> str:
-    """The starts of the cell ``index`` that did not reach its best optimum, in words: how many
-    reached each other kept optimum (its basin's share) and its |λ|/λub, and how many reached
-    none kept (failed, or not accepted)."""
+def _basins(sd, cell) -> str:
+    """The starts of ``cell`` (a one-cell selection) that did not reach its best optimum, in
+    words: how many reached each other kept optimum (its basin's share) and its |λ|/λub, and how
+    many reached none kept (failed, or not accepted)."""
     ds = sd.ds
     n = ds.sizes["start"]
-    mult = _cell(sel(ds["optimum_multiplicity"].where(ds["optimum_start"] >= 0, 0)), index)
-    rel = _cell(sel(abs(ds["optimum_relative_efficiency"])), index)
-    mult = np.asarray(mult.values).ravel()
-    rel = np.asarray(rel.values).ravel()
+    at = {d: cell[d].values.item() for d in ("anisotropy_ratio", "max_wavenumber", "p") if d in cell.coords}
+    mult = np.asarray(ds["optimum_multiplicity"].where(ds["optimum_start"] >= 0, 0).sel(at).values).ravel()
+    rel = np.asarray(abs(ds["optimum_relative_efficiency"]).sel(at).values).ravel()
     others = [f"{int(k)} at |λ|/λub {r:.3g} ({100 * (1 - r / rel[0]):.0f} % below the best)"
               for k, r in zip(mult[1:], rel[1:]) if k > 0]
     lost = n - int(mult.sum())
