@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._claim_values import COMPUTE, Measurement, NotComputed, scene_store
+from ._claim_values import COMPUTE, Measurement, NotComputed, is_optima, scene_store
 
 __all__ = ["CAUSES", "CHECKS", "KIND_CHECK", "RULES", "Cause", "Evidence", "explain", "miss", "parse_cause",
            "reflect", "tolerance_text"]
@@ -290,7 +290,7 @@ def _domain(stores, a: dict) -> list:
     out = []
     for scene, reduction in _reductions_of(a):
         sd = scene_store(stores, scene)
-        if sd.meta.get("kind", "grid") == "optima":
+        if is_optima(sd):
             sc = sd.science
             out.append(("optima", sc.get("optimizer", {}).get("direction"), sc.get("optimizer", {}).get("objective")))
             continue
@@ -309,7 +309,7 @@ def _grid(stores, a: dict) -> list:
     out = []
     for scene, reduction in _reductions_of(a):
         sd = scene_store(stores, scene)
-        if sd.meta.get("kind", "grid") == "optima":
+        if is_optima(sd):
             st = sd.science.get("starts", {})
             out.append(("starts", st.get("num"), st.get("seed")))
             continue
@@ -320,7 +320,7 @@ def _grid(stores, a: dict) -> list:
 
 def _rtol(sd) -> float:
     """The solver tolerance of a store's values (the τ-grid rtol of an optima store)."""
-    if sd.meta.get("kind", "grid") == "optima":
+    if is_optima(sd):
         return float(sd.science.get("optimizer", {}).get("grid_rtol", 0.0))
     return float(getattr(sd, "rtol", 0.0) or 0.0)
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Measurement", "NotComputed", "COMPUTE", "grid_role_array", "optima_role_array", "scene_store"]
+__all__ = ["Measurement", "NotComputed", "COMPUTE", "grid_role_array", "is_optima", "optima_role_array", "scene_store"]
 
 
 class NotComputed(LookupError):
@@ -93,6 +93,11 @@ def value_text(dim: str, v: float) -> str:
         if abs(2 * k - round(2 * k)) < 1e-9:
             return f"2^{k:g}" if k else "1"
     return f"{v:.3g}"
+
+
+def is_optima(sd) -> bool:
+    """The store holds an optimiser's ensembles (kept optima), not a grid."""
+    return sd.meta.get("kind", "grid") == "optima"
 
 
 def scene_store(stores, scene):
