@@ -22,11 +22,12 @@ from ._store import StoreBusy, StoreMismatch
 EXIT_BAD_SCENE = 2
 EXIT_REFUSED = 3
 
-#: Shipped scenes in the order ``paper`` runs them (the last two before the studies exist for
+#: Shipped scenes in the order ``paper`` runs them (the four before the studies exist for
 #: cause checks of the reproduction audit, reports/claims.toml).
 PAPER_SCENES = ("quick", "harmonic_grid", "harmonic_diagonals", "harmonic_optimum", "duty_cycle",
                 "linear_two_phase", "exponent_sets", "power_law", "fourier_optima", "force_laws",
-                "linear_two_phase_box", "fourier_optima_edge", "accuracy", "stiffness")
+                "linear_two_phase_box", "fourier_optima_edge", "exponent_sets_coarse", "exponent_sets_fine", "accuracy",
+                "stiffness")
 WORKFLOWS = Path(__file__).resolve().parent.parent / "workflows"
 
 

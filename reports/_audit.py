@@ -11,10 +11,15 @@ here holds a result. Verdicts:
   difference beyond our error estimate);
 * **not run** — the store the claim needs is missing, or lacks the cells it needs.
 
-A claim that differs carries a *cause* (:mod:`reports._causes`): a named check registered with
-the claim in ``claims.toml`` and run on the stores here; the row shows the cause, the check and
-its result, ``audit.json`` its ``cause`` and ``evidence``.  A claim whose check does not hold
-(or that has none) is ``unexplained``.
+A claim that differs may carry a *cause* (:mod:`reports._causes`, criteria in
+``reports/CAUSES.md``): its kind's check, registered with the claim in ``claims.toml`` and run on
+the stores here together with the kind's negative control; the row shows the cause, the check's
+result and its control, ``audit.json`` its ``cause``, ``evidence`` and ``control``.  A claim whose
+check does not hold, whose control fails, or that has none is ``unexplained``.
+
+Every claim states the basis of its tolerance (``basis``: a shared rule of CAUSES.md or a
+source); a claim that could not have differed for any data carries ``by_construction`` and is
+counted apart from the reproductions.
 """
 
 from __future__ import annotations
@@ -53,6 +58,8 @@ class Claim:
     compute: str
     args: dict
     cause: Cause | None = None
+    basis: str = ""
+    by_construction: str = ""
 
     @property
     def scenes(self) -> list[str]:
@@ -89,7 +96,9 @@ class AuditRow:
                 "error_estimate": m.error if m else None, "verdict": self.verdict, "reason": self.reason,
                 "scenes": self.claim.scenes, "compute": self.claim.compute, "cause": self.cause,
                 "why": self.claim.cause.why if self.claim.cause and self.cause else None,
-                "evidence": self.evidence.to_json() if self.evidence else None}
+                "evidence": self.evidence.to_json() if self.evidence else None,
+                "control": self.evidence.to_json()["control"] if self.evidence else None,
+                "basis": self.claim.basis, "by_construction": self.claim.by_construction or None}
 
 
 def _json_number(v):
@@ -104,7 +113,8 @@ def load_claims(path: Path | str = CLAIMS_FILE) -> list[Claim]:
     out, seen = [], set()
     for k, c in enumerate(doc.get("claims", [])):
         cid = c.get("id", f"#{k}")
-        missing = [f for f in ("id", "figure", "claim", "paper_value", "expect", "compute", "args") if f not in c]
+        missing = [f for f in ("id", "figure", "claim", "paper_value", "expect", "compute", "args", "basis")
+                   if f not in c]
         if missing:
             raise RegistryError(f"claim {cid}: missing {', '.join(missing)}")
         if cid in seen:
@@ -115,11 +125,12 @@ def load_claims(path: Path | str = CLAIMS_FILE) -> list[Claim]:
         if set(c["expect"]) not in _EXPECT_KEYS:
             raise RegistryError(f"claim {cid}: expect must be one of {[sorted(s) for s in _EXPECT_KEYS]}")
         try:
-            cause = parse_cause(cid, c.get("cause"))
+            cause = parse_cause(cid, c.get("cause"), dict(c["args"]))
         except ValueError as exc:
             raise RegistryError(str(exc)) from None
         out.append(Claim(id=cid, figure=c["figure"], claim=c["claim"], paper_value=str(c["paper_value"]),
-                         expect=dict(c["expect"]), compute=c["compute"], args=dict(c["args"]), cause=cause))
+                         expect=dict(c["expect"]), compute=c["compute"], args=dict(c["args"]), cause=cause,
+                         basis=str(c["basis"]), by_construction=str(c.get("by_construction", ""))))
     return out
 
 
@@ -218,7 +229,11 @@ _CLASS = {"agrees": "v-agrees", "differs": "v-differs", "not run": "v-notrun"}
 
 
 def audit_counts(rows) -> dict:
-    return {v: sum(r.verdict == v for r in rows) for v in VERDICTS}
+    """Verdict counts, and ``by construction``: the agreeing claims that could not have differed
+    (counted apart from the reproductions)."""
+    out = {v: sum(r.verdict == v for r in rows) for v in VERDICTS}
+    out["by construction"] = sum(r.verdict == "agrees" and bool(r.claim.by_construction) for r in rows)
+    return out
 
 
 def cause_counts(rows) -> dict:
@@ -231,18 +246,32 @@ def _cause_cell(r) -> str:
         return "—"
     ev = r.evidence
     why = f"<div class='small'>{esc(r.claim.cause.why)}</div>" if r.claim.cause else ""
-    check = (f"<details><summary class='small'>check <code>{esc(ev.check)}</code>: "
-             f"{'holds' if ev.holds else 'does not hold'}</summary><div class='small'>{esc(ev.result)}</div></details>"
-             if ev else "<div class='small'>no cause check registered</div>")
+    if ev is None:
+        check = "<div class='small'>no cause check registered</div>"
+    else:
+        ctrl = ev.control
+        control = ("" if ctrl is None else
+                   f"<div class='small'><b>control</b> ({'passed' if ctrl.get('passed') else 'FAILED'}): "
+                   f"{esc(ctrl.get('what', ''))}. {esc(ctrl.get('result', ''))}</div>")
+        check = (f"<div class='small'><b>evidence</b> (<code>{esc(ev.check)}</code>: "
+                 f"{'criterion met' if ev.holds else 'criterion not met'}): {esc(ev.result)}</div>{control}")
     return f"<b class='cause-{esc(r.cause)}'>{esc(r.cause)}</b>{why}{check}"
 
 
+def _claim_notes(c) -> str:
+    notes = f"<div class='small'>tolerance basis: {esc(c.basis)}</div>" if c.basis else ""
+    if c.by_construction:
+        notes += f"<div class='small'><b>true by construction</b> (not counted as a reproduction): {esc(c.by_construction)}</div>"
+    return notes
+
+
 def audit_html(rows, figure_anchor=lambda label: f"fig-{label}") -> str:
-    """The audit section (front page): a summary line and one table row per claim."""
+    """The audit section (front page): a summary line, every differing claim with its cause,
+    evidence and control, and one table row per claim."""
     n = audit_counts(rows)
     causes = cause_counts(rows)
     by_cause = ", ".join(f"{k} {causes[k]}" for k in CAUSES if causes[k])
-    body = []
+    body, differing = [], []
     for r in rows:
         c, m = r.claim, r.measurement
         ours = "—"
@@ -250,22 +279,37 @@ def audit_html(rows, figure_anchor=lambda label: f"fig-{label}") -> str:
             ours = (f"<b>{esc(_num(m.value))}</b><div class='small'>{esc(m.where)}</div>"
                     f"<div class='small'>{esc(m.resolution)}</div>"
                     + (f"<div class='small'>error: {esc(m.error)}</div>" if m.error else ""))
+        verdict_text = r.verdict + (" (by construction)" if r.verdict == "agrees" and c.by_construction else "")
         body.append(f"<tr id='claim-{esc(c.id)}'><td><a href='#{figure_anchor(c.figure)}'>{esc(c.figure)}</a>: "
-                    f"{esc(c.claim)}<div class='small'><code>{esc(c.id)}</code></div></td>"
+                    f"{esc(c.claim)}<div class='small'><code>{esc(c.id)}</code></div>{_claim_notes(c)}</td>"
                     f"<td>{esc(c.paper_value)}<div class='small'>{esc(c.tolerance_text())}</div></td><td>{ours}</td>"
-                    f"<td class='{_CLASS[r.verdict]}'>{esc(r.verdict)}</td><td>{_cause_cell(r)}</td>"
+                    f"<td class='{_CLASS[r.verdict]}'>{esc(verdict_text)}</td><td>{_cause_cell(r)}</td>"
                     f"<td>{esc(r.reason)}</td></tr>")
+        if r.verdict == "differs":
+            differing.append(f"<li><a href='#claim-{esc(c.id)}'><code>{esc(c.id)}</code></a>: "
+                             f"<b class='cause-{esc(r.cause)}'>{esc(r.cause)}</b> — ours {esc(_num(m.value) if m else 'n/a')}"
+                             f", paper {esc(c.paper_value)}"
+                             + (f"; evidence: {esc(r.evidence.result)}" if r.evidence else
+                                f"; no cause registered; what the data say: {esc(r.reason)}")
+                             + (f"; control ({'passed' if r.evidence.control.get('passed') else 'FAILED'}): "
+                                f"{esc(r.evidence.control.get('result', ''))}"
+                                if r.evidence and r.evidence.control else "") + "</li>")
+    reproduced = n["agrees"] - n["by construction"]
     return (f"<section class='audit' id='audit'><h2>Reproduction audit</h2>"
             f"<p><b>{len(rows)} quantitative claims</b> of the paper's results, each checked against the stores "
-            f"when this report was built: <span class='v-agrees'>{n['agrees']} agree</span>, "
-            f"<span class='v-differs'>{n['differs'] - causes['unexplained']} differ with a computed cause</span>"
-            + (f" ({esc(by_cause)})" if by_cause else "") + ", "
-            f"<span class='v-unexplained'>{causes['unexplained']} unexplained</span>, "
-            f"<span class='v-notrun'>{n['not run']} not run</span>. Each cause is a check registered with the "
-            "claim and run on the stores for this page (open a row's check for its numbers). The claims, their "
-            "tolerances, causes and the reductions computing our values are in <code>reports/claims.toml</code>; "
-            "the table is also written as <code>audit.json</code> beside this page.</p>"
-            "<table class='audit'><colgroup><col class='c-claim'><col class='c-paper'><col class='c-ours'>"
+            f"when this report was built: <span class='v-agrees'>{reproduced} agree</span> (and "
+            f"{n['by construction']} more true by construction, not counted as reproductions), "
+            f"<span class='v-differs'>{n['differs'] - causes['unexplained']} differ with a cause whose check and "
+            f"control hold</span>" + (f" ({esc(by_cause)})" if by_cause else "") + ", "
+            f"<span class='v-unexplained'>{causes['unexplained']} differ unexplained</span>, "
+            f"<span class='v-notrun'>{n['not run']} not run</span>. A cause counts only when its check meets its "
+            "kind's criterion and its negative control passes (<code>reports/CAUSES.md</code>); every tolerance "
+            "states its basis. The claims, their tolerances, causes and the reductions computing our values are in "
+            "<code>reports/claims.toml</code>; the table is also written as <code>audit.json</code> beside this "
+            "page.</p>"
+            + (f"<details open><summary><b>The {len(differing)} claims that differ</b>: cause, evidence and "
+               f"control</summary><ul class='small'>{''.join(differing)}</ul></details>" if differing else "")
+            + "<table class='audit'><colgroup><col class='c-claim'><col class='c-paper'><col class='c-ours'>"
             "<col class='c-verdict'><col class='c-cause'><col class='c-reason'></colgroup>"
             "<tr><th>claim</th><th>paper</th><th>ours (from the stores)</th><th>verdict</th><th>cause</th>"
             "<th>reason</th></tr>"
@@ -273,13 +317,15 @@ def audit_html(rows, figure_anchor=lambda label: f"fig-{label}") -> str:
 
 
 def audit_summary(path: Path) -> str:
-    """'N claims: a agree, d differ, r not run (path)' from an audit.json."""
+    """'N claims: a agree (b by construction), d differ (...; u unexplained), r not run (path)'
+    from an audit.json."""
     doc = json.loads(Path(path).read_text(encoding="utf-8"))
     n = {v: sum(o["verdict"] == v for o in doc) for v in VERDICTS}
+    built = sum(o["verdict"] == "agrees" and bool(o.get("by_construction")) for o in doc)
     causes = {k: sum(o["verdict"] == "differs" and o.get("cause") == k for o in doc) for k in (*CAUSES, "unexplained")}
     by = ", ".join(f"{k} {causes[k]}" for k in CAUSES if causes[k])
-    return (f"{len(doc)} claims: {n['agrees']} agree, {n['differs']} differ ({by + '; ' if by else ''}"
-            f"{causes['unexplained']} unexplained), {n['not run']} not run ({path})")
+    return (f"{len(doc)} claims: {n['agrees']} agree ({built} by construction), {n['differs']} differ "
+            f"({by + '; ' if by else ''}{causes['unexplained']} unexplained), {n['not run']} not run ({path})")
 
 
 def write_audit_json(rows, path: Path) -> Path:

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Measurement", "NotComputed", "COMPUTE", "grid_role_array", "optima_role_array", "scene_store"]
+__all__ = ["Measurement", "NotComputed", "COMPUTE", "grid_role_array", "is_optima", "optima_role_array", "scene_store"]
 
 
 class NotComputed(LookupError):
@@ -95,6 +95,11 @@ def value_text(dim: str, v: float) -> str:
     return f"{v:.3g}"
 
 
+def is_optima(sd) -> bool:
+    """The store holds an optimiser's ensembles (kept optima), not a grid."""
+    return sd.meta.get("kind", "grid") == "optima"
+
+
 def scene_store(stores, scene):
     """The store of ``scene`` among ``stores`` (by name); NotComputed when absent."""
     if scene not in stores:
@@ -138,7 +143,9 @@ def optima_role_array(sd, role: str):
     (``relative_efficiency``), ``scaled_period``, ``phi_max``, ``phi_min`` [rad], the number
     of distinct optima kept (``distinct``), or the number of distinct optima among the ten most
     efficient starts counted with repetition (``distinct_in_best_ten``, what the paper's figures
-    draw)."""
+    draw), the share of all starts that reached the best optimum (``share_at_best``), the share
+    of the starts that reached any kept optimum that reached the best (``share_of_optima_at_best``), or the
+    second (``second_share``), and the second optimum's |λ|/λub (``second_relative_efficiency``)."""
     ds = sd.ds
     if "optimum_relative_efficiency" not in ds:
         raise NotComputed(f"store {sd.name} holds no kept optima")
@@ -152,6 +159,26 @@ def optima_role_array(sd, role: str):
     if role == "distinct":
         kept = (ds["optimum_start"] >= 0).sum("rank")
         return kept.where(kept > 0).astype(float)
+    if role in ("share_at_best", "second_share"):
+        # the ensemble as the paper states it ("the same across all initializations"): the share
+        # of every start of the cell (failed ones included) that reached the best kept optimum,
+        # equal within the store's keep tolerances (phi_tolerance rad, period_tolerance relative);
+        # or the share that reached the second-best one (its basin)
+        n = ds.sizes["start"] if "start" in ds.sizes else None
+        if not n:
+            raise NotComputed(f"store {sd.name} has no start dimension")
+        mult = ds["optimum_multiplicity"].where(ds["optimum_start"] >= 0, 0)
+        k = 0 if role == "share_at_best" else 1
+        share = mult.isel(rank=k).astype(float) / float(n)
+        return share.where((ds["optimum_start"] >= 0).any("rank"))
+    if role == "share_of_optima_at_best":
+        # the starts that converged to an optimum (a kept, moving optimum: accepted, not at
+        # rest), and the share of them at the best one
+        mult = ds["optimum_multiplicity"].where(ds["optimum_start"] >= 0, 0)
+        total = mult.sum("rank")
+        return (mult.isel(rank=0).astype(float) / total.where(total > 0)).where(total > 0)
+    if role == "second_relative_efficiency":
+        return abs(ds["optimum_relative_efficiency"].isel(rank=1))
     if role == "distinct_in_best_ten":
         # the paper's figures: "the ten most efficient local optima (with repetition)"; the kept
         # optima are ranked by |lambda|, each reached by `multiplicity` accepted starts
@@ -307,6 +334,28 @@ def _edges(sd, reduction, cell_sel) -> tuple:
     return tuple(out)
 
 
+def _edge_shares(sd, reduction, sel) -> tuple:
+    """For a statistic over many cells: per continuous arg-max axis, how many of the selected
+    cells have their optimum at an end of the scanned range (said in the verdict)."""
+    red = _reduction(sd, reduction)
+    out = []
+    for ax in red.get("over", []):
+        if ax not in sd.ds.coords or ax in ("closing_shape", "opening_shape"):
+            continue
+        try:
+            arg = np.asarray(sel(grid_role_array(sd, reduction, ax)[0]).values, dtype=np.float64).ravel()
+        except (NotComputed, IndexError, ValueError, KeyError):
+            continue
+        arg = arg[np.isfinite(arg)]
+        coord = np.asarray(sd.ds[ax].values, dtype=np.float64)
+        span = float(coord.max() - coord.min()) or 1.0
+        for end, bound in (("lower", coord.min()), ("upper", coord.max())):
+            k = int(np.sum(np.abs(arg - bound) <= 1e-6 * span))
+            if k:
+                out.append(f"{axis_name(ax)} at the {end} end of its scanned range ({bound:.3g}) in {k} of {arg.size} cells")
+    return tuple(out)
+
+
 def _cell(arr, index):
     """Cell ``index`` (into the flattened values) of ``arr``; ``arr`` itself when it is one cell."""
     if index is None or arr.size <= 1:
@@ -447,11 +496,15 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
             m.error, m.error_value = f"grid optimum: {axis_name(role)} within one grid step ({step:.3g})", step
         if index is not None or statistic == "only":
             m.edges = _edges(sd, reduction, lambda arr: _cell(src.sel(arr), index))
+        elif not source.get("peak_over"):
+            m.edges = _edge_shares(sd, reduction, src.sel)
     elif source.get("quantity"):
         m.resolution = _grid_text(sd, sd.dims) + f"; solver rtol {sd.rtol:g}"
         m.error = f"solver rtol {sd.rtol:g}"
     else:
         m.resolution, m.error = _optima_resolution(sd)
+        if source.get("role") == "share_at_best" and index is not None and math.isfinite(value) and value < 1:
+            m.where += "; " + _basins(sd, _cell(da, index))
         if not counted and isinstance(value, float) and math.isfinite(value):
             m.error_value = abs(value) * float(sd.science.get("optimizer", {}).get("grid_rtol", math.nan))
     is_axis = reduction and source.get("role", "value") in _reduction(sd, reduction).get("over", [])
@@ -459,6 +512,9 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
         if location:
             m.neighbours = _neighbour_coords(da, index, location)
             m.coarse = f"{axis_name(location)} located on its grid"
+            if m.neighbours:  # the shared rule "grid": a located coordinate is known to one step
+                m.error_value = max(abs(n - value) for n in m.neighbours)
+                m.error = f"{axis_name(location)} located on its grid: within one step ({m.error_value:.3g})"
         else:
             spread, words = _neighbour_spread(da, index, _SAMPLED)
             if words:
@@ -486,6 +542,23 @@ def _unsampled_end(da, index, ranges) -> str:
                 return (f"the extremum is at our {end}most sample {value_text(d, c)} of the claim's range, which "
                         f"extends to {value_text(d, bound)}: the grid does not sample that end")
     return ""
+
+
+def _basins(sd, cell) -> str:
+    """The starts of ``cell`` (a one-cell selection) that did not reach its best optimum, in
+    words: how many reached each other kept optimum (its basin's share) and its |λ|/λub, and how
+    many reached none kept (failed, or not accepted)."""
+    ds = sd.ds
+    n = ds.sizes["start"]
+    at = {d: cell[d].values.item() for d in ("anisotropy_ratio", "max_wavenumber", "p") if d in cell.coords}
+    mult = np.asarray(ds["optimum_multiplicity"].where(ds["optimum_start"] >= 0, 0).sel(at).values).ravel()
+    rel = np.asarray(abs(ds["optimum_relative_efficiency"]).sel(at).values).ravel()
+    others = [f"{int(k)} at |λ|/λub {r:.3g} ({100 * (1 - r / rel[0]):.0f} % below the best)"
+              for k, r in zip(mult[1:], rel[1:]) if k > 0]
+    lost = n - int(mult.sum())
+    return (f"{int(mult[0])} of {n} starts at the best optimum (|λ|/λub {rel[0]:.3g})"
+            + (f"; other optima: {', '.join(others)}" if others else "")
+            + (f"; {lost} starts at no kept optimum (stopped, not accepted, or at rest)" if lost else ""))
 
 
 def _optima_resolution(sd):
@@ -534,6 +607,14 @@ def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=N
     b = b.drop_vars([c for c in b.coords if c not in b.dims], errors="ignore")
     with np.errstate(invalid="ignore", divide="ignore"):
         r = a / b
+    if test and test.get("figure_equal"):
+        # the shared rule "figure" (reports/CAUSES.md): equal to two significant digits,
+        # |a - b| <= half a unit in the second significant digit of the larger
+        big = np.maximum(abs(a), abs(b))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            half = 0.5 * 10.0 ** (np.floor(np.log10(big)) - 1)
+        r = xr.where(abs(a - b) <= half, 1.0, 0.0).where(np.isfinite(r))
+        test = {"min": 1.0}
     value, where, index = _collapse(r, statistic, test)
     m = Measurement(value=value, where=where, failed=_failures(r, excluded))
     res = []
@@ -566,6 +647,8 @@ def monotone(stores, *, scene, along: str, direction="increasing", slack=0.0, di
         pairs += int(ok.sum())
     m = Measurement(value=float(min(shares)), where=f"{pairs} adjacent pairs along "
                     + ", ".join(axis_name(d) for d in dims or [along]), failed=_failures(da, excluded))
+    # a share of n pairs is resolved to one pair (the shared rule "grid": one step of what is counted)
+    share_error = 1.0 / pairs if pairs else math.nan
     if source.get("quantity"):
         m.resolution = _grid_text(sd, sd.dims) + f"; solver rtol {sd.rtol:g}"
         m.error = f"solver rtol {sd.rtol:g}"
@@ -574,6 +657,8 @@ def monotone(stores, *, scene, along: str, direction="increasing", slack=0.0, di
         m.resolution = _grid_text(sd, [a for a in red.get("over", []) if a in sd.ds.sizes])
     else:
         m.resolution, m.error = _optima_resolution(sd)
+    m.error = (m.error + "; " if m.error else "") + f"a share of {pairs} pairs: one pair is {share_error:.2g}"
+    m.error_value = share_error
     return m
 
 
