@@ -1,7 +1,7 @@
 """Command line: ``python -m reports build [STORE ...] --out out/report/``.
 
-Exit codes: 0 built; 2 a store was refused (different or newer format, not a pipeline store)
-or bad arguments; nothing is written then.
+Exit codes: 0 built; 2 a path was refused (it does not exist, is not a pipeline store, or is a
+store of a different or newer format) or bad arguments; nothing is written then.
 """
 
 from __future__ import annotations
@@ -38,7 +38,8 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
     size = sum(f.stat().st_size for f in index.parent.iterdir() if f.is_file())
-    print(f"report: {index} ({len(stores)} store(s), {size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)",
+    # build_report reads every path given or refuses them all, so this is the count of stores read
+    print(f"report: {index} ({len(stores)} store(s) read, {size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)",
           flush=True)
     print(f"audit: {audit_summary(index.parent / AUDIT_JSON)}", flush=True)
     return 0

@@ -248,12 +248,33 @@ def test_animation_has_frames_and_controls(site, browser):
 def test_scenes_not_run_are_listed(tmp_path):
     import reports
 
-    index = reports.build_report([tmp_path / "out" / "harmonic_grid.zarr"], tmp_path / "report")
+    index = reports.build_report([], tmp_path / "report")
     html = index.read_text()
     toc = html.split("<nav id='toc'>")[1].split("</nav>")[0]
     for name in SHIPPED:
         assert f"{name} — not yet run" in toc
-    assert f"--store {tmp_path / 'out' / 'harmonic_grid.zarr'}" in html
+    assert "Built " in html and " from 0 store(s)" in html
+
+
+def test_count_is_of_stores_read(site):
+    n = len(list(site["out"].glob("*.zarr")))
+    assert f"({n} store(s) read, " in site["stdout"], site["stdout"]
+    assert f" from {n} store(s);" in site["html"]
+
+
+def test_refuses_a_path_that_does_not_exist(site, tmp_path):
+    """A mistyped path is an error naming it (exit 2, one line, nothing written), even beside a
+    store that reads, and not a scene "not yet run"."""
+    missing = tmp_path / "no" / "such.zarr"
+    out = tmp_path / "report"
+    proc = _cli("build", site["out"] / "quick.zarr", missing, "--out", out, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stdout
+    lines = proc.stderr.strip().splitlines()
+    assert lines == [f"error: {missing}: no such store"], proc.stderr
+    assert proc.stdout == "" and not out.exists()
+    # control: the same command without the mistyped path builds
+    proc = _cli("build", site["out"] / "quick.zarr", "--out", out, cwd=tmp_path)
+    assert proc.returncode == 0 and "(1 store(s) read, " in proc.stdout, proc.stderr
 
 
 def test_incomplete_store_is_reported_not_fatal(tmp_path):
