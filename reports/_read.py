@@ -19,7 +19,6 @@ __all__ = ["StoreRefused", "SceneStore", "open_scene_store", "shipped_scenes", "
 #: ``pipeline`` attributes predate the field and are read as version 1.
 SUPPORTED_FORMAT = 1
 ATTRS_KEY = "pipeline"
-WORKFLOWS = Path(__file__).resolve().parent.parent / "workflows"
 
 
 class StoreRefused(ValueError):
@@ -165,8 +164,11 @@ def open_scene_store(path) -> SceneStore:
     return SceneStore(path=path, meta=meta, ds=ds, science=meta["provenance"]["scene"])
 
 
-def shipped_scenes(workflows: Path = WORKFLOWS) -> list[dict]:
-    """Name, title, figure and file of every shipped scene (read from ``workflows/*.toml``)."""
+def shipped_scenes(workflows: Path | None = None) -> list[dict]:
+    """Name, title, figure and file of every shipped scene (read from ``workflows/*.toml``,
+    the package data of :mod:`workflows`, unless ``workflows`` names another folder)."""
+    if workflows is None:
+        from workflows import DIRECTORY as workflows
     out = []
     for f in sorted(workflows.glob("*.toml")):
         try:
