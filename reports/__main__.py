@@ -14,12 +14,14 @@ from pathlib import Path
 from ._audit import audit_summary
 from ._build import AUDIT_JSON, build_report, default_stores
 from ._read import StoreRefused
+from solver._version import VersionAction
 
 EXIT_REFUSED = 2
 
 
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m reports", description=__doc__.splitlines()[0])
+    ap.add_argument("--version", action=VersionAction)
     sub = ap.add_subparsers(dest="command", required=True)
     b = sub.add_parser("build", help="write index.html and plotly.min.js from pipeline stores")
     b.add_argument("stores", nargs="*", help="Zarr stores (default: every *.zarr under out/)")
