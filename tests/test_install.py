@@ -4,6 +4,7 @@ checkout's layout."""
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -29,7 +30,13 @@ def test_shipped_scenes_are_found_through_the_package():
 def test_wheel_carries_the_scenes_and_package_data(tmp_path):
     """``pip wheel .`` (what ``pip install .`` installs) holds every shipped scene file and
     README, the reports' registries and the solver tools' references."""
-    proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(REPO)],
+    src = tmp_path / "src"  # built from a copy: setuptools writes build/ and *.egg-info beside the sources
+    for name in ("pyproject.toml", "README.md", "solver", "pipeline", "reports", "workflows"):
+        if (REPO / name).is_dir():
+            shutil.copytree(REPO / name, src / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(REPO / name, src / name)
+    proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(src)],
                           capture_output=True, text=True, timeout=600)
     if proc.returncode != 0 and "setuptools" in proc.stderr and "Could not" in proc.stderr:
         pytest.skip(f"cannot build a wheel here (no build backend): {proc.stderr.strip().splitlines()[-1]}")
