@@ -176,9 +176,15 @@ def open_scene_store(path) -> SceneStore:
             ds = xr.open_zarr(str(path), consolidated=False, zarr_format=3, chunks=None)
         except Exception as exc:  # an unreadable array is a store we cannot report on
             raise _refuse(path, f"cannot read arrays ({type(exc).__name__}: {exc})") from None
-    for d in meta["layout"]["dims"]:
+    dims = list(meta["layout"]["dims"])
+    for d in dims:
         if d not in ds.coords:
             raise _refuse(path, f"coordinate array {d!r} missing (a different store format)")
+    # Coordinates in the scene's axis order (the order zarr lists the arrays in varies from one
+    # opening to the next, and with it the order of a cell's coordinates in the audit's text).
+    ds = xr.Dataset({k: ds[k].variable for k in ds.data_vars},
+                    coords={**{d: ds[d].variable for d in dims}, **{k: ds[k].variable for k in ds.coords if k not in dims}},
+                    attrs=ds.attrs)
     return SceneStore(path=path, meta=meta, ds=ds, science=meta["provenance"]["scene"])
 
 
