@@ -135,6 +135,10 @@ def read_meta(path: Path) -> dict:
         if (path / ".zgroup").is_file() or (path / ".zarray").is_file():
             raise _refuse(path, "a Zarr format 2 store; this report reads pipeline stores in Zarr format 3 "
                                 f"(store format version {SUPPORTED_FORMAT})")
+        inner = sorted(path.glob("*.zarr")) if path.is_dir() else []
+        if inner:
+            raise _refuse(path, f"a folder of {len(inner)} store(s), not a store; name the stores "
+                                f"({path / '*.zarr'}) or leave the arguments out for out/*.zarr")
         raise _refuse(path, "not a Zarr store (no zarr.json)")
     try:
         doc = json.loads(zj.read_text())

@@ -272,6 +272,9 @@ def test_refuses_a_path_that_does_not_exist(site, tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert lines == [f"error: {missing}: no such store"], proc.stderr
     assert proc.stdout == "" and not out.exists()
+    # a folder of stores is named as such
+    proc = _cli("build", site["out"], "--out", out, cwd=tmp_path)
+    assert proc.returncode == 2 and "a folder of " in proc.stderr and not out.exists(), proc.stderr
     # control: the same command without the mistyped path builds
     proc = _cli("build", site["out"] / "quick.zarr", "--out", out, cwd=tmp_path)
     assert proc.returncode == 0 and "(1 store(s) read, " in proc.stdout, proc.stderr
