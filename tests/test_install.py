@@ -31,6 +31,7 @@ def test_wheel_carries_the_scenes_and_package_data(tmp_path):
     """``pip wheel .`` (what ``pip install .`` installs) holds every shipped scene file and
     README, the reports' registries and the solver tools' references."""
     src = tmp_path / "src"  # built from a copy: setuptools writes build/ and *.egg-info beside the sources
+    src.mkdir()
     for name in ("pyproject.toml", "README.md", "solver", "pipeline", "reports", "workflows"):
         if (REPO / name).is_dir():
             shutil.copytree(REPO / name, src / name, ignore=shutil.ignore_patterns("__pycache__"))
