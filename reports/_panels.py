@@ -298,6 +298,11 @@ def quantity_maps(sd, name: str):
     # heatmap) with contour lines on top, instead of contours interpolated into jagged shapes.
     style = ("contour" if min(sizes[xd], sizes[yd]) >= FINE_GRID else "heatmap+lines" if min(sizes[xd], sizes[yd]) >= 4
              else "heatmap") if linear else "heatmap"
+    if blocks.decimated:
+        # A plane drawn by blocks is already as fine as the screen: its cells as a heatmap. The
+        # browser draws contours of a noisy 400 x 400 field (the error estimate of a
+        # 1,000 x 1,000 scene) in tens of seconds, a heatmap in well under one.
+        style = "heatmap"
     qlab = quantity_label(name, sd.p)
     custom = None
     if xs.kind != "linear" or ys.kind != "linear":
