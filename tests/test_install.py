@@ -48,3 +48,20 @@ def test_wheel_carries_the_scenes_and_package_data(tmp_path):
     want |= {"workflows/README.md", "workflows/__init__.py", "reports/claims.toml", "reports/figures.toml"}
     want |= {f"solver/tools/{p.name}" for p in (REPO / "solver" / "tools").glob("*.npz")}
     assert len(want) > 15 and want <= names, sorted(want - names)
+
+
+def test_paper_reads_the_scenes_of_workflows_dir(tmp_path, capsys):
+    """``paper --workflows DIR`` reads DIR/<name>.toml: an empty folder is one line naming the
+    first missing file (exit 2, nothing run or written); a missing folder is named too."""
+    from pipeline.__main__ import EXIT_BAD_SCENE, QUICK_SCENES, main
+
+    empty = tmp_path / "scenes"
+    empty.mkdir()
+    out = tmp_path / "out"
+    assert main(["paper", "--quick", "--workflows", str(empty), "--out", str(out)]) == EXIT_BAD_SCENE
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(empty / f"{QUICK_SCENES[0]}.toml") in err[0], err
+    assert main(["paper", "--workflows", str(tmp_path / "nope"), "--out", str(out)]) == EXIT_BAD_SCENE
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: --workflows: no such folder: {tmp_path / 'nope'}"]
+    assert not out.exists()
