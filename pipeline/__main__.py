@@ -12,10 +12,13 @@ import sys
 import time
 from pathlib import Path
 
+import workflows as _workflows
+from solver._version import VersionAction
+
 from ._grid_scene import Scene
 from ._registry import kind_of, load_scene, parse_scene
 from ._run import run_scene, warm_up_kernels
-from ._scene import SceneError
+from ._scene import SceneError, read_scene_file
 from ._schedule import Session
 from ._store import StoreBusy, StoreMismatch
 
@@ -28,7 +31,8 @@ PAPER_SCENES = ("quick", "harmonic_grid", "harmonic_diagonals", "harmonic_optimu
                 "linear_two_phase", "exponent_sets", "power_law", "fourier_optima", "force_laws",
                 "linear_two_phase_box", "fourier_optima_edge", "exponent_sets_coarse", "exponent_sets_fine", "accuracy",
                 "stiffness")
-WORKFLOWS = Path(__file__).resolve().parent.parent / "workflows"
+#: The shipped scene files: package data of :mod:`workflows`, found wherever it is installed.
+WORKFLOWS = _workflows.DIRECTORY
 
 
 def _scheduler(value: str) -> str:
@@ -39,6 +43,7 @@ def _scheduler(value: str) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.splitlines()[0])
+    ap.add_argument("--version", action=VersionAction)
     sub = ap.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="compute one scene into its Zarr store (resumes an interrupted run)")
     run.add_argument("scene", help="scene TOML file, e.g. workflows/quick.toml")
@@ -51,6 +56,9 @@ def _parser() -> argparse.ArgumentParser:
                        help="every figure's scene at reduced resolution (num / 4, step x 2), without the two "
                             "studies (accuracy, stiffness); stores under OUT/quick/")
     paper.add_argument("--out", default="out", help="directory of the stores (default out/)")
+    paper.add_argument("--workflows", type=Path, default=None, metavar="DIR",
+                       help="folder of the scene files <name>.toml (default: the shipped scenes, installed "
+                            "with the package)")
     for p in (run, paper):
         if p is run:
             p.add_argument("--store", help="Zarr store (default out/<scene>.zarr)")
@@ -75,7 +83,7 @@ def quick_variant(path) -> "Scene":
     ``num`` points keeps a quarter of them, at least 3 (so a maximum can lie inside), a ``num``
     on its own line (an optima scene's starts) a quarter, at least 4, and every ``step`` doubles.
     The reduced scene hashes differently, so its stores live apart from the full ones."""
-    text = Path(path).read_text(encoding="utf-8")
+    text = read_scene_file(path)
     text = _AXIS_NUM.sub(lambda m: f"{m.group(1)}{max(3, int(m.group(2)) // 4)}", text)
     text = _LINE_NUM.sub(lambda m: f"{m.group(1)}{max(4, int(m.group(2)) // 4)}", text)
     text = _STEP.sub(lambda m: f"step = {2 * float(m.group(1))!r}", text)
@@ -140,11 +148,15 @@ def main(argv=None) -> int:
         return _estimate(args)
     names = QUICK_SCENES if args.quick else PAPER_SCENES
     out = Path(args.out) / "quick" if args.quick else Path(args.out)
+    folder = args.workflows or WORKFLOWS
+    if not folder.is_dir():
+        print(f"error: --workflows: no such folder: {folder}", file=sys.stderr)
+        return EXIT_BAD_SCENE
     # Validate every scene before running any, so a bad file costs nothing.
     scenes = []
     for name in names:
         try:
-            scenes.append((quick_variant if args.quick else load_scene)(WORKFLOWS / f"{name}.toml"))
+            scenes.append((quick_variant if args.quick else load_scene)(folder / f"{name}.toml"))
         except SceneError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_BAD_SCENE

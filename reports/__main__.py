@@ -1,7 +1,7 @@
 """Command line: ``python -m reports build [STORE ...] --out out/report/``.
 
-Exit codes: 0 built; 2 a store was refused (different or newer format, not a pipeline store)
-or bad arguments; nothing is written then.
+Exit codes: 0 built; 2 a path was refused (it does not exist, is not a pipeline store, or is a
+store of a different or newer format) or bad arguments; nothing is written then.
 """
 
 from __future__ import annotations
@@ -14,12 +14,14 @@ from pathlib import Path
 from ._audit import audit_summary
 from ._build import AUDIT_JSON, build_report, default_stores
 from ._read import StoreRefused
+from solver._version import VersionAction
 
 EXIT_REFUSED = 2
 
 
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m reports", description=__doc__.splitlines()[0])
+    ap.add_argument("--version", action=VersionAction)
     sub = ap.add_subparsers(dest="command", required=True)
     b = sub.add_parser("build", help="write index.html and plotly.min.js from pipeline stores")
     b.add_argument("stores", nargs="*", help="Zarr stores (default: every *.zarr under out/)")
@@ -38,7 +40,8 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
     size = sum(f.stat().st_size for f in index.parent.iterdir() if f.is_file())
-    print(f"report: {index} ({len(stores)} store(s), {size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)",
+    # build_report reads every path given or refuses them all, so this is the count of stores read
+    print(f"report: {index} ({len(stores)} store(s) read, {size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)",
           flush=True)
     print(f"audit: {audit_summary(index.parent / AUDIT_JSON)}", flush=True)
     return 0

@@ -62,8 +62,8 @@ def build_report(stores, out, *, list_unrun: bool = True, claims_file=None) -> P
     Parameters
     ----------
     stores : iterable of path
-        Zarr stores written by ``python -m pipeline run``. A path that does not exist is a
-        scene not yet run (listed, not an error).
+        Zarr stores written by ``python -m pipeline run``; every one must exist and be a
+        pipeline store of a format this report reads.
     out : path
         Output directory.
     list_unrun : bool
@@ -78,15 +78,12 @@ def build_report(stores, out, *, list_unrun: bool = True, claims_file=None) -> P
     Raises
     ------
     StoreRefused
-        A store of a different or newer format, or not a pipeline store (nothing is written).
+        A path that does not exist, a store of a different or newer format, or not a pipeline
+        store (nothing is written).
     """
-    loaded, missing = [], []
-    for s in stores:
-        p = Path(s)
-        if not p.exists():
-            missing.append(p)
-            continue
-        loaded.append(open_scene_store(p))  # raises before anything is written
+    # Every path must be a store this report reads: a mistyped path is refused, not taken for a
+    # scene not yet run (that is a shipped scene with no store among ``stores``).
+    loaded = [open_scene_store(Path(s)) for s in stores]  # raises before anything is written
     site = SiteBuilder(Path(out))
     site.n_stores = len(loaded)
     rows = evaluate_claims(load_claims(claims_file) if claims_file else load_claims(), loaded)
@@ -128,12 +125,6 @@ def build_report(stores, out, *, list_unrun: bool = True, claims_file=None) -> P
                                      "scene", children))
     have = {sd.name for sd in loaded}
     shipped = {e["name"]: e for e in shipped_scenes()}
-    for p in missing:
-        name = p.name.removesuffix(".zarr")
-        e = dict(shipped.get(name, {"name": name}))
-        e["command"] = f"python -m pipeline run {e.get('file', 'workflows/' + name + '.toml')} --store {p}"
-        site.add_not_run(e)
-        have.add(name)
     if list_unrun:
         for name, e in shipped.items():
             if name not in have:

@@ -9,7 +9,7 @@ import numpy as np
 
 from ._labels import format_value, param_label, quantity_label
 from ._motion import animation_figure, compute_motion, motion_figure, params_text
-from ._panels import quantity_maps, reduction_arrays, reduction_figures, series_figure
+from ._panels import full_data_note, quantity_maps, reduction_arrays, reduction_figures, series_figure
 from ._read import SceneStore
 from ._site import esc, fmt, provenance_table, scroll_table
 
@@ -22,6 +22,10 @@ MAX_MOTIONS = 2
 def grid_section(site, sd: SceneStore, anchor: str) -> str:
     """The HTML of one grid store's view: title (h3 with id ``anchor``), then its parts (h4)."""
     parts = [f"<h3 id='{anchor}'>{esc(sd.name)}: {esc(sd.title)}</h3>"]
+    # Every array this view draws, each read whole in one go (the store is opened lazily).
+    sd.load(["status", *sd.quantities, "error_estimate", "series_u", "series_tau", "series_status",
+             *(f"series_{d}" for d in sd.dims),
+             *(n for red in sd.reductions for roles in reduction_arrays(sd, red).values() for n in roles.values())])
     if not sd.complete:
         parts.append("<p class='warn'>This store is incomplete (run interrupted or still running): "
                      f"state {esc(sd.state)}. Points not computed yet are blank.</p>")
@@ -33,18 +37,28 @@ def grid_section(site, sd: SceneStore, anchor: str) -> str:
     if names:
         parts.append("<h4>Maps of the stored quantities</h4>")
     for q in names:
-        parts.append(site.guarded(f"{sd.name} map {q}", lambda q=q: site.maybe_figure(quantity_maps(sd, q))))
+        parts.append(site.guarded(f"{sd.name} map {q}", lambda q=q: _with_data(site, sd, quantity_maps(sd, q), [q])))
     for red in sd.reductions:
         parts.append(f"<h4>Reduction <code>{esc(red['name'])}</code>: {esc(red.get('statistic', 'max'))} of "
                      f"{quantity_label(red['quantity'], sd.p)} over "
                      f"{', '.join(param_label(a, sd.p) for a in red.get('over', []))}</h4>")
         parts.append(site.guarded(f"{sd.name} reduction {red['name']}",
-                                  lambda red=red: "".join(site.figure(f) for f in reduction_figures(sd, red))))
+                                  lambda red=red: _with_data(site, sd, reduction_figures(sd, red),
+                                                             [n for roles in reduction_arrays(sd, red).values()
+                                                              for n in roles.values()])))
     if "series_u" in sd.ds:
         parts.append("<h4>Stored velocity series</h4>")
         parts.append(site.guarded(f"{sd.name} series", lambda: site.maybe_figure(series_figure(sd))))
     parts.append(site.guarded(f"{sd.name} motions", lambda: _motions(site, sd)))
     return "\n".join(parts)
+
+
+def _with_data(site, sd: SceneStore, figs, names) -> str:
+    """The figure(s) ``figs`` (one, a list, or None), then where their full data is."""
+    figs = [f for f in (figs if isinstance(figs, list) else [figs]) if f is not None]
+    if not figs:
+        return ""
+    return "".join(site.figure(f) for f in figs) + full_data_note(sd, names)
 
 
 def _motions(site, sd: SceneStore) -> str:

@@ -9,20 +9,36 @@
 * ``series_figure``: the stored u(tau).
 
 Every function takes a :class:`~reports._read.SceneStore` and returns Plotly figures.
+
+Maps are drawn at the screen's resolution, not the scene's: a panel carries at most
+``MAX_MAP_CELLS`` cells along each axis (fewer when many panels share a figure). A finer plane is
+cut into blocks of k_y x k_x cells; a quantity map draws each block's mean (``block_reduce``), a
+reduction's map the cell of each block's largest maximum with its arg-max and companions
+(``block_pick``); the plot's title says which, and the store keeps the full data
+(``full_data_note``). The line plots, tables and the audit read the full arrays.
 """
 
 from __future__ import annotations
 
+import functools
+import html
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ._labels import SIGNED, AxisSpec, axis_spec, format_value, param_label, quantity_label
 from ._motion import params_text
 
-__all__ = ["quantity_maps", "reduction_figures", "series_figure", "reduction_arrays", "MAX_FACET", "FINE_GRID"]
+__all__ = ["quantity_maps", "reduction_figures", "series_figure", "reduction_arrays", "MAX_FACET", "FINE_GRID",
+           "MAX_MAP_CELLS", "MAX_LINES", "Blocks", "map_blocks", "block_reduce", "block_pick", "full_data_note"]
 
 MAX_FACET = 4
+#: Cells drawn along each axis of a map panel at most: about the pixels of a panel on a wide
+#: screen (a single panel is ~1400 x 320 px). Figures of several panels get fewer (``map_blocks``).
+MAX_MAP_CELLS = 400
+#: Curves of one panel at most (evenly spread over the line axis, ends kept; the title says so).
+MAX_LINES = 16
 #: Grids with at least this many points along both map axes are drawn as contour maps; coarser
 #: ones as heatmaps of their cells with contour lines on top.
 FINE_GRID = 48
@@ -30,6 +46,7 @@ _PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#
             "#17becf"]
 
 
+@functools.lru_cache(maxsize=4096)
 def _color(i: int, n: int) -> str:
     """Colour i of n along a perceptual ramp (for ordered families of curves)."""
     import plotly.colors as pc
@@ -89,6 +106,109 @@ def _round(a: np.ndarray, digits: int = 6) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------
+# Aggregation to the screen
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """How a plane of ``ny`` x ``nx`` cells is drawn: in blocks of ``ky`` x ``kx`` cells (1 x 1:
+    as it is), ``my`` x ``mx`` blocks (the last ones partial)."""
+
+    ny: int
+    nx: int
+    ky: int
+    kx: int
+
+    @property
+    def my(self) -> int:
+        return -(-self.ny // self.ky)
+
+    @property
+    def mx(self) -> int:
+        return -(-self.nx // self.kx)
+
+    @property
+    def decimated(self) -> bool:
+        return self.ky > 1 or self.kx > 1
+
+    def text(self, how: str, detail: str = "") -> str:
+        """``"drawn at 334 × 334 of 1,000 × 1,000 cells: block mean over blocks of 3 × 3"`` and
+        ``detail`` in parentheses ('' when not decimated)."""
+        if not self.decimated:
+            return ""
+        return (f"drawn at {self.my:,} × {self.mx:,} of {self.ny:,} × {self.nx:,} cells: block {how} over blocks "
+                f"of {self.ky} × {self.kx}" + (f" ({detail})" if detail else ""))
+
+
+def map_blocks(ny: int, nx: int, panels: int = 1, limit: int = MAX_MAP_CELLS) -> Blocks:
+    """The blocks that bring an ``ny`` x ``nx`` plane to at most ``limit / ceil(sqrt(panels))``
+    cells per axis: ``limit`` for a figure of one panel, half for two to four panels (each is
+    half as wide or as tall), so a figure carries at most about ``limit**2`` cells in all."""
+    limit = max(limit // math.ceil(math.sqrt(max(panels, 1))), 1)
+    return Blocks(ny, nx, -(-ny // limit), -(-nx // limit))
+
+
+def _padded(a: np.ndarray, b: Blocks, fill) -> np.ndarray:
+    """``a`` (..., ny, nx) padded with ``fill`` to (..., my, ky, mx, kx)."""
+    lead = a.shape[:-2]
+    out = np.full(lead + (b.my * b.ky, b.mx * b.kx), fill, dtype=np.result_type(a, type(fill)))
+    out[..., : b.ny, : b.nx] = a
+    return out.reshape(lead + (b.my, b.ky, b.mx, b.kx))
+
+
+def block_reduce(a: np.ndarray, b: Blocks, how: str = "mean") -> np.ndarray:
+    """Each block's NaN-ignoring ``how`` ("mean" or "max") of ``a`` (..., ny, nx) -> (..., my, mx);
+    NaN where a block has no finite cell."""
+    if not b.decimated:
+        return np.asarray(a, dtype=np.float64)
+    v = _padded(np.asarray(a, dtype=np.float64), b, np.nan)
+    finite = np.isfinite(v)
+    n = finite.sum(axis=(-3, -1))
+    if how == "mean":
+        total = np.where(finite, v, 0.0).sum(axis=(-3, -1))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(n > 0, total / np.maximum(n, 1), np.nan)
+    if how == "max":
+        return np.where(n > 0, np.where(finite, v, -np.inf).max(axis=(-3, -1)), np.nan)
+    raise ValueError(f"how: must be 'mean' or 'max', got {how!r}")
+
+
+def block_pick(key: np.ndarray, b: Blocks) -> np.ndarray:
+    """Flat index into the (ny, nx) plane of each block's cell of largest finite ``key`` (the
+    block's first cell when none is finite), shape (my, mx). ``a.ravel()[idx]`` then draws any
+    array of the plane at those cells, so a maximum and its arg-max come from the same cell."""
+    iy, ix = np.meshgrid(np.arange(b.ny), np.arange(b.nx), indexing="ij")
+    flat = _padded(iy * b.nx + ix, b, -1)
+    k = _padded(np.asarray(key, dtype=np.float64), b, np.nan)
+    k = np.where(np.isfinite(k) & (flat >= 0), k, -np.inf)
+    # blocks as rows of ky*kx candidates
+    k = k.transpose(0, 2, 1, 3).reshape(b.my, b.mx, -1)
+    flat = flat.transpose(0, 2, 1, 3).reshape(b.my, b.mx, -1)
+    best = np.take_along_axis(flat, np.argmax(k, axis=-1)[..., None], axis=-1)[..., 0]
+    return np.where(best >= 0, best, flat[..., 0])
+
+
+def _block_axis(spec: AxisSpec, k: int) -> AxisSpec:
+    """``spec`` with its values and positions averaged over runs of ``k`` (the blocks' centres)."""
+    if k == 1:
+        return spec
+    b = Blocks(1, spec.values.size, 1, k)
+    return AxisSpec(spec.name, block_reduce(spec.values[None, :], b)[0], block_reduce(spec.positions[None, :], b)[0],
+                    spec.title, spec.kind, spec.tickvals, spec.ticktext)
+
+
+def full_data_note(sd, names) -> str:
+    """Where the full-resolution data of a figure is: the store and two lines of Python."""
+    names = [n for n in dict.fromkeys(names) if n]
+    sel = ", ".join(repr(n) for n in names)
+    code = (f"import xarray as xr\nds = xr.open_zarr({str(sd.path)!r}, zarr_format=3, consolidated=False)"
+            f"[[{sel}]]")
+    return ("<details class='small'><summary>full-resolution data</summary><pre><code>"
+            f"{html.escape(code)}</code></pre></details>")
+
+
+# ---------------------------------------------------------------------------
 # Maps of stored quantities
 # ---------------------------------------------------------------------------
 
@@ -104,7 +224,6 @@ def _map_axes(dims: list[str], sizes: dict[str, int]) -> tuple[str, str] | None:
 
 def quantity_maps(sd, name: str):
     """Maps of ``name`` over two axes, faceted over up to two others; None when the scene has no plane."""
-    import plotly.graph_objects as go
     from plotly.subplots import make_subplots
 
     da = sd.ds[name]
@@ -135,7 +254,9 @@ def quantity_maps(sd, name: str):
     ci = _pick(sizes[fy]) if fy else [0]
     if fx and not fy and len(ri) > 3:  # one facet axis: lay it out in a row
         ci, ri, fy, fx = ri, [0], fx, None
-    xs, ys = _spec(sd, xd), _spec(sd, yd)
+    blocks = map_blocks(sizes[yd], sizes[xd], panels=len(ri) * len(ci))
+    v = block_reduce(v, blocks, "mean")
+    xs, ys = _block_axis(_spec(sd, xd), blocks.kx), _block_axis(_spec(sd, yd), blocks.ky)
     fixed_text = ", ".join(f"{param_label(d, sd.p)} = {format_value(d, float(sd.ds[d].values[0]))}" for d in single)
     held = ", ".join(f"{param_label(k, sd.p)} = {format_value(k, v)}" for k, v in sd.fixed.items()
                      if k not in ("p", "delta"))
@@ -177,6 +298,11 @@ def quantity_maps(sd, name: str):
     # heatmap) with contour lines on top, instead of contours interpolated into jagged shapes.
     style = ("contour" if min(sizes[xd], sizes[yd]) >= FINE_GRID else "heatmap+lines" if min(sizes[xd], sizes[yd]) >= 4
              else "heatmap") if linear else "heatmap"
+    if blocks.decimated:
+        # A plane drawn by blocks is already as fine as the screen: its cells as a heatmap. The
+        # browser draws contours of a noisy 400 x 400 field (the error estimate of a
+        # 1,000 x 1,000 scene) in tens of seconds, a heatmap in well under one.
+        style = "heatmap"
     qlab = quantity_label(name, sd.p)
     custom = None
     if xs.kind != "linear" or ys.kind != "linear":
@@ -185,6 +311,7 @@ def quantity_maps(sd, name: str):
         hx, hy = "%{customdata[0]:.4g}", "%{customdata[1]:.4g}"
     else:
         hx, hy = "%{x:.4g}", "%{y:.4g}"
+    traces = []
     for r, i in enumerate(ri):
         for c, j in enumerate(ci):
             if fx and fy:
@@ -207,20 +334,23 @@ def quantity_maps(sd, name: str):
             if held:
                 extra.append(held)
             hover = (f"{xs.title} = {hx}<br>{ys.title} = {hy}<br><b>{qlab} = %{{z:.4g}}</b>"
+                     + (f" (mean of a {blocks.ky} × {blocks.kx} block)" if blocks.decimated else "")
                      + "".join(f"<br>{e}" for e in extra) + "<extra></extra>")
             kw = dict(x=xs.positions, y=ys.positions, z=_round(z), coloraxis="coloraxis", hovertemplate=hover,
                       customdata=custom, name=qlab)
+            axes = _axes_of(fig, r + 1, c + 1)
+            if custom is None:
+                del kw["customdata"]
             if style == "contour":
-                fig.add_trace(go.Contour(**kw, contours={"coloring": "heatmap", "showlines": True},
-                                         line={"width": 0.5}, ncontours=16, connectgaps=False), row=r + 1, col=c + 1)
+                traces.append(dict(type="contour", **kw, contours={"coloring": "heatmap", "showlines": True},
+                                   line={"width": 0.5}, ncontours=16, connectgaps=False, **axes))
                 continue
-            fig.add_trace(go.Heatmap(**kw), row=r + 1, col=c + 1)
+            traces.append(dict(type="heatmap", **kw, **axes))
             if style == "heatmap+lines":
-                fig.add_trace(go.Contour(x=xs.positions, y=ys.positions, z=_round(z), contours={"coloring": "none"},
-                                         line={"width": 0.8, "color": "rgba(40,40,40,0.55)"}, ncontours=10,
-                                         showscale=False, showlegend=False, hoverinfo="skip", connectgaps=False,
-                                         name="contours"),
-                              row=r + 1, col=c + 1)
+                traces.append(dict(type="contour", x=xs.positions, y=ys.positions, z=_round(z),
+                                   contours={"coloring": "none"}, line={"width": 0.8, "color": "rgba(40,40,40,0.55)"},
+                                   ncontours=10, showscale=False, showlegend=False, hoverinfo="skip", connectgaps=False,
+                                   name="contours", **axes))
     # One update for every panel, then titles on the outer ones (per-panel updates are slow in plotly.py).
     fig.update_xaxes(**{k: w for k, w in xs.axis_layout().items() if k != "title"})
     fig.update_yaxes(**{k: w for k, w in ys.axis_layout().items() if k != "title"})
@@ -236,7 +366,9 @@ def quantity_maps(sd, name: str):
         title += f"; facets show at most {MAX_FACET} values of each facet axis"
     if fixed_text:
         title += f"; {fixed_text}"
-    return _layout(fig, height=max(320, 250 * nr + 80), title=title)
+    if blocks.decimated:
+        title += "<br>" + blocks.text("mean")
+    return _with_traces(_layout(fig, height=max(320, 250 * nr + 80), title=title), traces)
 
 
 def _quantity_curve(sd, name: str, dim: str):
@@ -359,23 +491,29 @@ def reduction_figures(sd, red: dict) -> list:
 
 
 def _select(sd, name: str, keep: list[str]) -> np.ndarray:
-    """Array ``name`` with dims ordered as ``keep``; other dims of size 1 squeezed, larger taken at index 0."""
-    da = sd.ds[name]
-    for d in da.dims:
-        if d not in keep:
-            da = da.isel({d: 0})
-    return np.asarray(da.transpose(*keep).values, dtype=np.float64)
+    """Array ``name`` with dims ordered as ``keep``; other dims of size 1 squeezed, larger taken at
+    index 0. Read-only, and kept for the rest of the build (curves select the same arrays per line)."""
+    cache = sd.__dict__.setdefault("_selected", {})
+    key = (name, tuple(keep))
+    if key not in cache:
+        da = sd.ds[name]
+        for d in da.dims:
+            if d not in keep:
+                da = da.isel({d: 0})
+        v = np.array(da.transpose(*keep).values, dtype=np.float64)
+        v.flags.writeable = False
+        cache[key] = v
+    return cache[key]
 
 
 def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_dim: str | None):
-    import plotly.graph_objects as go
     from plotly.subplots import make_subplots
 
     roles = _plot_roles(red, arrays)
     keep = [d for d in (col_dim, line_dim, xdim) if d]
     xs = _spec(sd, xdim)
     cols = _pick(sd.ds.sizes[col_dim], 6) if col_dim else [0]
-    lines = list(range(sd.ds.sizes[line_dim])) if line_dim else [0]
+    lines = _pick(sd.ds.sizes[line_dim], MAX_LINES) if line_dim else [0]
     titles = []
     for role in roles:
         for j in cols:
@@ -386,11 +524,15 @@ def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_di
     fig = make_subplots(rows=len(roles), cols=len(cols), shared_xaxes=True, subplot_titles=titles,
                         vertical_spacing=min(0.08, 0.5 / len(roles)), horizontal_spacing=0.05)
     has_polished = "polished" in arrays
+    # Traces as plain dicts, added to the figure's JSON at the end: plotly.py's validation of
+    # thousands of small Scatter objects cost most of a report's build (issue 36).
+    traces = []
+    axes = {(r, c): _axes_of(fig, r + 1, c + 1) for r in range(len(roles)) for c in range(len(cols))}
     for r, role in enumerate(roles):
         vspec = _arg_axis(sd, role)
         for c, j in enumerate(cols):
-            for li in lines:
-                color = _color(li, len(lines)) if line_dim else "#1f77b4"
+            for n_line, li in enumerate(lines):
+                color = _color(n_line, len(lines)) if line_dim else "#1f77b4"
                 lname = (f"{param_label(line_dim, sd.p)} = {format_value(line_dim, float(sd.ds[line_dim].values[li]))}"
                          if line_dim else "")
                 for kind in ("grid", "polished"):
@@ -416,11 +558,11 @@ def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_di
                                                                                j if col_dim else None,
                                                                                li if line_dim else None), axis=-1)
                     legend = (lname + " " if lname else "") + kind
-                    fig.add_trace(go.Scatter(
-                        x=xs.positions, y=y, customdata=custom, hovertemplate=hover,
+                    traces.append(dict(
+                        type="scatter", x=xs.positions, y=y, customdata=custom, hovertemplate=hover,
                         mode="lines" if polished else ("markers" if has_polished else "lines+markers"),
                         line={"color": color, "width": 2}, marker={"color": color, "size": 6, "symbol": "circle-open"},
-                        name=legend, legendgroup=legend, showlegend=(r == 0 and c == 0)), row=r + 1, col=c + 1)
+                        name=legend, legendgroup=legend, showlegend=(r == 0 and c == 0), **axes[r, c]))
             if vspec is not None:
                 fig.update_yaxes(row=r + 1, col=c + 1, **_value_axis_layout(vspec, ""))
         short = param_label(role, sd.p) if role in red.get("over", []) else _role_label(sd, red, role)
@@ -432,7 +574,31 @@ def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_di
         ", ".join(param_label(a, sd.p) for a in red.get("over", []))
     if has_polished:
         what += " — grid optimum (markers) and polished optimum (lines)"
-    return _layout(fig, height=max(360, 230 * len(roles) + 80), title=what)
+    if line_dim and len(lines) < sd.ds.sizes[line_dim]:
+        what += (f"<br>{len(lines)} of the {sd.ds.sizes[line_dim]:,} values of {param_label(line_dim, sd.p)}, "
+                 "evenly spread")
+    return _with_traces(_layout(fig, height=max(360, 230 * len(roles) + 80), title=what), traces)
+
+
+def _axes_of(fig, row: int, col: int) -> dict:
+    """``{"xaxis": "x2", "yaxis": "y2"}``: the axes of subplot (row, col) of ``fig`` (make_subplots)."""
+    sub = fig.get_subplot(row, col)
+    return {"xaxis": sub.xaxis.plotly_name.replace("axis", ""), "yaxis": sub.yaxis.plotly_name.replace("axis", "")}
+
+
+def _with_traces(fig, traces: list) -> dict:
+    """The JSON spec of ``fig`` (layout, and any traces it holds) followed by ``traces`` (dicts);
+    their numeric arrays are encoded as plotly.py encodes validated ones (base64 typed arrays)."""
+    try:
+        from _plotly_utils.utils import to_typed_array_spec
+    except ImportError:  # an older plotly: plain lists
+        def to_typed_array_spec(v):
+            return v
+    spec = fig.to_plotly_json()
+    encoded = [{k: to_typed_array_spec(v) if isinstance(v, np.ndarray) and v.dtype.kind in "fiub" else v
+                for k, v in t.items()} for t in traces]
+    spec["data"] = list(spec.get("data", [])) + encoded
+    return spec
 
 
 def _argmax_custom(sd, red, roles, keep, j, li) -> list[np.ndarray]:
@@ -460,7 +626,6 @@ def _argmax_hover(sd, red, roles, keep, j, li, n) -> str:
 def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
     """The maximum, the arg-max parameters and the reported quantities over the kept plane, one
     row each (own colour scale), grid and polished optima side by side."""
-    import plotly.graph_objects as go
     from plotly.subplots import make_subplots
 
     # The paper draws these planes with mu_n/mu_s across and the scaled period up.
@@ -473,9 +638,27 @@ def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
     fig = make_subplots(rows=nr, cols=len(kinds), shared_yaxes=True, shared_xaxes=True, horizontal_spacing=0.05,
                         vertical_spacing=vgap, subplot_titles=titles)
     gx, gy = np.meshgrid(xs.values, ys.values)
+    # A fine plane is drawn by blocks: each block shows its cell of largest maximum (smallest
+    # for a "min" reduction) with that cell's arg-max and companions, never a mix of cells.
+    blocks = map_blocks(ys.values.size, xs.values.size, panels=nr * len(kinds))
+    picks = {}
+    if blocks.decimated:
+        for kind in kinds:
+            key = _select(sd, arrays[kind]["value"], [yd, xd])
+            picks[kind] = block_pick(-key if red.get("statistic") == "min" else key, blocks)
+        xs, ys = _block_axis(xs, blocks.kx), _block_axis(ys, blocks.ky)
+
+    def plane(kind, name):
+        v = _select(sd, name, [yd, xd])
+        return v.ravel()[picks[kind]] if kind in picks else v
+
+    def cells(kind, g):
+        return g.ravel()[picks[kind]] if kind in picks else g
+
     row_h = (1 - vgap * (nr - 1)) / nr
+    traces = []
     for r, role in enumerate(roles):
-        vals = {k: _select(sd, arrays[k][role], [yd, xd]) for k in kinds if role in arrays[k]}
+        vals = {k: plane(k, arrays[k][role]) for k in kinds if role in arrays[k]}
         vspec = _arg_axis(sd, role)
         allv = np.concatenate([v.ravel() for v in vals.values()])
         allv = allv[np.isfinite(allv)]
@@ -485,23 +668,23 @@ def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
             if kind not in vals:
                 continue
             v = vals[kind]
-            extra = [gx, gy, _round(v)]
+            extra = [cells(kind, gx), cells(kind, gy), _round(v)]
             hover = (f"{xs.title} = %{{customdata[0]:.4g}}<br>{ys.title} = %{{customdata[1]:.4g}}<br><b>{label} = "
                      "%{customdata[2]:.5g}</b>")
             k = 3
             for ax in red.get("over", []):
                 if ax in arrays[kind] and ax != role:
-                    extra.append(_round(_select(sd, arrays[kind][ax], [yd, xd])))
+                    extra.append(_round(plane(kind, arrays[kind][ax])))
                     hover += f"<br>{param_label(ax, sd.p)} = %{{customdata[{k}]:.4g}}"
                     k += 1
             if kind == "polished" and "status" in arrays[kind]:
-                extra.append(_select(sd, arrays[kind]["status"], [yd, xd]))
+                extra.append(plane(kind, arrays[kind]["status"]))
                 hover += f"<br>polish status = %{{customdata[{k}]:.0f}}"
             hover += f"<br>{kind} optimum<extra></extra>"
             z = _to_pos(vspec, v) if vspec is not None else v
-            fig.add_trace(go.Heatmap(x=xs.positions, y=ys.positions, z=_round(z),
-                                     customdata=np.stack(extra, axis=-1), hovertemplate=hover, coloraxis=cname,
-                                     name=kind), row=r + 1, col=c + 1)
+            traces.append(dict(type="heatmap", x=xs.positions, y=ys.positions, z=_round(z),
+                               customdata=np.stack(extra, axis=-1), hovertemplate=hover, coloraxis=cname,
+                               name=kind, **_axes_of(fig, r + 1, c + 1)))
         if (role in SIGNED or role == "signed") and allv.size:
             vmax = float(np.max(np.abs(allv))) or 1.0
             cax = {"colorscale": "RdBu_r", "cmin": -vmax, "cmax": vmax}
@@ -520,7 +703,12 @@ def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
         for r in range(nr - 1):
             fig.update_xaxes(row=r + 1, col=c + 1, **{k: w for k, w in xs.axis_layout().items() if k != "title"})
     what = f"{red['name']} over the ({xs.title}, {ys.title}) plane"
-    return _layout(fig, height=max(360, 260 * nr + 60), title=what)
+    if blocks.decimated:
+        best = "smallest" if red.get("statistic") == "min" else "largest"
+        what += "<br>" + blocks.text("min" if best == "smallest" else "max",
+                                     f"each drawn cell is its block's cell of {best} {_role_label(sd, red, 'value')}, "
+                                     "with that cell's arg-max")
+    return _with_traces(_layout(fig, height=max(360, 260 * nr + 60), title=what), traces)
 
 
 # ---------------------------------------------------------------------------

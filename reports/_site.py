@@ -239,12 +239,21 @@ drawn when it scrolls into view.</div></header>
 {body}
 {not_run}
 </main>
+<footer class='small' style='padding:0 2em 2em'>{_versions_line()}</footer>
 <script>document.addEventListener('DOMContentLoaded', function () {{{loader}}});</script>
 </body></html>
 """
         index = self.out / "index.html"
         index.write_text(doc, encoding="utf-8")
         return index
+
+
+def _versions_line() -> str:
+    """The footer: the package and solver engine versions that built the report."""
+    from solver._version import DISTRIBUTION, engine_versions_text, package_version
+
+    return (f"Built by {DISTRIBUTION} {esc(package_version())} (solver engines {esc(engine_versions_text())}); "
+            "each store's own versions are in its provenance.")
 
 
 # ---------------------------------------------------------------------------
@@ -280,6 +289,7 @@ def provenance_table(sd, kind_rows) -> str:
         ("scene hash", f"<code title='{esc(pv.get('scene_hash', ''))}'>{esc(pv.get('scene_hash', '')[:16])}…</code>"),
         ("scene file", f"<code>{esc(pv.get('scene_file', ''))}</code>"),
         ("package version", esc(pv.get("package_version", "?"))),
+        ("engine versions", esc(", ".join(f"{k} {v}" for k, v in sorted((pv.get("engines") or {}).items())) or "?")),
         ("git commit", f"<code>{esc(pv.get('git_commit') or 'unknown')}</code>"),
         ("created (UTC)", esc(pv.get("created", "?"))),
         ("host", esc(pv.get("host", "?"))),

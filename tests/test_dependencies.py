@@ -16,7 +16,7 @@ import tomllib
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-PACKAGES = ("solver", "pipeline", "reports")
+PACKAGES = ("solver", "pipeline", "reports", "workflows")
 
 
 def normalise(name: str) -> str:

@@ -110,7 +110,9 @@ def test_coarse_maps_are_heatmaps_with_contour_lines(n, kinds):
     ds = xr.Dataset({"scaled_efficiency": (("A0", "A1_ratio"), z)}, coords={"A0": a0, "A1_ratio": r})
     sd = SceneStore(path=Path("x.zarr"), meta={"layout": {"dims": ["A0", "A1_ratio"]}}, ds=ds,
                     science={"outputs": {"quantities": ["scaled_efficiency"]}})
-    fig = quantity_maps(sd, "scaled_efficiency")
+    import plotly.graph_objects as go
+
+    fig = go.Figure(quantity_maps(sd, "scaled_efficiency"))  # the panels return figure specs (dicts)
     assert [t.type for t in fig.data] == kinds
     for t in fig.data:
         if t.type == "contour" and len(kinds) == 2:

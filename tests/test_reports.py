@@ -248,12 +248,36 @@ def test_animation_has_frames_and_controls(site, browser):
 def test_scenes_not_run_are_listed(tmp_path):
     import reports
 
-    index = reports.build_report([tmp_path / "out" / "harmonic_grid.zarr"], tmp_path / "report")
+    index = reports.build_report([], tmp_path / "report")
     html = index.read_text()
     toc = html.split("<nav id='toc'>")[1].split("</nav>")[0]
     for name in SHIPPED:
         assert f"{name} — not yet run" in toc
-    assert f"--store {tmp_path / 'out' / 'harmonic_grid.zarr'}" in html
+    assert "Built " in html and " from 0 store(s)" in html
+
+
+def test_count_is_of_stores_read(site):
+    n = len(list(site["out"].glob("*.zarr")))
+    assert f"({n} store(s) read, " in site["stdout"], site["stdout"]
+    assert f" from {n} store(s);" in site["html"]
+
+
+def test_refuses_a_path_that_does_not_exist(site, tmp_path):
+    """A mistyped path is an error naming it (exit 2, one line, nothing written), even beside a
+    store that reads, and not a scene "not yet run"."""
+    missing = tmp_path / "no" / "such.zarr"
+    out = tmp_path / "report"
+    proc = _cli("build", site["out"] / "quick.zarr", missing, "--out", out, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stdout
+    lines = proc.stderr.strip().splitlines()
+    assert lines == [f"error: {missing}: no such store"], proc.stderr
+    assert proc.stdout == "" and not out.exists()
+    # a folder of stores is named as such
+    proc = _cli("build", site["out"], "--out", out, cwd=tmp_path)
+    assert proc.returncode == 2 and "a folder of " in proc.stderr and not out.exists(), proc.stderr
+    # control: the same command without the mistyped path builds
+    proc = _cli("build", site["out"] / "quick.zarr", "--out", out, cwd=tmp_path)
+    assert proc.returncode == 0 and "(1 store(s) read, " in proc.stdout, proc.stderr
 
 
 def test_incomplete_store_is_reported_not_fatal(tmp_path):
@@ -368,3 +392,133 @@ def test_motion_reproduces_the_stored_series_and_speed(site):
     bx, by = body_outline(m.x_cm, m.phi)
     np.testing.assert_allclose(0.5 * (bx[:, 0] + bx[:, 1]), m.x_cm)
     np.testing.assert_allclose(by[:, 0], -by[:, 2])
+
+
+# ---------------------------------------------------------------------------
+# Reports bounded by the screen (issue 36)
+# ---------------------------------------------------------------------------
+
+#: 2 x 1 x 1000 x 1000 = 2,000,000 points: two 1,000,000-point (A0, A1/A0) planes, a reduction
+#: keeping the whole plane (its maps and 1,000 curves) and one keeping the anisotropy axis.
+BIG_PLANE = """
+[scene]
+name = "big_plane"
+title = "report test: two 1000 x 1000 planes"
+figure = "UEtaMax (test)"
+family = "harmonic"
+
+[axes]
+anisotropy_ratio = { values = [0.25, 4.0] }
+scaled_period = { values = [2.0] }
+A0 = { range = [0.01, 1.5], num = 1000 }
+A1_ratio = { range = [0.01, 0.99], num = 1000 }
+
+[solver]
+rtol = 1e-4
+
+[outputs]
+quantities = ["scaled_efficiency", "relative_efficiency"]
+diagnostics = ["error_estimate"]
+
+[[reductions]]
+name = "best_ratio"
+quantity = "scaled_efficiency"
+statistic = "absmax"
+over = ["anisotropy_ratio"]
+report = ["relative_efficiency"]
+polish = true
+
+[[reductions]]
+name = "best_shape"
+quantity = "scaled_efficiency"
+statistic = "max"
+over = ["A0", "A1_ratio"]
+
+[execution]
+points_per_chunk = 250000
+"""
+
+
+def _specs(html: str) -> list[dict]:
+    return [json.loads(m) for m in re.findall(r"<script type='application/json' id='fig-\d+-spec'>(.*?)</script>",
+                                               html, flags=re.S)]
+
+
+@pytest.fixture(scope="module")
+def big_site(tmp_path_factory):
+    root = tmp_path_factory.mktemp("big")
+    (root / "big_plane.toml").write_text(BIG_PLANE)
+    store = rh.synthetic_store(root / "big_plane.zarr", root / "big_plane.toml")
+    proc = _cli("build", store, "--out", root / "report", "--no-unrun", cwd=root)
+    assert proc.returncode == 0, proc.stderr
+    index = root / "report" / "index.html"
+    return {"store": store, "index": index, "html": index.read_text(encoding="utf-8"), "stderr": proc.stderr}
+
+
+def test_report_of_a_million_point_plane_is_under_25_mb(big_site):
+    """Maps are aggregated to the screen, so the report does not grow with the scene: the two
+    1,000,000-point planes (31 MB for one plane before issue 36) stay under 25 MB in all."""
+    files = [f for f in big_site["index"].parent.rglob("*") if f.is_file()]
+    total = sum(f.stat().st_size for f in files)
+    assert total < 25 * MB, f"report is {total / MB:.1f} MB"
+    assert "panel failed" not in big_site["html"], big_site["stderr"]
+
+
+def test_every_map_panel_is_at_most_400_cells_a_side_and_says_how(big_site):
+    from reports._panels import MAX_LINES, MAX_MAP_CELLS
+
+    specs = _specs(big_site["html"])
+    maps = [t for s in specs for t in s["data"] if t["type"] in ("heatmap", "contour")]
+    assert len(maps) >= 6  # 3 quantities x 2 facets; the reduction's maps
+    for t in maps:
+        z = t["z"]
+        assert len(z) <= MAX_MAP_CELLS and max(len(row) for row in z) <= MAX_MAP_CELLS
+    titles = [s["layout"]["title"]["text"] for s in specs if s["layout"].get("title")]
+    quantity = [t for t in titles if "block mean" in t]
+    reduction = [t for t in titles if "block max" in t]
+    assert len(quantity) == 3 and len(reduction) == 1, titles
+    assert all("of 1,000 × 1,000 cells" in t for t in quantity + reduction)
+    # curves over one axis of the kept plane: at most MAX_LINES lines, and the title says so
+    curves = [s for s in specs if "values of" in (s["layout"].get("title") or {}).get("text", "")]
+    assert curves and all(len({t["name"].rsplit(" ", 1)[0] for t in s["data"]}) <= MAX_LINES for s in curves)
+    # the way to the full data, once per map figure
+    assert big_site["html"].count("full-resolution data") == 3 + 2  # 2 quantities and the error; 2 reductions
+    assert f"xr.open_zarr({str(big_site['store'])!r}" in html_unescape(big_site["html"])
+
+
+def html_unescape(text: str) -> str:
+    import html
+
+    return html.unescape(text)
+
+
+def test_block_helpers_against_brute_force():
+    """Block mean, max and pick against loops over the blocks, on a plane whose size is no
+    multiple of the block (partial last blocks) with NaN cells and an all-NaN block."""
+    from reports._panels import block_pick, block_reduce, map_blocks
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(23, 17))
+    a[rng.random(a.shape) < 0.2] = np.nan
+    a[0:4, 0:3] = np.nan  # one whole block without a finite cell
+    b = map_blocks(23, 17, limit=6)
+    assert (b.ky, b.kx, b.my, b.mx) == (4, 3, 6, 6)
+    mean, mx, pick = block_reduce(a, b, "mean"), block_reduce(a, b, "max"), block_pick(a, b)
+    for i in range(b.my):
+        for j in range(b.mx):
+            block = a[i * 4:(i + 1) * 4, j * 3:(j + 1) * 3]
+            fin = block[np.isfinite(block)]
+            if fin.size == 0:
+                assert np.isnan(mean[i, j]) and np.isnan(mx[i, j])
+                assert pick[i, j] == i * 4 * 17 + j * 3  # the block's first cell
+                continue
+            assert mean[i, j] == pytest.approx(fin.mean(), rel=1e-12)
+            assert mx[i, j] == fin.max()
+            assert a.ravel()[pick[i, j]] == fin.max()
+            r, c = divmod(int(pick[i, j]), 17)
+            assert i * 4 <= r < (i + 1) * 4 and j * 3 <= c < (j + 1) * 3
+    # a plane within the limit is drawn as it is
+    small = map_blocks(23, 17, limit=400)
+    assert not small.decimated and np.array_equal(block_reduce(a, small), a, equal_nan=True)
+    # more panels, fewer cells each
+    assert map_blocks(1000, 1000, panels=1).ky == 3 and map_blocks(1000, 1000, panels=4).ky == 5
