@@ -88,7 +88,7 @@ class SolveResult:
     method : the method that computed it.
     start : how each point's solve started (``periodic``; None for ``march``): 0 cold,
     1 warm from its sweep's previous point, 2 warm failed, then cold
-    (``periodic.driver.START_*``).
+    (``periodic.point.START_*``).
     Failed points have NaN in every float output.
     """
 
@@ -213,7 +213,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         Solve the points as sweeps (``periodic`` only): (n_sweeps + 1,) increasing offsets
         from 0 to n_points; points sweeps[k] .. sweeps[k + 1] - 1 form one sweep, solved in
         that order, each point starting from its predecessor's periodic orbit (its u(0),
-        node weights and norm; ``periodic.driver.warm_start``), the first cold.  Order the
+        node weights and norm; ``periodic.point.warm_start``), the first cold.  Order the
         points so that neighbours follow each other (``snake_order``).  Every result is
         judged by the same error estimate as a cold solve; where the warm start fails the
         point is solved cold.  A sweep's results depend on its own points only.  Default:

@@ -13,7 +13,9 @@ from test_pipeline_structure import REPO, import_cycles, private_imports
 #: kernel, the controller, the events, the estimator and the driver by their file names)
 LAYOUT = {
     "model": {"kinematics", "force", "physics", "limits"},
-    "periodic": {"radau", "control", "switching", "sweep", "global_error", "shooting", "driver"},
+    "periodic": {"radau", "defect", "control", "steps", "record", "switching", "events", "traps",
+                 "integrator", "estimators", "global_error", "shooting", "point", "driver",
+                 "sweep"},
     "march": {"heun", "driver"},
     "adjoint": {"gradient", "optimize"},
     "tools": {"bench", "bench_optimize", "bench_sweep", "honesty"},
@@ -92,3 +94,14 @@ def test_the_checks_walk_subpackages(tmp_path):
     assert import_cycles(graph) == [["a.x", "b.y", "a.x"]]
     assert private_imports(graph) == ["b.y: from a.x import _secret"]
     assert set(graph["top"]) == {"a.x", "b.y"}
+
+
+#: no module of the engine longer than this (issue 37: a module holds one role; scipy's
+#: ``integrate/_ivp/radau.py`` is ~570 lines with its dense output)
+MAX_ENGINE_MODULE_LINES = 550
+
+
+def test_engine_modules_hold_one_role_each():
+    long = {p.name: n for p in (REPO / "solver" / "periodic").glob("*.py")
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_ENGINE_MODULE_LINES}
+    assert long == {}

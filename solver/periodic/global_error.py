@@ -1,6 +1,6 @@
 """The global error of the engine's period integrals: one estimate behind one rule.
 
-Every estimator takes a converged periodic solution (the ``periodic.sweep`` workspace) and returns
+Every estimator takes a converged periodic solution (the ``periodic.record`` step record) and returns
 its errors of int u and int Pi (absolute) and, per step, the share of the tolerance it
 finds there; ``combine`` is the one rule that adds them up: the estimators' errors add (they
 count different errors: no cancellation is assumed between them), and the estimate is the
@@ -19,7 +19,7 @@ lambda_{n+1} e, to first order.
 Estimators here:
 
 - ``local_error_estimate``: each step's local error from its defect (``periodic.radau.defect_error``,
-  or the split re-solve of ``periodic.sweep.event_split_errors``) weighted by the node weights, plus
+  or the split re-solve of ``periodic.estimators.event_split_errors``) weighted by the node weights, plus
   its own quadrature errors.
 """
 from __future__ import annotations
@@ -29,8 +29,9 @@ import math
 from numba import njit
 
 from .radau import ERROR_ORDER, StepError
-from .sweep import (ACCEPT_STEP, ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q_P, Q_U, T,
-                     floored_errors)
+from .estimators import floored_errors
+from .record import ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q_P, Q_U, T
+from .steps import ACCEPT_STEP
 
 
 @njit(cache=True, error_model="numpy")
@@ -53,10 +54,10 @@ def node_weights(W, N, one_minus_M):
 
 @njit(cache=True, error_model="numpy")
 def local_error_estimate(W, N, shares, scale_u, scale_p):
-    """The steps' local errors (``periodic.sweep.estimate_sweep``) carried to the period integrals:
+    """The steps' local errors (``periodic.estimators.estimate_sweep``) carried to the period integrals:
     returns (error of int u, error of int Pi) and adds each step's weighted error (in the
     norm: the larger of U's and P's relative shares) to ``shares``.  Each step's errors are
-    counted above their rounding floor (``periodic.sweep.floored_errors``, rows FLOOR)."""
+    counted above their rounding floor (``periodic.estimators.floored_errors``, rows FLOOR)."""
     e_u = 0.0
     e_p = 0.0
     for n in range(N):
@@ -94,7 +95,7 @@ def refinement_ceiling(W, N, shares, target, ceilings):
     """Per step, the largest step the next adaptive sweep may take inside it: inf where the
     step's share is within ``target`` times its length, else its length times
     (target h / share)^(1 / ERROR_ORDER) but at least 1 / MAX_REFINEMENT, and at least
-    ``periodic.sweep.ACCEPT_STEP``.  Returns how many steps ask for refinement."""
+    ``periodic.steps.ACCEPT_STEP``.  Returns how many steps ask for refinement."""
     asked = 0
     for n in range(N):
         h = W[T, n + 1] - W[T, n]

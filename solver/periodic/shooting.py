@@ -1,6 +1,9 @@
 """The shooting of the periodic state: the monodromy M = prod_n du_{n+1}/du_n of a sweep
 (its log and sign, without cancellation at M ~ 1), the bracketed Newton update of u(0), and
-the stage solve's tolerance relative to the speed scale.
+the stage solve's tolerance relative to the speed scale; and Newton on u(0) over a fixed step
+sequence (``frozen_newton``: frozen passes of ``periodic.integrator.frozen_sweep``), the
+period map, the period integrals of a recorded pass and the shift of a converged pass onto
+its fixed point.
 
 Shared by the engine's shooting (``periodic.driver``), its adjoint (``adjoint.gradient``) and the
 explicit march (``march.heun``), which thus do not depend on each other.
@@ -8,8 +11,13 @@ explicit march (``march.heun``), which thus do not depend on each other.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 from numba import njit
+
+from ..status import CONVERGED, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED
+from .integrator import frozen_sweep
+from .record import INT_P, INT_U, M_MINUS_1, Q_P, Q_U, SENS, STAGE, U
 
 
 @njit(cache=True, error_model="numpy")
@@ -55,3 +63,102 @@ def stage_tolerance(rtol, vscale):
     """The stage Newton's absolute tolerance in u: max(1e-5 rtol, 1e-14) V, V the speed scale.
     Every converged step carries a residual up to this size."""
     return max(1e-5 * rtol, 1e-14) * vscale
+
+
+#: frozen-grid Newton sweeps per round
+MAX_FROZEN_SWEEPS = 30
+
+
+@njit(cache=True, error_model="numpy")
+def period_map(W, N, u0):
+    """(g = u(1) - u(0), 1 - M) of a sweep: the shooting residual and one minus the
+    monodromy (``periodic.shooting.one_minus_monodromy``)."""
+    log_m = 0.0
+    sign_m = 1.0
+    for n in range(N):
+        log_m, sign_m = monodromy_factor(log_m, sign_m, W[M_MINUS_1, n])
+    return W[U, N] - u0, one_minus_monodromy(log_m, sign_m)
+
+
+@njit(cache=True, error_model="numpy")
+def period_integrals(W, N):
+    int_u = 0.0
+    int_p = 0.0
+    for n in range(N):
+        int_u += W[INT_U, n]
+        int_p += W[INT_P, n]
+    return int_u, int_p
+
+
+@njit(cache=True, error_model="numpy")
+def shift_onto_fixed_point(W, N, shift):
+    """Move the converged sweep, which starts ``shift`` short of the fixed point, onto it to
+    first order along the sensitivities (no force evaluations)."""
+    for n in range(N):
+        W[U, n] += shift
+        for i in range(3):
+            W[STAGE + i, n] += W[SENS + i, n] * shift
+        W[INT_U, n] += W[Q_U, n] * shift
+        W[INT_P, n] += W[Q_P, n] * shift
+        shift *= 1.0 + W[M_MINUS_1, n]
+    W[U, N] += shift
+
+
+class FrozenNewton(NamedTuple):
+    """What ``frozen_newton`` returns.
+
+    u0 : the last u(0); g, one_minus_M : the period map there (``period_map``); status :
+    CONVERGED (the fixed point within tol_fix, u0 inside the bracket) or the failure;
+    restart_u0 : after a failure, where the next round's adaptive sweep starts (NaN: the
+    failure stands); sweeps, evaluations : frozen sweeps made and their evaluations of F."""
+
+    u0: float
+    g: float
+    one_minus_M: float
+    status: int
+    restart_u0: float
+    sweeps: int
+    evaluations: int
+
+
+@njit(cache=True, error_model="numpy")
+def frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound):
+    """Newton on u(0) over the N recorded steps of ``W`` (``frozen_sweep``, in place) until
+    |g| <= tol_fix |1 - M|, bracketed in +-bound.
+
+    Where the frozen steps do not carry Newton to the fixed point (a stage solve fails on
+    them, a sweep is not finite, or MAX_FROZEN_SWEEPS run out), the next round's adaptive
+    sweep places its steps anew: from Newton's last proposal after a failed stage solve,
+    else from the best u(0) seen (smallest |g / (1 - M)|); where that is the start, the next
+    round would repeat this one, and the failure stands (restart_u0 NaN), as it does where
+    the period map itself is not finite."""
+    lo, hi = -bound, bound
+    start = best_u0 = u0
+    best_residual = math.inf
+    sweeps = 0
+    evaluations = 0
+    g = 0.0
+    one_minus_M = 1.0
+    status = NOT_PERIODIC
+    for _ in range(MAX_FROZEN_SWEEPS):
+        g, one_minus_M = period_map(W, N, u0)
+        if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
+            return FrozenNewton(u0, g, one_minus_M, NON_FINITE, math.nan, sweeps, evaluations)
+        if abs(g) <= tol_fix * abs(one_minus_M):
+            status = CONVERGED if abs(u0) < 0.999 * bound else NOT_PERIODIC
+            break
+        if abs(g / one_minus_M) < best_residual:
+            best_u0, best_residual = u0, abs(g / one_minus_M)
+        u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
+        status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
+        sweeps += 1
+        evaluations += e
+        if status == STAGE_SOLVE_FAILED:
+            return FrozenNewton(u0, g, one_minus_M, status, u0, sweeps, evaluations)
+        if status != CONVERGED:
+            break
+        status = NOT_PERIODIC
+    if status == CONVERGED:
+        return FrozenNewton(u0, g, one_minus_M, status, math.nan, sweeps, evaluations)
+    restart = best_u0 if best_u0 != start else math.nan
+    return FrozenNewton(u0, g, one_minus_M, status, restart, sweeps, evaluations)

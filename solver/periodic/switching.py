@@ -12,7 +12,7 @@ integral) where:
 
 And the solution itself changes fast where the links stop rotating, omega = 0 (a turning
 point of phi): the whole body then slides one way and feels the full friction, so across a
-window ~ |u| / |phi''| the force changes by O(mu) (``periodic.sweep.trap_ceiling``).  A step whose stages do not sample such a feature does not see it, nor does its
+window ~ |u| / |phi''| the force changes by O(mu) (``periodic.traps.trap_ceiling``).  A step whose stages do not sample such a feature does not see it, nor does its
 embedded error estimate.  So every one of them is a step end (diffrax ``JumpStepWrapper``,
 DifferentialEquations.jl ``tstops``):
 
@@ -69,7 +69,7 @@ class Bracket(NamedTuple):
 
 
 class SolvedStep(NamedTuple):
-    """A solved step of a sweep, as its events are sought in it (``periodic.sweep.find_event``).
+    """A solved step of a sweep, as its events are sought in it (``periodic.events.find_event``).
 
     t0, h : its start and length; u_n : u at its start; sol : its stages
     (``periodic.radau.StepSolution``: U1, U2, U3 with u_n define the collocation polynomial,
@@ -338,7 +338,7 @@ def turning_stops(code, params, stops, n_stops, omax):
     near-tangencies, flat inflections, and the power law's corners where a phase starts or
     ends with omega = 0; SIMPLE_TURNING where moreover |omega'| there is at least
     SIMPLE_SHARE of 2 pi omax (a harmonic motion's turning points: omega' = 2 pi omax),
-    so that omega grows away from it like a simple zero (``periodic.sweep.TRAP_FLOOR``); 0 else."""
+    so that omega grows away from it like a simple zero (``periodic.traps.TRAP_FLOOR``); 0 else."""
     out = np.zeros(n_stops, dtype=np.int8)
     for j in range(n_stops):
         t = stops[j]
