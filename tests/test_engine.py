@@ -12,7 +12,7 @@ import pytest
 import solver
 from references import reference
 from cases import AGREEMENT_CASES, radau_reference
-from solver.periodic import defect, estimators, events, integrator, radau, record, steps, switching, traps
+from solver.periodic import defect, estimators, events, integrator, options, radau, record, steps, switching, traps
 from solver.model.kinematics import angle_and_rate
 from solver.periodic.radau import PointPhysics
 from solver.tools.bench import solution_error
@@ -177,7 +177,7 @@ def test_a_corner_next_to_a_zero_stays_a_stop():
     count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out)
     stops = out[:count]
     assert 0.5 in stops, stops
-    near = stops[np.abs(stops - 0.5) <= switching.STOP_GAP]
+    near = stops[np.abs(stops - 0.5) <= options.STOP_GAP]
     assert list(near) == [0.5], near  # (the root merged into the corner)
 
 
@@ -318,7 +318,7 @@ def test_the_trap_clip_never_lengthens_a_step():
     """``periodic.traps.trap_clip``: a step next to a turning point is cut to its ceiling, not below
     ACCEPT_STEP, and never made longer (a step already ending on a stop closer than
     ACCEPT_STEP keeps its length: it must not cross the stop)."""
-    accept = steps.ACCEPT_STEP
+    accept = options.ACCEPT_STEP
     for h in (1e-14, 0.3 * accept, accept, 3.0 * accept, 1e-6, 0.1):
         for cap in (0.0, 1e-15, 0.5 * accept, 2.0 * accept, 1e-7, 1e-3, 1.0):
             clipped = traps.trap_clip(h, cap)
@@ -473,7 +473,8 @@ def test_a_round_refines_a_step_at_most_max_refinement_times():
     """``periodic.global_error.refinement_ceiling``: a share 2^5 above its step's target asks for a
     step half as long; one far above it (an estimate out of its regime), for at most
     MAX_REFINEMENT times shorter, not for ACCEPT_STEP; within the target, for nothing."""
-    from solver.periodic.global_error import MAX_REFINEMENT, refinement_ceiling
+    from solver.periodic.global_error import refinement_ceiling
+    from solver.periodic.options import MAX_REFINEMENT
 
     W = record.new_workspace(4)
     W[record.T, :4] = [0.0, 0.25, 0.5, 1.0]
@@ -651,7 +652,7 @@ def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
     cap = traps.trap_ceiling(code, row, _point_physics(phys), stops[j + 1], stops[j] + 0.5 * h,
                              -9e-8)
     assert cap < 1e-8 and h > 1e-2
-    assert ceilings[j] == h / traps.TRAP_SPAN
+    assert ceilings[j] == h / options.TRAP_SPAN
     flagged = np.isfinite(ceilings)
     steps = np.diff(W[record.T, :N + 1])
-    assert np.all(ceilings[flagged] >= steps[flagged] / traps.TRAP_SPAN)
+    assert np.all(ceilings[flagged] >= steps[flagged] / options.TRAP_SPAN)

@@ -15,6 +15,7 @@ LAYOUT = {
     "model": {"kinematics", "force", "physics", "limits"},
     "periodic": {"radau", "defect", "control", "steps", "record", "switching", "events", "traps",
                  "integrator", "estimators", "global_error", "shooting", "point", "driver",
+                 "options", "tolerances",
                  "sweep"},
     "march": {"heun", "driver"},
     "adjoint": {"gradient", "optimize"},

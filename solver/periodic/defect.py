@@ -18,32 +18,13 @@ import numpy as np
 from numba import njit
 
 from ..model.force import force_slope_power_sc
+from .options import DEFECT_FIT, NOISE_GAIN, THETA_LATE, THETA_MID, VARIABLE_SLOPE_LIMIT
 from .radau import A31, A32, A33, C1, C2, StepError, dense_value, embedded_error
 
 
-# ---------------------------------------------------------------- the defect estimate
-#: where the defect estimate samples a step besides its start and its stages (where the
-#: defect vanishes): one point between the first two stages, one between the last two
-THETA_MID = 0.5
-THETA_LATE = 0.85
-
-
-#: the defect estimate moves by about this many times a change of the stage values (the
-#: polynomial's slope at the start, divided by h, times h): its floor is this times the
-#: stages' error (the Newton tolerance plus rounding), which no smaller step reduces
-NOISE_GAIN = 16.0
 _EPS = float(np.finfo(np.float64).eps)
 
 
-#: the defect divided by the stages' node polynomial, linear through the start and THETA_MID,
-#: must predict the late sample within this share of it; else the step's solution is not in
-#: the asymptotic regime and the embedded estimate (conservative) is used
-DEFECT_FIT = 0.5
-
-
-#: up to this |h kappa dF/du| the resolvent of the defect estimate is integrated with the
-#: slope varying along the step (8-point Gauss-Legendre: ~1e-3 relative at the limit)
-VARIABLE_SLOPE_LIMIT = 16.0
 _GX, _GW = np.polynomial.legendre.leggauss(8)
 GL8_X = 0.5 * (_GX + 1.0)
 GL8_W = 0.5 * _GW

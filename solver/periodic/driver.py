@@ -12,13 +12,13 @@ import numpy as np
 from numba import get_num_threads, njit
 
 from ..status import CONVERGED, NON_FINITE
+from .options import GUESS_STEPS, IN_LINE_SHARE, START_CAPACITY
 from .point import N_COSTS, Orbit, fixed_grid_point, no_orbit, solve_point
 from .radau import PointPhysics
-from .record import T, U, new_workspace
-
-
-#: workspace capacity a thread starts with (steps; it doubles when a point needs more)
-START_CAPACITY = 512
+from .record import new_workspace, node_series
+# (transitional: ``adjoint.gradient`` imports these three from here)
+from .shooting import frozen_newton, shift_onto_fixed_point  # noqa: F401
+from .tolerances import stage_atol  # noqa: F401
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -119,10 +119,6 @@ def no_series():
     return Series(np.zeros(0, dtype=np.int64), empty, empty, np.zeros(0, dtype=np.int64))
 
 
-#: ``in_line``'s relative tolerance on a second difference
-IN_LINE_SHARE = 1e-9
-
-
 @njit(cache=True, error_model="numpy")
 def _second_difference_small(a, b, c):
     return abs(a - 2.0 * b + c) <= IN_LINE_SHARE * max(abs(a), abs(b), abs(c), 1e-300)
@@ -179,8 +175,9 @@ def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, series):
             _store(out, i, sol)
             if series.offsets.size > 0:
                 N = min(sol.n_steps, series.offsets[i + 1] - series.offsets[i])
-                series.tau[series.offsets[i]:series.offsets[i] + N] = W[T, :N]
-                series.u[series.offsets[i]:series.offsets[i] + N] = W[U, :N]
+                tau, u = node_series(W, N)
+                series.tau[series.offsets[i]:series.offsets[i] + N] = tau
+                series.u[series.offsets[i]:series.offsets[i] + N] = u
                 series.counts[i] = N
 
 
@@ -203,12 +200,6 @@ def solve_points(points, rtol, max_steps, runs, threads, series):
                                                      runs, out, series), range(lanes)):
             pass
     return out
-
-
-#: the fast limit's u (``model.limits.fast_limit_velocity``) that starts the shooting is taken on
-#: this many steps: it is a guess (bench, rtol 1e-4: 64 steps cost 18.7 ms per 2,000 points
-#: and the loose shooting 605 evaluations per solve, 8 steps 2.8 ms and 604, u = 0 571)
-GUESS_STEPS = 8
 
 
 def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None):
@@ -242,8 +233,3 @@ def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None):
                 n_tau=out.n_steps, iterations=out.sweeps, still=out.vscale == 0.0,
                 series=series, evaluations=out.evaluations, start=out.start)
 
-
-# Transitional: ``adjoint.gradient`` imports these from here until it uses the engine's
-# public boundary (``periodic/__init__.py``)
-from .point import stage_atol  # noqa: E402,F401
-from .shooting import frozen_newton, shift_onto_fixed_point  # noqa: E402,F401

@@ -15,22 +15,20 @@ from numba import njit
 from ..model.kinematics import angle_and_rate
 from .defect import defect_error, estimate_floor
 from .events import clear_exit_memo, find_event, new_exit_memo
-from .radau import C1, C2, StageKinematics, StepSolution, dense_value, runtime_bool, step_integrals
-from .record import (CORNER_STOP, COS, END_KIND, ERR, FLOOR, F_END, INT_P, INT_U, M_MINUS_1,
-                     OMEGA, POWER, PU_STAGE, SENS, SIN, SLOPE, STAGE, T, U)
+from .options import SPLIT_SHARE
+from .radau import C1, C2, StepError, dense_value, runtime_bool, step_integrals
+from .record import (CORNER_STOP, end_kind, end_kinematics, node_value, recorded_error,
+                     recorded_integrals, recorded_kinematics, recorded_solution, recorded_stages,
+                     set_error, set_error_floor, stage_values, step_span)
 from .steps import sample_kinematics, solve_step, stage_kinematics, start_values
 from .switching import SolvedStep
-
-
-#: a state event within this share of a recorded step's end counts as on it (rounding)
-SPLIT_SHARE = 1e-9
 
 
 @njit(cache=True, error_model="numpy")
 def weighted_error(err, lam, mu, scale_u, scale_p, floor=0.0, h=0.0, pi_u=0.0):
     """A step's error in the norm of U and P: its local error in u carried to the period
     integrals by the node weights lam, mu, plus its own quadrature errors (absolute values:
-    no cancellation is counted on).  ``floor`` (``periodic.radau.estimate_floor``) is taken off u's
+    no cancellation is counted on).  ``floor`` (``periodic.defect.estimate_floor``) is taken off u's
     error, h floor off int u's and h floor ``pi_u`` (max |dPi/du|) off int Pi's: the stage
     values' own error, which no smaller step reduces.  This is the one rule of a step's
     error, for the step-size control (floor: the stage tolerance's) and the global estimate
@@ -48,7 +46,7 @@ def floored_errors(err, floor, h, pi_u):
 
 @njit(cache=True, error_model="numpy")
 def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
-    """The defect estimate (``periodic.radau.defect_error``) of every recorded step of ``W``, in
+    """The defect estimate (``periodic.defect.defect_error``) of every recorded step of ``W``, in
     place (rows ERR), from its stored stages: two evaluations of F per step, and the start
     values where phi has a corner (``corner_nodes``, (N,)) or at tau = 0; and the estimate's
     floor (rows FLOOR) for rounding alone (the stage tolerance ``atol`` is set so that the
@@ -60,24 +58,17 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
     evaluations = 2 * N
     f0 = J0 = P0 = Pu0 = 0.0
     for n in range(N):
-        t0 = W[T, n]
-        h = W[T, n + 1] - t0
-        u = W[U, n]
+        t0, h = step_span(W, n)
+        u = node_value(W, n)
         if n == 0 or corner_nodes[n]:
             f0, J0, P0, Pu0 = start_values(code, params, t0, t0 + 0.5 * h, u, phys)
             evaluations += 1
-        step = StepSolution(W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n], W[POWER, n],
-                            W[POWER + 1, n], W[POWER + 2, n], W[SENS, n], W[SENS + 1, n],
-                            W[SENS + 2, n], W[M_MINUS_1, n], W[PU_STAGE, n],
-                            W[PU_STAGE + 1, n], W[PU_STAGE + 2, n], W[F_END, n], W[SLOPE, n],
-                            W[SLOPE + 1, n], W[SLOPE + 2, n], 0, True, math.nan)
+        step = recorded_solution(W, n)
         err, used = defect_error(u, f0, J0, P0, Pu0, step, h,
                                  sample_kinematics(code, params, t0, h), phys)
         fallbacks += not used
-        W[ERR, n] = err.u
-        W[ERR + 1, n] = err.int_u
-        W[ERR + 2, n] = err.int_pi
-        W[FLOOR, n] = estimate_floor(u, step, 0.0)
+        set_error(W, n, err)
+        set_error_floor(W, n, estimate_floor(u, step, 0.0))
         f0, J0, P0, Pu0 = kappa * step.F3, kappa * step.d3, step.P3, step.Pu3
     return fallbacks, evaluations
 
@@ -86,19 +77,17 @@ def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
 def _interior_event(code, params, phys, atol, W, N, n, memo):
     """theta of the first event (``find_event``) strictly inside recorded step n, or -1
     (``memo``: the exit functions' ``held_exits`` memo, steps visited in order)."""
-    t0 = W[T, n]
-    h = W[T, n + 1] - t0
-    if n == 0 or W[END_KIND, n - 1] == CORNER_STOP:  # (the step's side of a corner)
+    t0, h = step_span(W, n)
+    if n == 0 or end_kind(W, n - 1) == CORNER_STOP:  # (the step's side of a corner)
         phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
         S0 = math.sin(phi0)
         clear_exit_memo(memo)
     else:
-        S0, om0 = W[SIN + 2, n - 1], W[OMEGA + 2, n - 1]
-    sol = StepSolution(W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n], 0.0, 0.0, 0.0, 0.0,
-                       0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, True, math.nan)
-    kin = StageKinematics(W[SIN, n], W[SIN + 1, n], W[SIN + 2, n], W[COS, n], W[COS + 1, n],
-                          W[COS + 2, n], W[OMEGA, n], W[OMEGA + 1, n], W[OMEGA + 2, n])
-    theta = find_event(code, params, phys, SolvedStep(t0, h, W[U, n], sol, kin, S0, om0, 0.0),
+        S0, om0 = end_kinematics(W, n - 1)
+    sol = recorded_stages(W, n)
+    kin = recorded_kinematics(W, n)
+    theta = find_event(code, params, phys, SolvedStep(t0, h, node_value(W, n), sol, kin, S0, om0,
+                                                      0.0),
                        atol, runtime_bool(False), memo)
     return theta if SPLIT_SHARE < theta < 1.0 - SPLIT_SHARE else -1.0
 
@@ -118,10 +107,9 @@ def event_split_errors(code, params, phys, atol, W, N, split):
         theta = _interior_event(code, params, phys, atol, W, N, n, memo)
         if theta < 0.0:
             continue
-        t0 = W[T, n]
-        h = W[T, n + 1] - t0
-        u_n = W[U, n]
-        U1, U2, U3 = W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n]
+        t0, h = step_span(W, n)
+        u_n = node_value(W, n)
+        U1, U2, U3 = stage_values(W, n)
         h1 = theta * h
         h2 = h - h1
         first, its1 = solve_step(u_n, dense_value(C1 * theta, u_n, U1, U2, U3),
@@ -139,9 +127,11 @@ def event_split_errors(code, params, phys, atol, W, N, split):
             continue
         iu1, ip1 = step_integrals(h1, first)
         iu2, ip2 = step_integrals(h2, second)
-        W[ERR, n] = max(abs(W[ERR, n]), abs(second.U3 - U3))
-        W[ERR + 1, n] = max(abs(W[ERR + 1, n]), abs(iu1 + iu2 - W[INT_U, n]))
-        W[ERR + 2, n] = max(abs(W[ERR + 2, n]), abs(ip1 + ip2 - W[INT_P, n]))
+        old = recorded_error(W, n)
+        int_u, int_p = recorded_integrals(W, n)
+        set_error(W, n, StepError(max(abs(old.u), abs(second.U3 - U3)),
+                                  max(abs(old.int_u), abs(iu1 + iu2 - int_u)),
+                                  max(abs(old.int_pi), abs(ip1 + ip2 - int_p))))
         split[n] = True
         count += 1
     return count, evaluations

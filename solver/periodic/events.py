@@ -15,44 +15,10 @@ import numpy as np
 from numba import njit
 
 from ..model.kinematics import angle_and_rate
+from .options import CROSSING_BAND, EVENT_BAND, EVENT_NOISE, SIGN_ROUNDING
 from .radau import C1, C2, runtime_int
 from .switching import (Bracket, N_STATE_FUNCTIONS, STOP, TANGENTIAL, exit_functions, locate_exit,
                         locate_state_event, rate_slope, state_function)
-
-
-#: a state event closer than this share of its step to the step's end is taken to be on it
-EVENT_END_SHARE = 1e-6
-
-
-#: ... and one closer than this share of the previous step to the step's start is not cut:
-#: mostly it is the one that step ended at (located on its polynomial, then missed by the
-#: re-solved step by a residue; cut there, steps of 1e-7 .. 1e-8 followed, grown back by
-#: MAX_FACTOR over 5-7 steps: bench, rtol 1e-4, median n_tau 116 -> 105 with this share
-#: instead of 1e-6), but after a kinematic stop it can be another event (a reviewer: 196 of
-#: ~17.8k skipped), which then stays inside its step, judged by the error estimate (no
-#: solve's error changed against the share 1e-6 on 7 sets x 150 points x 4 rtols)
-EVENT_START_SHARE = 1e-3
-
-
-#: state switching functions within this share of their terms' size have no sign
-SIGN_ROUNDING = 64.0 * 2.0 ** -52
-
-
-#: a switching function's value has a sign beyond this many stage tolerances
-EVENT_NOISE = 8.0
-
-
-#: ... and a sign change is an event where its sides differ by more than this many delta_tau
-CROSSING_BAND = 4.0
-
-
-#: the friction's band: the body is at rest where |g| is within this many delta_tau (stops)
-EVENT_BAND = 10.0
-
-
-#: an event is cut at most this many times in a row (the located root moves as the step
-#: shrinks; past this it is accepted where the last cut put it)
-MAX_EVENT_CUTS = 4
 
 
 @njit(cache=True, error_model="numpy")

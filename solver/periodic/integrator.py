@@ -33,33 +33,20 @@ from numba import njit
 from ..model.kinematics import angle_and_rate
 from ..status import (CONVERGED, NON_FINITE, STAGE_SOLVE_FAILED, STEP_BUDGET_EXCEEDED,
                       TOLERANCE_NOT_REACHED)
-from .control import MIN_FACTOR, predict_factor
+from .control import predict_factor
 from .defect import defect_error, estimate_floor
 from .estimators import weighted_error
-from .events import (END_D1, END_D2, END_D3, EVENT_BAND, EVENT_END_SHARE, EVENT_START_SHARE,
-                     MAX_EVENT_CUTS, clear_exit_memo, find_event, new_exit_memo, stop_reach,
-                     stop_reach_at)
-from .radau import C1, C2, StageKinematics, StepError, dense_value, embedded_error, runtime_int
-from .record import (CORNER_STOP, COS, END_KIND, ERR, KINEMATIC_STOP, OMEGA, ORDINARY, SENS, SIN,
-                     STAGE, STATE_EVENT, T, U, grown, record_step)
-from .steps import (ACCEPT_STEP, MIN_STEP, sample_kinematics, solve_step, stage_kinematics,
-                    start_values)
+from .events import (END_D1, END_D2, END_D3, clear_exit_memo, find_event, new_exit_memo,
+                     stop_reach, stop_reach_at)
+from .options import (ACCEPT_STEP, EVENT_BAND, EVENT_END_SHARE, EVENT_START_SHARE, FIT_DISTRUST,
+                      MAX_ATTEMPTS_PER_STEP, MAX_EVENT_CUTS, MIN_FACTOR, MIN_STEP, STRETCH)
+from .radau import C1, C2, dense_value, embedded_error, runtime_int
+from .record import (CORNER_STOP, KINEMATIC_STOP, ORDINARY, STATE_EVENT, close_period, end_kind,
+                     grown, predicted_stages, record_step, recorded_error, recorded_kinematics,
+                     step_span)
+from .steps import sample_kinematics, solve_step, stage_kinematics, start_values
 from .switching import SolvedStep
 from .traps import step_turning, trap_clip, trap_limit
-
-
-#: a step whose defect model does not fit (``periodic.radau.defect_error``) is judged by this many
-#: times its error estimate (measured: the fallback estimates were up to 12x too small next
-#: to turning points at scaled period 0.01)
-FIT_DISTRUST = 16.0
-
-
-#: a step is stretched to a stop within this factor of it, and split evenly up to twice it
-STRETCH = 1.25
-
-
-#: a sweep gives up after this many attempted steps per accepted one (plus 16)
-MAX_ATTEMPTS_PER_STEP = 32
 
 
 class Stops(NamedTuple):
@@ -346,7 +333,7 @@ def adaptive_sweep(code, params, phys, point_stops, u0, h_first, aim, W):
                 phys, u, f0, band, kin.S3, kin.C3, kin.om3,
                 (END_D1 * kin.om1 + END_D2 * kin.om2 + END_D3 * kin.om3) / h)
         h = h_next
-    W[T, n] = 1.0
+    close_period(W, n)
     return Sweep(W, n, status, h, evaluations)
 
 
@@ -360,20 +347,13 @@ def frozen_sweep(code, params, phys, u0, atol, W, N):
     u = u0
     iterations = 0
     for n in range(N):
-        t0 = W[T, n]
-        h = W[T, n + 1] - t0
-        kin = StageKinematics(W[SIN, n], W[SIN + 1, n], W[SIN + 2, n], W[COS, n],
-                              W[COS + 1, n], W[COS + 2, n], W[OMEGA, n], W[OMEGA + 1, n],
-                              W[OMEGA + 2, n])
-        du = u - W[U, n]
-        sol, its = solve_step(u, W[STAGE, n] + W[SENS, n] * du,
-                              W[STAGE + 1, n] + W[SENS + 1, n] * du,
-                              W[STAGE + 2, n] + W[SENS + 2, n] * du, h, kin, phys, atol,
-                              math.inf, math.nan)
+        t0, h = step_span(W, n)
+        kin = recorded_kinematics(W, n)
+        g1, g2, g3 = predicted_stages(W, n, u)
+        sol, its = solve_step(u, g1, g2, g3, h, kin, phys, atol, math.inf, math.nan)
         iterations += 3 * its
         if not sol.ok:
             return (STAGE_SOLVE_FAILED if math.isfinite(sol.U3) else NON_FINITE), iterations
-        zero = StepError(W[ERR, n], W[ERR + 1, n], W[ERR + 2, n])
-        record_step(W, n, t0, h, u, sol, zero, kin, W[END_KIND, n])
+        record_step(W, n, t0, h, u, sol, recorded_error(W, n), kin, end_kind(W, n))
         u = sol.U3
     return CONVERGED, iterations

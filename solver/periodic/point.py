@@ -47,40 +47,16 @@ from ..status import CONVERGED, NON_FINITE, NOT_PERIODIC, NO_MOTION, TOLERANCE_N
 from .estimators import estimate_sweep, event_split_errors
 from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
 from .integrator import Stops, SweepAim, WeightModel, adaptive_sweep, frozen_sweep
+from .options import (FIRST_STEP, MAX_LOOSE_SWEEPS, MAX_ROUNDS, MIN_STEP, RESIDUAL_WEIGHT,
+                      WARM_ATOL_SLACK)
 from .radau import ERROR_ORDER, PointPhysics
-from .record import (CORNER_STOP, END_KIND, LAMBDA, MU, SENS, STAGE, T, U, new_workspace,
-                     stage_kinematics_into)
+from .record import (CORNER_STOP, end_kind, new_workspace, node_columns, node_weight,
+                     set_step_span, set_step_start, stage_kinematics_into, step_span)
 from .shooting import (bracketed_newton_update, frozen_newton, period_integrals, period_map,
-                       shift_onto_fixed_point, stage_tolerance)
-from .steps import MIN_STEP
+                       shift_onto_fixed_point)
 from .switching import MAX_STOPS, kinematic_stops, stop_speed, turning_stops
+from .tolerances import Tolerances, norm_scales, stage_atol, target_stage_atol, tolerances, u0_bound
 from .traps import trapped_steps
-
-
-#: the stage tolerance is at most this share of delta_tau (p = 0; ``stage_atol``)
-BAND_SHARE = 0.01
-
-
-#: tolerance of the loose shooting (step 2)
-LOOSE_RTOL = 1e-2
-
-
-#: at most this many loose sweeps
-MAX_LOOSE_SWEEPS = 8
-
-
-#: the adaptive sweeps aim at this share of the tolerance (the rest is the margin for the
-#: node weights of the converged solution, which the sweep only knew approximately)
-TARGET_SHARE = 0.8
-
-
-#: rounds of steps 3-4
-MAX_ROUNDS = 4
-
-
-#: a shooting residual kept where the frozen period map jumps over its fixed point counts
-#: this many times its first-order effect on the period integrals (``solve_point``)
-RESIDUAL_WEIGHT = 2.0
 
 
 #: the force evaluations of a solve, by phase (``solve_point``'s last output)
@@ -91,10 +67,6 @@ N_COSTS = 4
 #: how a solve started (``PointSolution.start``): cold (loose shooting from the fast limit);
 #: warm, from the previous point of its sweep (``warm_start``); warm start failed, then cold
 START_COLD, START_WARM, START_WARM_REJECTED = 0, 1, 2
-
-
-#: first step of the first sweep
-FIRST_STEP = 1.0 / 16.0
 
 
 class PointSolution(NamedTuple):
@@ -122,19 +94,6 @@ class PointSolution(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
-def stage_atol(rtol, scale, phys):
-    """The stage Newton's tolerance: ``periodic.shooting.stage_tolerance`` of the scale, and for p = 0
-    at most BAND_SHARE delta_tau: where the body sticks F rises by O(mu) across a band of
-    u ~delta_tau wide, and stages solved only to a tolerance wider than it land anywhere on
-    the saturated force (measured: delta 1e-10, tolerance 4e-8 V, u chattering +-1e-6 around
-    rest, 131,072 steps)."""
-    atol = stage_tolerance(rtol, scale)
-    if phys.p == 0.0:
-        atol = min(atol, BAND_SHARE * phys.dtau)
-    return atol
-
-
-@njit(cache=True, error_model="numpy")
 def _largest_weight(model, scale_u, scale_p):
     """max(1, |lambda|, |mu| scale_u / scale_p) over the model's nodes: a stage error e moves
     U by lambda e (relative to scale_u) and P by mu e (relative to scale_p), so the stage
@@ -148,25 +107,24 @@ def _largest_weight(model, scale_u, scale_p):
 
 @njit(cache=True, error_model="numpy")
 def _model(W, N, ceilings):
-    return WeightModel(W[T, :N + 1].copy(), W[LAMBDA, :N + 1].copy(), W[MU, :N + 1].copy(),
-                       ceilings[:N].copy(), N)
+    t, lam, mu = node_columns(W, N)
+    return WeightModel(t, lam, mu, ceilings[:N].copy(), N)
 
 
 class PointProblem(NamedTuple):
     """One point's problem as every phase of ``solve_point`` sees it: the kinematics' kernel
     encoding ``code``, ``params`` (one row, ``model.kinematics``); ``phys`` (PointPhysics);
-    ``stops`` (its kinematic ``Stops``); ``vscale`` = V; ``rtol``; ``max_steps`` (steps per
-    period before STEP_BUDGET_EXCEEDED); ``tol_fix`` (the shooting's tolerance on
-    |g / (1 - M)|, 1e-3 rtol V) and ``bound`` (u(0) is bracketed in +-bound)."""
+    ``stops`` (its kinematic ``Stops``); ``vscale`` = V; ``tols``, the ``Tolerances`` of
+    rtol (``periodic.tolerances``); ``max_steps`` (steps per period before
+    STEP_BUDGET_EXCEEDED) and ``bound`` (u(0) is bracketed in +-bound)."""
 
     code: int
     params: np.ndarray
     phys: PointPhysics
     stops: Stops
     vscale: float
-    rtol: float
+    tols: Tolerances
     max_steps: int
-    tol_fix: float
     bound: float
 
 
@@ -230,20 +188,20 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     code, params, phys = problem.code, problem.params, problem.phys
     corner_nodes = np.zeros(N, dtype=np.bool_)
     for n in range(N - 1):
-        corner_nodes[n + 1] = W[END_KIND, n] == CORNER_STOP
+        corner_nodes[n + 1] = end_kind(W, n) == CORNER_STOP
     evaluations = estimate_sweep(code, params, phys, corner_nodes, atol, W, N)[1]
     split = np.zeros(N, dtype=np.bool_)
     evaluations += event_split_errors(code, params, phys, atol, W, N, split)[1]
     node_weights(W, N, one_minus_M)
     int_u, int_p = period_integrals(W, N)
-    scale_u = max(abs(int_u), 1e-3 * problem.vscale)
-    scale_p = abs(int_p) if int_p != 0.0 else 1.0
+    scale_u, scale_p = norm_scales(int_u, int_p, problem.vscale)
     shares = np.zeros(N)
     e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
     # a kept shooting residual g is a jump of u at node 0: it moves int u by lambda_0 g
     # and int Pi by mu_0 g to first order (the node weights' meaning), counted twice
-    e_u += RESIDUAL_WEIGHT * abs(W[LAMBDA, 0] * residual)
-    e_p += RESIDUAL_WEIGHT * abs(W[MU, 0] * residual)
+    lam0, mu0 = node_weight(W, 0)
+    e_u += RESIDUAL_WEIGHT * abs(lam0 * residual)
+    e_p += RESIDUAL_WEIGHT * abs(mu0 * residual)
     estimate = combine(e_u, e_p, scale_u, scale_p)
     # the steps next to turning points judged again by the converged u (``trapped_steps``)
     trap_caps = np.full(N, math.inf)
@@ -253,17 +211,18 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
 
 
 @njit(cache=True, error_model="numpy")
-def _refinement_model(W, N, judged, rtol):
+def _refinement_model(W, N, judged, tols):
     """The weight model of the next round: the converged sweep's node weights, and ceilings
     on the steps that asked for refinement (or all steps shrunk evenly where none asked
     alone) and on the trapped ones."""
+    rtol = tols.rtol
     ceilings = np.full(N, math.inf)
     if judged.estimate > rtol:
-        asked = refinement_ceiling(W, N, judged.shares, TARGET_SHARE * rtol, ceilings)
+        asked = refinement_ceiling(W, N, judged.shares, tols.target, ceilings)
         if asked == 0:
             shrink = 0.9 * (rtol / judged.estimate) ** (1.0 / ERROR_ORDER)
             for n in range(N):
-                ceilings[n] = shrink * (W[T, n + 1] - W[T, n])
+                ceilings[n] = shrink * step_span(W, n)[1]
     for n in range(N):
         ceilings[n] = min(ceilings[n], judged.trap_caps[n])
     return _model(W, N, ceilings)
@@ -274,7 +233,8 @@ def _rounds(problem, start, W, evals, sweeps, start_kind):
     """Steps 3-4 of the module docstring, at most MAX_ROUNDS times from ``start``
     (RoundStart).  Returns (W, PointSolution)."""
     code, params, phys = problem.code, problem.params, problem.phys
-    rtol, vscale = problem.rtol, problem.vscale
+    tols, vscale = problem.tols, problem.vscale
+    rtol = tols.rtol
     u0, h_first, model, atol = start.u0, start.h_first, start.model, start.atol
     scale_u, scale_p = start.scale_u, start.scale_p
     nan = math.nan
@@ -282,7 +242,7 @@ def _rounds(problem, start, W, evals, sweeps, start_kind):
     N = 0
     failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
     for _ in range(MAX_ROUNDS):
-        aim = SweepAim(TARGET_SHARE * rtol, scale_u, scale_p, model, atol, problem.max_steps,
+        aim = SweepAim(tols.target, scale_u, scale_p, model, atol, problem.max_steps,
                        True, True)
         sweep = adaptive_sweep(code, params, phys, problem.stops, u0, h_first, aim, W)
         W, N, status = sweep.W, sweep.N, sweep.status
@@ -292,7 +252,7 @@ def _rounds(problem, start, W, evals, sweeps, start_kind):
             return W, PointSolution(nan, nan, u0, status, N, sweeps, math.inf, evals, vscale,
                                     start_kind)
         round_start = u0
-        fn = frozen_newton(code, params, phys, u0, atol, W, N, problem.tol_fix, problem.bound)
+        fn = frozen_newton(code, params, phys, u0, atol, W, N, tols.shooting, problem.bound)
         sweeps += fn.sweeps
         evals[COST_FROZEN] += fn.evaluations
         u0, g, one_minus_M = fn.u0, fn.g, fn.one_minus_M
@@ -336,8 +296,8 @@ def _rounds(problem, start, W, evals, sweeps, start_kind):
             return W, PointSolution(judged.int_u, judged.int_p, u0, CONVERGED, N, sweeps,
                                     estimate, evals, vscale, start_kind)
         failure = TOLERANCE_NOT_REACHED
-        model = _refinement_model(W, N, judged, rtol)
-        h_first = min(h_first, W[T, 1] - W[T, 0])
+        model = _refinement_model(W, N, judged, tols)
+        h_first = min(h_first, step_span(W, 0)[1])
     return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals, vscale,
                             start_kind)
 
@@ -362,8 +322,8 @@ def _cold_start(problem, u_guess, W, evals):
     """Step 2, the loose shooting from ``u_guess``.  Returns (W, RoundStart, status, N,
     sweeps): status CONVERGED, or the failure that ends the solve."""
     code, params, phys = problem.code, problem.params, problem.phys
-    rtol, vscale = problem.rtol, problem.vscale
-    loose = max(LOOSE_RTOL, rtol)
+    tols, vscale = problem.tols, problem.vscale
+    rtol, loose = tols.rtol, tols.loose
     u0 = u_guess
     empty = np.zeros(1)
     model = WeightModel(empty, empty, empty, empty, 0)
@@ -374,7 +334,7 @@ def _cold_start(problem, u_guess, W, evals):
     lo, hi = -problem.bound, problem.bound
     scale_u = scale_p = 1.0
     for _ in range(MAX_LOOSE_SWEEPS):
-        aim = SweepAim(TARGET_SHARE * loose, vscale, math.inf, model,
+        aim = SweepAim(tols.loose_target, vscale, math.inf, model,
                        stage_atol(loose, vscale, phys), problem.max_steps, True, False)
         sweep = adaptive_sweep(code, params, phys, problem.stops, u0, FIRST_STEP, aim, W)
         W, N, status = sweep.W, sweep.N, sweep.status
@@ -383,8 +343,7 @@ def _cold_start(problem, u_guess, W, evals):
         if status != CONVERGED:
             return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), status, N, sweeps
         int_u, int_p = period_integrals(W, N)
-        scale_u = max(abs(int_u), 1e-3 * vscale)
-        scale_p = abs(int_p) if int_p != 0.0 else 1.0
+        scale_u, scale_p = norm_scales(int_u, int_p, vscale)
         g, one_minus_M = period_map(W, N, u0)
         if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
             return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), NON_FINITE, N, sweeps
@@ -396,8 +355,8 @@ def _cold_start(problem, u_guess, W, evals):
         if moved <= loose * vscale:
             break
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
-    atol = stage_atol(rtol, scale_u, phys) / _largest_weight(model, scale_u, scale_p)
-    h_first = max((W[T, 1] - W[T, 0]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
+    atol = target_stage_atol(rtol, scale_u, phys, _largest_weight(model, scale_u, scale_p))
+    h_first = max((step_span(W, 0)[1]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
     return W, RoundStart(u0, h_first, model, atol, scale_u, scale_p), CONVERGED, N, sweeps
 
 
@@ -406,15 +365,9 @@ def _largest_node_weight(W, N, scale_u, scale_p):
     """``_largest_weight`` of the node weights in W's rows LAMBDA and MU."""
     largest = 1.0
     for n in range(N + 1):
-        largest = max(largest, abs(W[LAMBDA, n]), abs(W[MU, n]) * scale_u / scale_p)
+        lam, mu = node_weight(W, n)
+        largest = max(largest, abs(lam), abs(mu) * scale_u / scale_p)
     return largest
-
-
-#: a warm solve stands only where the stage tolerance it used (set by the neighbour's norm and
-#: node weights) is at most this factor above the one the point's own converged solution sets
-#: (measured without this check: short_period_harmonic point 78 at rtol 1e-3, its neighbour's
-#: scaled period 10x longer, 51 steps, estimate 0.84 rtol, error 41 rtol)
-WARM_ATOL_SLACK = 2.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -428,8 +381,8 @@ def warm_start(W, orbit, problem):
     slower: ``docs/validation.md``, "Warm starts".)"""
     N = orbit.N
     model = _model(W, N, np.full(N, math.inf))
-    atol = stage_atol(problem.rtol, orbit.scale_u, problem.phys) / orbit.largest_weight
-    return RoundStart(orbit.u0, W[T, 1] - W[T, 0], model, atol, orbit.scale_u, orbit.scale_p)
+    atol = target_stage_atol(problem.tols.rtol, orbit.scale_u, problem.phys, orbit.largest_weight)
+    return RoundStart(orbit.u0, step_span(W, 0)[1], model, atol, orbit.scale_u, orbit.scale_p)
 
 
 @njit(cache=True, error_model="numpy")
@@ -461,10 +414,8 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit)
     if vscale == 0.0:
         return W, PointSolution(0.0, 0.0, 0.0, NO_MOTION, 0, 0, 0.0, evals, vscale,
                                 START_COLD), no_orbit()
-    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
-    bound = 1e3 * vscale + 10.0 * abs(u_guess)
-    problem = PointProblem(code, params, phys, point_stops, vscale, rtol, max_steps, tol_fix,
-                           bound)
+    problem = PointProblem(code, params, phys, point_stops, vscale, tolerances(rtol, vscale),
+                           max_steps, u0_bound(vscale, u_guess))
     verdict = START_COLD
     if orbit.N > 0:
         # warm: the rounds of steps 3-4 from the neighbour's orbit (``warm_start``)
@@ -472,12 +423,12 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit)
         W, sol = _rounds(problem, start, W, evals, 0, START_WARM)
         if sol.status == CONVERGED:
             own = _orbit_of(W, sol, problem)
-            own_atol = stage_atol(rtol, own.scale_u, phys) / own.largest_weight
+            own_atol = target_stage_atol(rtol, own.scale_u, phys, own.largest_weight)
             if start.atol <= WARM_ATOL_SLACK * own_atol:
                 return W, sol, own
             # the neighbour's norm and node weights set a stage tolerance too loose for this
             # point's (``_largest_weight``): the rounds again with the point's own
-            start = RoundStart(sol.u0, W[T, 1] - W[T, 0], _model(W, sol.n_steps,
+            start = RoundStart(sol.u0, step_span(W, 0)[1], _model(W, sol.n_steps,
                                np.full(sol.n_steps, math.inf)), own_atol, own.scale_u,
                                own.scale_p)
             W, sol = _rounds(problem, start, W, evals, sol.sweeps, START_WARM)
@@ -497,8 +448,7 @@ def _orbit_of(W, sol, problem):
     """The ``Orbit`` of a solution whose final sweep is in ``W`` (none unless CONVERGED)."""
     if sol.status != CONVERGED:
         return no_orbit()
-    scale_u = max(abs(sol.int_u), 1e-3 * problem.vscale)
-    scale_p = abs(sol.int_pi) if sol.int_pi != 0.0 else 1.0
+    scale_u, scale_p = norm_scales(sol.int_u, sol.int_pi, problem.vscale)
     return Orbit(sol.n_steps, sol.u0, scale_u, scale_p,
                  _largest_node_weight(W, sol.n_steps, scale_u, scale_p))
 
@@ -512,19 +462,14 @@ def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
     W = new_workspace(N)
     phys_atol = stage_atol(rtol, vscale, phys)
     for n in range(N):
-        W[T, n] = grid[n]
-        W[T, n + 1] = grid[n + 1]
+        set_step_span(W, n, grid[n], grid[n + 1])
         stage_kinematics_into(code, params, W, n)
-        W[U, n] = u_guess
-        for i in range(3):
-            W[STAGE + i, n] = u_guess
-            W[SENS + i, n] = 0.0
-    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
-    bound = 1e3 * vscale + 10.0 * abs(u_guess)
+        set_step_start(W, n, u_guess, u_guess, 0.0)
     status, _ = frozen_sweep(code, params, phys, u_guess, phys_atol, W, N)
     if status != CONVERGED:
         return math.nan, math.nan, status
-    fn = frozen_newton(code, params, phys, u_guess, phys_atol, W, N, tol_fix, bound)
+    fn = frozen_newton(code, params, phys, u_guess, phys_atol, W, N,
+                       tolerances(rtol, vscale).shooting, u0_bound(vscale, u_guess))
     if fn.status != CONVERGED:
         return math.nan, math.nan, fn.status
     shift_onto_fixed_point(W, N, fn.g / fn.one_minus_M)

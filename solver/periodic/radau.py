@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit
 
 from ..model.force import force_slope_power_sc
+from .options import FIRST_CORRECTION_SHARE, MAX_STAGE_ITERATIONS, SLOPE_SHARE
 
 
 _S6 = math.sqrt(6.0)
@@ -71,19 +72,6 @@ ORDER = 5
 #: the local errors the step-size control sees are O(h^(ERROR_ORDER + 1)): those of the
 #: defect estimate (``defect_error``; its fallback, the embedded estimate, is O(h^4))
 ERROR_ORDER = 5
-MAX_STAGE_ITERATIONS = 40
-
-
-#: Newton's first correction is taken as the last where the quadratic constant carried from
-#: the previous step predicts the next correction below this share of the tolerance
-#: (``radau5_step``'s ``rate``).  A prediction, not a bound (stages up to 3.7e5 atol off were
-#: measured), so ``periodic.integrator.adaptive_sweep`` uses it in the loose sweeps only (bench: 857 ->
-#: 601 evaluations per solve there; docs/validation.md)
-FIRST_CORRECTION_SHARE = 0.1
-
-
-#: ... and only where dF/du at the predicted stages is within this share of ``slope``
-SLOPE_SHARE = 0.25
 
 
 # the tableau as scalars for the compiled kernels (numba reads module globals as constants)

@@ -10,17 +10,18 @@ passes rewrite its columns in place.
 """
 from __future__ import annotations
 
+import math
 
 import numpy as np
 from numba import njit
 
-from .radau import step_integrals, step_weights
+from .radau import StageKinematics, StepError, StepSolution, step_integrals, step_weights
 from .steps import stage_kinematics
 
 
 # ---------------------------------------------------------------- workspace fields
 # (rows of one float64 array, not a NamedTuple of arrays: numba grows, copies and passes the
-# sweep's state as one contiguous block, and frozen sweeps rewrite its columns in place)
+# pass's state as one contiguous block, and frozen passes rewrite its columns in place)
 T = 0            # node times tau_n, n = 0 .. N (tau_N = 1)
 U = 1            # u at the nodes
 STAGE = 2        # stage values U_1..U_3 of step n: rows STAGE .. STAGE + 2
@@ -41,7 +42,7 @@ END_KIND = 30    # what ends step n: ORDINARY, KINEMATIC_STOP, CORNER_STOP, STAT
 PU_STAGE = 31    # dPi/du at the stages: rows PU_STAGE .. PU_STAGE + 2
 SLOPE = 34       # dF/du at the stages: rows SLOPE .. SLOPE + 2
 F_END = 37       # F at the step's end (its last stage)
-FLOOR = 38       # the floor of the step's estimate of u's error (``periodic.radau.estimate_floor``)
+FLOOR = 38       # the floor of the step's estimate of u's error (``periodic.defect.estimate_floor``)
 N_FIELDS = 39
 ORDINARY = 0.0
 KINEMATIC_STOP = 1.0
@@ -102,3 +103,190 @@ def stage_kinematics_into(code, params, W, n):
     _put3(W, SIN, n, kin.S1, kin.S2, kin.S3)
     _put3(W, COS, n, kin.C1, kin.C2, kin.C3)
     _put3(W, OMEGA, n, kin.om1, kin.om2, kin.om3)
+
+
+# ---------------------------------------------------------------- reading and writing a step
+# (the only code that indexes the rows: every other module reads and writes the record
+# through these; numba inlines them, so they cost nothing per call)
+@njit(cache=True, error_model="numpy")
+def node_time(W, n):
+    """tau_n."""
+    return W[T, n]
+
+
+@njit(cache=True, error_model="numpy")
+def step_span(W, n):
+    """(tau_n, h_n) of step n."""
+    t0 = W[T, n]
+    return t0, W[T, n + 1] - t0
+
+
+@njit(cache=True, error_model="numpy")
+def node_value(W, n):
+    """u at node n (n = N: the pass's end value)."""
+    return W[U, n]
+
+
+@njit(cache=True, error_model="numpy")
+def end_kind(W, n):
+    """What ends step n: ORDINARY, KINEMATIC_STOP, CORNER_STOP or STATE_EVENT."""
+    return W[END_KIND, n]
+
+
+@njit(cache=True, error_model="numpy")
+def stage_values(W, n):
+    """(U_1, U_2, U_3) of step n."""
+    return W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n]
+
+
+@njit(cache=True, error_model="numpy")
+def predicted_stages(W, n, u):
+    """The stages of step n moved to the start value ``u`` along their sensitivities dU_i/du_n
+    (a frozen pass's first guess)."""
+    du = u - W[U, n]
+    return (W[STAGE, n] + W[SENS, n] * du, W[STAGE + 1, n] + W[SENS + 1, n] * du,
+            W[STAGE + 2, n] + W[SENS + 2, n] * du)
+
+
+@njit(cache=True, error_model="numpy")
+def recorded_kinematics(W, n):
+    """The ``StageKinematics`` step n was solved with."""
+    return StageKinematics(W[SIN, n], W[SIN + 1, n], W[SIN + 2, n], W[COS, n], W[COS + 1, n],
+                           W[COS + 2, n], W[OMEGA, n], W[OMEGA + 1, n], W[OMEGA + 2, n])
+
+
+@njit(cache=True, error_model="numpy")
+def end_kinematics(W, n):
+    """(sin phi, dphi/dtau) at the end of step n (its last stage)."""
+    return W[SIN + 2, n], W[OMEGA + 2, n]
+
+
+@njit(cache=True, error_model="numpy")
+def recorded_solution(W, n):
+    """The ``StepSolution`` of step n as recorded (F at the stages other than the last, the
+    Newton counts and rate are not kept: 0, True, NaN)."""
+    return StepSolution(W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n], W[POWER, n],
+                        W[POWER + 1, n], W[POWER + 2, n], W[SENS, n], W[SENS + 1, n],
+                        W[SENS + 2, n], W[M_MINUS_1, n], W[PU_STAGE, n], W[PU_STAGE + 1, n],
+                        W[PU_STAGE + 2, n], W[F_END, n], W[SLOPE, n], W[SLOPE + 1, n],
+                        W[SLOPE + 2, n], 0, True, math.nan)
+
+
+@njit(cache=True, error_model="numpy")
+def recorded_stages(W, n):
+    """A ``StepSolution`` with step n's stage values only (the rest 0): what the event
+    search reads."""
+    return StepSolution(W[STAGE, n], W[STAGE + 1, n], W[STAGE + 2, n], 0.0, 0.0, 0.0, 0.0,
+                        0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, True, math.nan)
+
+
+@njit(cache=True, error_model="numpy")
+def recorded_error(W, n):
+    """The ``StepError`` estimate of step n."""
+    return StepError(W[ERR, n], W[ERR + 1, n], W[ERR + 2, n])
+
+
+@njit(cache=True, error_model="numpy")
+def set_error(W, n, err):
+    """Record the ``StepError`` estimate ``err`` of step n."""
+    W[ERR, n] = err.u
+    W[ERR + 1, n] = err.int_u
+    W[ERR + 2, n] = err.int_pi
+
+
+@njit(cache=True, error_model="numpy")
+def error_floor(W, n):
+    return W[FLOOR, n]
+
+
+@njit(cache=True, error_model="numpy")
+def set_error_floor(W, n, floor):
+    W[FLOOR, n] = floor
+
+
+@njit(cache=True, error_model="numpy")
+def largest_power_slope(W, n):
+    """max |dPi/du| over the stages of step n."""
+    return max(abs(W[PU_STAGE, n]), abs(W[PU_STAGE + 1, n]), abs(W[PU_STAGE + 2, n]))
+
+
+@njit(cache=True, error_model="numpy")
+def recorded_integrals(W, n):
+    """(int u, int Pi) over step n."""
+    return W[INT_U, n], W[INT_P, n]
+
+
+@njit(cache=True, error_model="numpy")
+def monodromy_minus_1(W, n):
+    """du_{n+1}/du_n - 1 of step n."""
+    return W[M_MINUS_1, n]
+
+
+@njit(cache=True, error_model="numpy")
+def integral_sensitivity(W, n, which):
+    """d(int_step u)/du_n (``which`` 0) or d(int_step Pi)/du_n (1) of step n."""
+    return W[Q_U + which, n]
+
+
+@njit(cache=True, error_model="numpy")
+def node_weight(W, n):
+    """(lambda, mu) at node n (``periodic.global_error.node_weights``)."""
+    return W[LAMBDA, n], W[MU, n]
+
+
+@njit(cache=True, error_model="numpy")
+def set_node_weight(W, n, which, value):
+    """Record lambda (``which`` 0) or mu (1) at node n."""
+    W[LAMBDA + which, n] = value
+
+
+@njit(cache=True, error_model="numpy")
+def node_columns(W, N):
+    """Copies of the node times, lambda and mu at nodes 0 .. N."""
+    return W[T, :N + 1].copy(), W[LAMBDA, :N + 1].copy(), W[MU, :N + 1].copy()
+
+
+@njit(cache=True, error_model="numpy")
+def node_series(W, N):
+    """Views of the node times and u at nodes 0 .. N - 1 (the series output)."""
+    return W[T, :N], W[U, :N]
+
+
+@njit(cache=True, error_model="numpy")
+def close_period(W, N):
+    """Set the last node's time to exactly 1."""
+    W[T, N] = 1.0
+
+
+@njit(cache=True, error_model="numpy")
+def shift_step(W, n, shift):
+    """Move step n, which starts ``shift`` short of where it should, to first order along
+    its sensitivities (u_n, stages, integrals); returns the shift carried to its end."""
+    W[U, n] += shift
+    for i in range(3):
+        W[STAGE + i, n] += W[SENS + i, n] * shift
+    W[INT_U, n] += W[Q_U, n] * shift
+    W[INT_P, n] += W[Q_P, n] * shift
+    return shift * (1.0 + W[M_MINUS_1, n])
+
+
+@njit(cache=True, error_model="numpy")
+def shift_node_value(W, n, shift):
+    W[U, n] += shift
+
+
+@njit(cache=True, error_model="numpy")
+def set_step_span(W, n, t0, t1):
+    """Step n from t0 to t1 (a given grid's)."""
+    W[T, n] = t0
+    W[T, n + 1] = t1
+
+
+@njit(cache=True, error_model="numpy")
+def set_step_start(W, n, u, stage, sensitivity):
+    """u_n = ``u``, every stage of step n ``stage`` and its dU_i/du_n ``sensitivity`` (the
+    first frozen pass's guess on a given grid is stage + sensitivity (u - u_n))."""
+    W[U, n] = u
+    for i in range(3):
+        W[STAGE + i, n] = stage
+        W[SENS + i, n] = sensitivity

@@ -1,6 +1,6 @@
 """The shooting of the periodic state: the monodromy M = prod_n du_{n+1}/du_n of a sweep
 (its log and sign, without cancellation at M ~ 1), the bracketed Newton update of u(0), and
-the stage solve's tolerance relative to the speed scale; and Newton on u(0) over a fixed step
+and Newton on u(0) over a fixed step
 sequence (``frozen_newton``: frozen passes of ``periodic.integrator.frozen_sweep``), the
 period map, the period integrals of a recorded pass and the shift of a converged pass onto
 its fixed point.
@@ -17,7 +17,8 @@ from numba import njit
 
 from ..status import CONVERGED, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED
 from .integrator import frozen_sweep
-from .record import INT_P, INT_U, M_MINUS_1, Q_P, Q_U, SENS, STAGE, U
+from .options import MAX_FROZEN_SWEEPS
+from .record import monodromy_minus_1, node_value, recorded_integrals, shift_node_value, shift_step
 
 
 @njit(cache=True, error_model="numpy")
@@ -59,25 +60,14 @@ def bracketed_newton_update(u0, g, one_minus_M, lo, hi):
 
 
 @njit(cache=True, error_model="numpy")
-def stage_tolerance(rtol, vscale):
-    """The stage Newton's absolute tolerance in u: max(1e-5 rtol, 1e-14) V, V the speed scale.
-    Every converged step carries a residual up to this size."""
-    return max(1e-5 * rtol, 1e-14) * vscale
-
-
-#: frozen-grid Newton sweeps per round
-MAX_FROZEN_SWEEPS = 30
-
-
-@njit(cache=True, error_model="numpy")
 def period_map(W, N, u0):
     """(g = u(1) - u(0), 1 - M) of a sweep: the shooting residual and one minus the
     monodromy (``periodic.shooting.one_minus_monodromy``)."""
     log_m = 0.0
     sign_m = 1.0
     for n in range(N):
-        log_m, sign_m = monodromy_factor(log_m, sign_m, W[M_MINUS_1, n])
-    return W[U, N] - u0, one_minus_monodromy(log_m, sign_m)
+        log_m, sign_m = monodromy_factor(log_m, sign_m, monodromy_minus_1(W, n))
+    return node_value(W, N) - u0, one_minus_monodromy(log_m, sign_m)
 
 
 @njit(cache=True, error_model="numpy")
@@ -85,8 +75,9 @@ def period_integrals(W, N):
     int_u = 0.0
     int_p = 0.0
     for n in range(N):
-        int_u += W[INT_U, n]
-        int_p += W[INT_P, n]
+        step_u, step_p = recorded_integrals(W, n)
+        int_u += step_u
+        int_p += step_p
     return int_u, int_p
 
 
@@ -95,13 +86,8 @@ def shift_onto_fixed_point(W, N, shift):
     """Move the converged sweep, which starts ``shift`` short of the fixed point, onto it to
     first order along the sensitivities (no force evaluations)."""
     for n in range(N):
-        W[U, n] += shift
-        for i in range(3):
-            W[STAGE + i, n] += W[SENS + i, n] * shift
-        W[INT_U, n] += W[Q_U, n] * shift
-        W[INT_P, n] += W[Q_P, n] * shift
-        shift *= 1.0 + W[M_MINUS_1, n]
-    W[U, N] += shift
+        shift = shift_step(W, n, shift)
+    shift_node_value(W, N, shift)
 
 
 class FrozenNewton(NamedTuple):

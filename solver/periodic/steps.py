@@ -11,19 +11,9 @@ from numba import njit
 
 from ..model.force import force_slope_power_sc
 from ..model.kinematics import angle_and_rate
-from .defect import SampleKinematics, THETA_LATE, THETA_MID
+from .defect import SampleKinematics
+from .options import THETA_LATE, THETA_MID
 from .radau import C1, C2, StageKinematics, radau5_step
-
-
-#: the smallest step (in tau, period 1): below it a sweep fails (TOLERANCE_NOT_REACHED)
-MIN_STEP = 2.0 ** -40
-
-
-#: a step this short is accepted whatever its error (which the estimate counts): next to a
-#: power law's corner omega ~ z^(gamma - 1), and for gamma near 1 (1.035 measured) the error
-#: per unit length does not fall as steps shrink, so no step size meets it: the steps
-#: approached the corner geometrically down to MIN_STEP and the sweep failed
-ACCEPT_STEP = 2.0 ** -36
 
 
 @njit(cache=True, error_model="numpy")

@@ -34,22 +34,14 @@ from numba import njit
 
 from ..model.force import force_slope_power_sc
 from ..model.kinematics import FOURIER, angle_and_rate, rate_slope
+from .options import SAMPLES_PER_WAVENUMBER, SIMPLE_SHARE, STOP_GAP, TANGENCY_SHARE
 from .radau import StageKinematics, StepSolution, dense_value, runtime_int
 
-#: samples per wavenumber (and period) in the search for the zeros of the kinematic
-#: switching functions of a Fourier motion (a function of wavenumber K has at most 2K zeros)
-SAMPLES_PER_WAVENUMBER = 64
-#: a minimum of |omega| below this share of max |omega| is a near-tangency (a stop)
-TANGENCY_SHARE = 0.1
-#: a turning point is simple where |omega'| >= this share of 2 pi max |omega| (``turning_stops``)
-SIMPLE_SHARE = 0.5
 #: ``turning_stops``' codes
 TURNING = 1
 SIMPLE_TURNING = 2
 #: at most this many kinematic stops per period
 MAX_STOPS = 512
-#: two stops closer than this are one
-STOP_GAP = 1e-12
 
 #: the state switching functions, by index
 TANGENTIAL = 0   # g = u + omega S / 4: the link's tangential velocity is C g, its inner

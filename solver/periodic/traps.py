@@ -11,25 +11,10 @@ import math
 
 from numba import njit
 
-from .record import T, U
-from .steps import ACCEPT_STEP, start_values
+from .options import ACCEPT_STEP, TRAP_FLOOR, TRAP_SHARE, TRAP_SLACK, TRAP_SPAN
+from .record import node_time, node_value, step_span
+from .steps import start_values
 from .switching import SIMPLE_TURNING
-
-
-#: next to a turning point of phi a step may change u by friction at most this share of u
-#: (``trap_ceiling``)
-TRAP_SHARE = 0.1
-
-
-#: ... but at a simple turning point (``periodic.switching.SIMPLE_TURNING``: a simple zero of omega,
-#: no corner) never below this step: where the body comes to rest at the turning point with
-#: the links (u -> 0 there) the cap shrinks with u and the steps approached the turning point
-#: geometrically (45 % of the bench's steps at rtol 1e-4).  An empirical floor, not a bound:
-#: measured honest on the harness's sets (also at 1e-2: worst 2.3 rtol) and a reviewer's
-#: short- and long-period harmonic sets; at every turning point it was 6.4 rtol off (estimate
-#: 0.6) on a sin^3 Fourier motion whose flat inflections are near-tangencies
-#: (``test_a_flat_inflection_keeps_the_trap_cap``), which keep the cap
-TRAP_FLOOR = 1e-3
 
 
 @njit(cache=True, error_model="numpy")
@@ -82,21 +67,6 @@ def trap_clip(h, cap):
     return min(h, max(cap, ACCEPT_STEP))
 
 
-#: at the converged solution a step next to a turning point may exceed its ``trap_ceiling``
-#: by this factor before the round is rejected (the shooting's last shift moves u a little)
-TRAP_SLACK = 2.0
-
-
-#: ... and its ceiling, which the next sweep keeps over the whole recorded step
-#: (``WeightModel.max_step``), splits the step into at most this many: the step next to the
-#: turning point gets the cap from that sweep's own ``trap_limit`` (from the converged u(0),
-#: where its u is the converged one).  The cap itself as the ceiling split a step of 0.014
-#: next to a flat turning point into steps of 4.5e-9 (u there 9e-8, in the friction's band):
-#: STEP_BUDGET_EXCEEDED after 4,000
-#: (``tests/test_engine.py::test_a_trapped_step_is_split_into_at_most_trap_span_steps``)
-TRAP_SPAN = 64.0
-
-
 @njit(cache=True, error_model="numpy")
 def trapped_steps(code, params, phys, point_stops, W, N, ceilings):
     """The ``trap_ceiling`` of ``adaptive_sweep`` checked again on the converged solution of
@@ -119,19 +89,18 @@ def trapped_steps(code, params, phys, point_stops, W, N, ceilings):
     evaluations = 0
     j = 0  # the stop at or after W[T, n]
     for n in range(N):
-        t = W[T, n]
-        h = W[T, n + 1] - t
+        t, h = step_span(W, n)
         while j < n_stops and stops[j] < t:
             j += 1
         starts = j < n_stops and stops[j] == t
         k = j + 1 if starts else j  # the next stop after t (n_stops: tau = 1)
-        ends = W[T, n + 1] == (stops[k] if k < n_stops else 1.0)
+        ends = node_time(W, n + 1) == (stops[k] if k < n_stops else 1.0)
         turning, i = step_turning(stops, stop_is_turning, n_stops, k if ends else -1,
                                   j if starts else -1)
         if turning < 0.0 or stop_is_corner[i]:
             continue
         cap = max(trap_limit(code, params, phys, turning, i, stop_is_corner, stop_is_turning,
-                             t + 0.5 * h, W[U, n]), ACCEPT_STEP)
+                             t + 0.5 * h, node_value(W, n)), ACCEPT_STEP)
         evaluations += 1
         if h > TRAP_SLACK * cap:
             ceilings[n] = min(ceilings[n], max(cap, h / TRAP_SPAN))
