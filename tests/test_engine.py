@@ -14,7 +14,7 @@ from references import reference
 from cases import AGREEMENT_CASES, radau_reference
 from solver.periodic import defect, estimators, events, integrator, options, radau, record, steps, switching, traps
 from solver.model.kinematics import angle_and_rate
-from solver.periodic.radau import PointPhysics
+from solver.model.physics import PointPhysics
 from solver.tools.bench import solution_error
 from test_solver_methods import ORDER_CASES
 

@@ -15,8 +15,7 @@ LAYOUT = {
     "model": {"kinematics", "force", "physics", "limits"},
     "periodic": {"radau", "defect", "control", "steps", "record", "switching", "events", "traps",
                  "integrator", "estimators", "global_error", "shooting", "point", "driver",
-                 "options", "tolerances",
-                 "sweep"},
+                 "options", "tolerances", "sweep"},
     "march": {"heun", "driver"},
     "adjoint": {"gradient", "optimize"},
     "tools": {"bench", "bench_optimize", "bench_sweep", "honesty"},
@@ -106,3 +105,26 @@ def test_engine_modules_hold_one_role_each():
     long = {p.name: n for p in (REPO / "solver" / "periodic").glob("*.py")
             if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_ENGINE_MODULE_LINES}
     assert long == {}
+
+
+def _record_rows() -> set[str]:
+    """The row constants of the step record (``periodic.record``: integer assignments)."""
+    tree = ast.parse((REPO / "solver" / "periodic" / "record.py").read_text(encoding="utf-8"))
+    return {t.id for node in tree.body if isinstance(node, ast.Assign)
+            and isinstance(node.value, ast.Constant) and type(node.value.value) is int
+            for t in node.targets if isinstance(t, ast.Name)}
+
+
+#: modules that still re-export the record's rows for ``adjoint.gradient`` (transitional)
+ROW_REEXPORTS = {"periodic.record", "periodic.sweep"}
+
+
+def test_only_the_record_indexes_its_rows():
+    rows = _record_rows()
+    assert {"T", "U", "STAGE", "SENS", "N_FIELDS"} <= rows  # the check sees the layout
+    leaks = {module: names & rows
+             for module, deps in package_imports(REPO / "solver").items()
+             if module not in ROW_REEXPORTS
+             for target, names in deps.items() if target == "periodic.record" and names & rows}
+    assert leaks == {}
+

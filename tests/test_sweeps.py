@@ -68,8 +68,8 @@ def test_a_sweep_depends_on_its_own_points_only():
     points = driver.Points(code, params, kin.corners(), phys.inertia_factor, phys.mu_n,
                            phys.mu_s, phys.p, phys.delta_tau,
                            fast_limit_velocity(kin, phys, driver.GUESS_STEPS))
-    one = driver.solve_points(points, 1e-5, 2 ** 17, runs, 1, driver.no_series())
-    two = driver.solve_points(points, 1e-5, 2 ** 17, runs, 2, driver.no_series())
+    one, _ = driver.solve_points(points, 1e-5, 2 ** 17, runs, 1)
+    two, _ = driver.solve_points(points, 1e-5, 2 ** 17, runs, 2)
     for a, b in zip(one, two):
         np.testing.assert_array_equal(a, b)
 

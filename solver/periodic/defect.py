@@ -177,7 +177,7 @@ def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
     Where the line of delta / w through the start and THETA_MID misses the late sample by
     more than DEFECT_FIT of it (p is not in its asymptotic regime: a feature the samples
     resolve differently), each error is the larger of this one and the embedded estimate's
-    (``embedded_error``, O(h^4)); the sweep then halves the step rather than accept it.
+    (``embedded_error``, O(h^4)); the pass then halves the step rather than accept it.
     Returns (StepError, whether the defect estimate's model fits).
     """
     if not h > 0.0:

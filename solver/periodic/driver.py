@@ -11,14 +11,15 @@ from typing import NamedTuple
 import numpy as np
 from numba import get_num_threads, njit
 
+from ..model.physics import PointPhysics
 from ..status import CONVERGED, NON_FINITE
 from .options import GUESS_STEPS, IN_LINE_SHARE, START_CAPACITY
 from .point import N_COSTS, Orbit, fixed_grid_point, no_orbit, solve_point
-from .radau import PointPhysics
 from .record import new_workspace, node_series
 # (transitional: ``adjoint.gradient`` imports these three from here)
 from .shooting import frozen_newton, shift_onto_fixed_point  # noqa: F401
 from .tolerances import stage_atol  # noqa: F401
+# (transitional: ``adjoint.gradient`` imports these three from here)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -73,7 +74,7 @@ class Outputs(NamedTuple):
     u0: np.ndarray
     status: np.ndarray
     n_steps: np.ndarray
-    sweeps: np.ndarray
+    passes: np.ndarray
     estimate: np.ndarray
     vscale: np.ndarray
     evaluations: np.ndarray
@@ -95,28 +96,11 @@ def _store(out, i, sol):
     out.u0[i] = sol.u0
     out.status[i] = sol.status
     out.n_steps[i] = sol.n_steps
-    out.sweeps[i] = sol.sweeps
+    out.passes[i] = sol.passes
     out.estimate[i] = sol.estimate
     out.vscale[i] = sol.vscale
     out.evaluations[i, :] = sol.evaluations
     out.start[i] = sol.start
-
-
-class Series(NamedTuple):
-    """Where ``solve_points`` writes each point's final nodes (without tau = 1) and u there:
-    ``tau`` and ``u`` from ``offsets[i]`` to ``offsets[i + 1]`` (empty ``offsets``: nowhere),
-    and how many it wrote, ``counts`` (n,)."""
-
-    offsets: np.ndarray
-    tau: np.ndarray
-    u: np.ndarray
-    counts: np.ndarray
-
-
-@njit(cache=True, error_model="numpy")
-def no_series():
-    empty = np.zeros(0)
-    return Series(np.zeros(0, dtype=np.int64), empty, empty, np.zeros(0, dtype=np.int64))
 
 
 @njit(cache=True, error_model="numpy")
@@ -155,12 +139,29 @@ def predicted_u0(points, out, first, i):
     return 3.0 * u1 - 3.0 * u2 + out.u0[i - 3]
 
 
+@njit(cache=True, error_model="numpy")
+def _kept(buffer, size):
+    """``buffer`` with room for ``size`` values (doubled, contents kept), or itself."""
+    if size <= buffer.size:
+        return buffer
+    bigger = np.empty(max(2 * buffer.size, size))
+    bigger[:buffer.size] = buffer
+    return bigger
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, series):
+def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep_series):
     """The sweeps lane, lane + lanes, ... of ``solve_points`` on one workspace: each point
     of a sweep starts from its predecessor's orbit, the first cold.  Releases the GIL (the
-    lanes run on Python threads: numba's parallel loops do not take NamedTuples)."""
+    lanes run on Python threads: numba's parallel loops do not take NamedTuples).
+
+    Returns (tau, u): with ``keep_series``, the final pass's nodes (without tau = 1) and u
+    there of every point of the lane's sweeps in the order solved, ``out.n_steps[i]`` of
+    point i (read from the converged orbit in the workspace, not solved again); else empty."""
     W = new_workspace(START_CAPACITY)
+    kept_tau = np.empty(START_CAPACITY if keep_series else 0)
+    kept_u = np.empty(START_CAPACITY if keep_series else 0)
+    kept = 0
     for r in range(lane, runs.size - 1, lanes):
         orbit = no_orbit()
         for i in range(runs[r], runs[r + 1]):
@@ -173,40 +174,53 @@ def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, series):
             W, sol, orbit = solve_point(points.code, points.params[i], points.corners[i], phys,
                                         rtol, points.u_guess[i], max_steps, W, start)
             _store(out, i, sol)
-            if series.offsets.size > 0:
-                N = min(sol.n_steps, series.offsets[i + 1] - series.offsets[i])
+            if keep_series:
+                N = sol.n_steps
                 tau, u = node_series(W, N)
-                series.tau[series.offsets[i]:series.offsets[i] + N] = tau
-                series.u[series.offsets[i]:series.offsets[i] + N] = u
-                series.counts[i] = N
+                kept_tau = _kept(kept_tau, kept + N)
+                kept_u = _kept(kept_u, kept + N)
+                kept_tau[kept:kept + N] = tau
+                kept_u[kept:kept + N] = u
+                kept += N
+    return kept_tau[:kept], kept_u[:kept]
 
 
-def solve_points(points, rtol, max_steps, runs, threads, series):
+def solve_points(points, rtol, max_steps, runs, threads, keep_series=False):
     """``solve_point`` over every point of ``points`` (Points), as the sweeps ``runs``:
     (n_runs + 1,) offsets from 0 to n, points runs[k] .. runs[k + 1] - 1 one sweep in that
-    order (every point its own sweep: all cold).  Returns ``Outputs``; with a ``series``
-    (``Series``, else ``no_series()``) also each point's nodes and u there.  The sweeps are
-    dealt to 4 ``threads`` lanes in turn (sweep k to lane k mod lanes), so that each
-    thread gets a share of the hard points; each lane keeps one workspace.  A sweep's
-    results depend on its points alone, not on the threads."""
+    order (every point its own sweep: all cold).  Returns (``Outputs``, series): with
+    ``keep_series`` the series is a list of each point's (u, tau) at its final nodes, else
+    None.  The sweeps are dealt to 4 ``threads`` lanes in turn (sweep k to lane k mod
+    lanes), so that each thread gets a share of the hard points; each lane keeps one
+    workspace.  A sweep's results depend on its points alone, not on the threads."""
     out = _new_outputs(points.params.shape[0])
     lanes = max(min(runs.size - 1, 4 * threads), 1)
+    keep = bool(keep_series)
     if threads <= 1 or lanes == 1:
-        for lane in range(lanes):
-            solve_lane(lane, lanes, points, rtol, max_steps, runs, out, series)
-        return out
-    with ThreadPoolExecutor(threads) as pool:
-        for done in pool.map(lambda lane: solve_lane(lane, lanes, points, rtol, max_steps,
-                                                     runs, out, series), range(lanes)):
-            pass
-    return out
+        kept = [solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep)
+                for lane in range(lanes)]
+    else:
+        with ThreadPoolExecutor(threads) as pool:
+            kept = list(pool.map(lambda lane: solve_lane(lane, lanes, points, rtol, max_steps,
+                                                         runs, out, keep), range(lanes)))
+    if not keep:
+        return out, None
+    series = [None] * points.params.shape[0]
+    for lane, (tau, u) in enumerate(kept):
+        start = 0
+        for r in range(lane, runs.size - 1, lanes):
+            for i in range(runs[r], runs[r + 1]):
+                end = start + int(out.n_steps[i])
+                series[i] = (u[start:end], tau[start:end])
+                start = end
+    return out, series
 
 
 def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None):
     """Batched ``solve_point`` for ``solve.solve_periodic(method="periodic")``.
 
     ``sweeps``: None (every point cold) or the offsets of ``solve_points``' runs.  Returns a
-    dict with int_u, int_pi, status, estimate, n_tau, iterations (sweeps), still (phi
+    dict with int_u, int_pi, status, estimate, n_tau, iterations (passes over the period), still (phi
     constant: nothing solved), evaluations, start (``PointSolution.start``) and, with
     ``return_series``, per point (u nodes, tau nodes)."""
     from ..model.limits import fast_limit_velocity
@@ -217,19 +231,9 @@ def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None):
     points = Points(code, params, kinematics.corners(), physics.inertia_factor, physics.mu_n,
                     physics.mu_s, physics.p, physics.delta_tau,
                     fast_limit_velocity(kinematics, physics, GUESS_STEPS))
-    out = solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(),
-                       no_series())
-    series = None
-    if return_series:
-        # the same sweeps again (deterministic), writing each point's final steps
-        offsets = np.concatenate([[0], np.cumsum(out.n_steps)]).astype(np.int64)
-        written = Series(offsets, np.empty(offsets[-1]), np.empty(offsets[-1]),
-                         np.zeros(n, dtype=np.int64))
-        solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(), written)
-        if not np.array_equal(written.counts, out.n_steps):
-            raise RuntimeError("periodic: a point's second solve for its series took another grid")
-        series = [(written.u[a:b], written.tau[a:b]) for a, b in zip(offsets[:-1], offsets[1:])]
+    out, series = solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(),
+                               return_series)
     return dict(int_u=out.int_u, int_pi=out.int_pi, status=out.status, estimate=out.estimate,
-                n_tau=out.n_steps, iterations=out.sweeps, still=out.vscale == 0.0,
+                n_tau=out.n_steps, iterations=out.passes, still=out.vscale == 0.0,
                 series=series, evaluations=out.evaluations, start=out.start)
 

@@ -1,7 +1,7 @@
 """The error estimators of a recorded pass, and the one rule of a step's error.
 
 ``weighted_error`` (with ``floored_errors``) is the norm every step is judged by, in the
-step-size control and in the global estimate.  ``estimate_sweep`` puts the defect estimate
+step-size control and in the global estimate.  ``estimate_pass`` puts the defect estimate
 of every recorded step into its ERR rows; ``event_split_errors`` re-solves the steps that hold
 a state event off their ends (moved there by the shooting) split at it.  The global estimate
 that carries these local errors to the period integrals is ``periodic.global_error``.
@@ -45,7 +45,7 @@ def floored_errors(err, floor, h, pi_u):
 
 
 @njit(cache=True, error_model="numpy")
-def estimate_sweep(code, params, phys, corner_nodes, atol, W, N):
+def estimate_pass(code, params, phys, corner_nodes, atol, W, N):
     """The defect estimate (``periodic.defect.defect_error``) of every recorded step of ``W``, in
     place (rows ERR), from its stored stages: two evaluations of F per step, and the start
     values where phi has a corner (``corner_nodes``, (N,)) or at tau = 0; and the estimate's
@@ -95,7 +95,7 @@ def _interior_event(code, params, phys, atol, W, N, n, memo):
 @njit(cache=True, error_model="numpy")
 def event_split_errors(code, params, phys, atol, W, N, split):
     """The error of the recorded steps that hold a state event off their ends (the shooting
-    moved it after the adaptive sweep had put it on a node): each such step is solved again
+    moved it after the adaptive pass had put it on a node): each such step is solved again
     as two steps split at the event, and the change of its end value and integrals replaces
     its estimate where larger (the defect's samples need not see a corner between them).
     ``split`` (N,) is set for those steps.  Returns (their count, evaluations of F)."""

@@ -31,7 +31,7 @@ def _first_crossing(step, atol, dtau):
     stage tolerance ``atol``, and rounding: a body at rest at tau = 0 has g = +-1e-17), and a
     sign change is a crossing only where one side lies beyond EVENT_BAND delta_tau: inside
     the friction's band F is smooth (a stuck g whose sign changes with the force it must
-    hold is no corner; cut there, a sweep at delta 1e-10 took 1e5 steps of 1e-11).  Not
+    hold is no corner; cut there, a pass at delta 1e-10 took 1e5 steps of 1e-11).  Not
     both sides beyond it: a step cut to an event located on a longer step's polynomial can
     end just past the corner, inside the band (measured: such steps kept the corner 3 % of
     the step inside and were rejected, 1e3 rtol over, down to steps of 1e-6).  ``step``: a

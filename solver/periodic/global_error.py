@@ -6,7 +6,7 @@ finds there; ``combine`` is the one rule that adds them up: the estimators' erro
 count different errors: no cancellation is assumed between them), and the estimate is the
 larger of U's and P's relative errors in the solver's norm (``solve`` docstring: U relative
 to max(|int u|, 1e-3 V), P relative).  A step whose share is above its length times the
-tolerance asks for refinement: its ceiling for the next adaptive sweep is its length times
+tolerance asks for refinement: its ceiling for the next adaptive pass is its length times
 share^(-1/ERROR_ORDER) (``refinement_ceiling``).
 
 The node weights are the discrete adjoint of the shooting: for
@@ -56,7 +56,7 @@ def node_weights(W, N, one_minus_M):
 
 @njit(cache=True, error_model="numpy")
 def local_error_estimate(W, N, shares, scale_u, scale_p):
-    """The steps' local errors (``periodic.estimators.estimate_sweep``) carried to the period integrals:
+    """The steps' local errors (``periodic.estimators.estimate_pass``) carried to the period integrals:
     returns (error of int u, error of int Pi) and adds each step's weighted error (in the
     norm: the larger of U's and P's relative shares) to ``shares``.  Each step's errors are
     counted above their rounding floor (``periodic.estimators.floored_errors``, rows FLOOR)."""
@@ -85,7 +85,7 @@ def combine(error_u, error_p, scale_u, scale_p):
 
 @njit(cache=True, error_model="numpy")
 def refinement_ceiling(W, N, shares, target, ceilings):
-    """Per step, the largest step the next adaptive sweep may take inside it: inf where the
+    """Per step, the largest step the next adaptive pass may take inside it: inf where the
     step's share is within ``target`` times its length, else its length times
     (target h / share)^(1 / ERROR_ORDER) but at least 1 / MAX_REFINEMENT, and at least
     ``periodic.steps.ACCEPT_STEP``.  Returns how many steps ask for refinement."""
@@ -96,8 +96,8 @@ def refinement_ceiling(W, N, shares, target, ceilings):
         if ratio > 1.0:
             shrink = ratio ** (-1.0 / ERROR_ORDER) if math.isfinite(ratio) else 0.0
             ceilings[n] = h * max(shrink, 1.0 / MAX_REFINEMENT)
-            # (not below ACCEPT_STEP, which the sweep takes whatever its error: a step of 1e-13
-            # cut to a state event asked for 1.2e-13, below MIN_STEP, and the sweep failed)
+            # (not below ACCEPT_STEP, which the pass takes whatever its error: a step of 1e-13
+            # cut to a state event asked for 1.2e-13, below MIN_STEP, and the pass failed)
             ceilings[n] = max(ceilings[n], ACCEPT_STEP)
             asked += 1
         else:

@@ -1,13 +1,13 @@
-"""One period of the engine: an adaptive sweep and a frozen-grid sweep.
+"""One period of the engine: an adaptive pass and a frozen-grid pass.
 
-A sweep integrates eq. (Newtonu) over one period from u(0) with the Radau IIA step of
+A pass integrates eq. (Newtonu) over one period from u(0) with the Radau IIA step of
 ``periodic.radau`` and records every step in the step record (``periodic.record``), which is what the
 shooting, the adjoint weights and the error estimators read.
 
-- ``adaptive_sweep`` chooses the steps (diffrax's loop: the step kernel proposes, the
+- ``adaptive_pass`` chooses the steps (diffrax's loop: the step kernel proposes, the
   controller ``periodic.control.predict_factor`` decides).  The error of a step is its
   embedded estimate weighted by the sensitivities of int u and int Pi of the periodic
-  solution to it, lambda and mu (the node weights of the previous sweep, ``WeightModel``),
+  solution to it, lambda and mu (the node weights of the previous pass, ``WeightModel``),
   per unit length and relative to the norm of U and P: a step is accepted when
 
       max((|lambda err_u| + |err_int_u|) / scale_U, (|mu err_u| + |err_int_pi|) / scale_P)
@@ -17,9 +17,9 @@ shooting, the adjoint weights and the error estimators read.
   end at every kinematic stop (``periodic.switching.kinematic_stops``: corners of phi, zeros of
   sin phi, cos phi, omega) and at every state event (``periodic.events.find_event``),
   and never exceed the previous estimators' ceilings (``WeightModel.max_step``).
-- ``frozen_sweep`` solves the same steps again from another u(0) (the shooting's Newton
+- ``frozen_pass`` solves the same steps again from another u(0) (the shooting's Newton
   iterations: on a fixed step sequence the period map is smooth and its derivative, the
-  monodromy, is exact), starting each stage at the previous sweep's value moved along its
+  monodromy, is exact), starting each stage at the previous pass's value moved along its
   sensitivity, and records the embedded estimates of the new solution.
 """
 from __future__ import annotations
@@ -50,7 +50,7 @@ from .traps import step_turning, trap_clip, trap_limit
 
 
 class Stops(NamedTuple):
-    """A point's kinematic step ends, which every sweep keeps (``periodic.switching``):
+    """A point's kinematic step ends, which every pass keeps (``periodic.switching``):
     ``times`` (count,) sorted in [0, 1), times[0] = 0; ``is_corner`` (count,) whether phi has
     a corner there (the next step's start values are re-evaluated on its side);
     ``is_turning`` (count,) whether the links (nearly) stop rotating there (``trap_ceiling``;
@@ -62,9 +62,9 @@ class Stops(NamedTuple):
     count: int
 
 
-class Sweep(NamedTuple):
-    """What ``adaptive_sweep`` returns: the workspace ``W`` (possibly grown, its first ``N``
-    steps the sweep's), ``status`` (CONVERGED when the sweep reached tau = 1), ``h_next``
+class PeriodPass(NamedTuple):
+    """What ``adaptive_pass`` returns: the workspace ``W`` (possibly grown, its first ``N``
+    steps the pass's), ``status`` (CONVERGED when the pass reached tau = 1), ``h_next``
     (the controller's last proposal) and the ``evaluations`` of F made."""
 
     W: np.ndarray
@@ -74,13 +74,13 @@ class Sweep(NamedTuple):
     evaluations: int
 
 
-class SweepAim(NamedTuple):
-    """What an ``adaptive_sweep`` aims at: accepted steps keep their weighted error
+class PassAim(NamedTuple):
+    """What an ``adaptive_pass`` aims at: accepted steps keep their weighted error
     (``weighted_error``, in the norm ``scale_u``, ``scale_p``, weighted by ``model``, a
     ``WeightModel``) <= ``target`` h; stages solved to ``atol``; at most ``max_steps`` steps;
     ``events``: cut steps at the state events (``_first_crossing``); ``sharp``: judge steps
-    by the defect estimate and solve every stage afresh (the target sweep), else by the
-    embedded estimate with a carried Newton constant (the loose sweeps).  (Flags in a bundle
+    by the defect estimate and solve every stage afresh (the target pass), else by the
+    embedded estimate with a carried Newton constant (the loose passes).  (Flags in a bundle
     are run-time values: no specialisation per constant, ``periodic.radau.runtime_bool``.)"""
 
     target: float
@@ -94,10 +94,10 @@ class SweepAim(NamedTuple):
 
 
 class WeightModel(NamedTuple):
-    """What an adaptive sweep knows from the previous one: node times ``t`` (N + 1,), the
+    """What an adaptive pass knows from the previous one: node times ``t`` (N + 1,), the
     node weights ``lam`` and ``mu`` there (int u's and int Pi's sensitivity to a jump of u),
     and ``max_step`` (N,), the ceiling the estimators put on the steps inside each of its
-    steps (inf: none).  ``N`` = 0: no previous sweep (unit weights, no ceilings)."""
+    steps (inf: none).  ``N`` = 0: no previous pass (unit weights, no ceilings)."""
 
     t: np.ndarray
     lam: np.ndarray
@@ -140,7 +140,7 @@ def _model_at(model, t, k):
 
 
 @njit(cache=True, error_model="numpy")
-def adaptive_sweep(code, params, phys, point_stops, u0, h_first, aim, W):
+def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
     """Integrate one period from u(0) = u0 with step-size control; see the module docstring.
 
     Parameters
@@ -148,15 +148,15 @@ def adaptive_sweep(code, params, phys, point_stops, u0, h_first, aim, W):
     code, params : the kinematics' kernel encoding, one row; phys : PointPhysics
     point_stops : Stops
     h_first : float
-        The first step's size (the controller's proposal carried from an earlier sweep).
-    aim : SweepAim
+        The first step's size (the controller's proposal carried from an earlier pass).
+    aim : PassAim
         What the steps are judged by (target, norm, weight model, stage tolerance, step
         budget, events, sharp).
     W : workspace, grown as needed
 
     Returns
     -------
-    Sweep
+    Pass
     """
     target, scale_u, scale_p, model = aim.target, aim.scale_u, aim.scale_p, aim.model
     atol, max_steps, events, sharp = aim.atol, aim.max_steps, aim.events, aim.sharp
@@ -187,17 +187,17 @@ def adaptive_sweep(code, params, phys, point_stops, u0, h_first, aim, W):
     reach = stop_reach_at(code, params, phys, t, u, f0, band)
     memo = new_exit_memo()
     # Newton's quadratic constant, carried from step to step (``radau5_step``), in the loose
-    # sweeps only (``sharp`` False): it does not bound the stage error (a reviewer measured
+    # passes only (``sharp`` False): it does not bound the stage error (a reviewer measured
     # stages accepted up to 3.7e5 atol off: the constant goes stale over one-correction steps
-    # and grows with h kappa), which the loose sweeps tolerate (they give u(0) and the node
-    # weights; the target sweep and the frozen Newton solve every stage afresh) but the
-    # target sweep does not (its stages become final where the loose u(0) needs no frozen
-    # Newton sweep).  Not in ``frozen_sweep`` either (its shooting failed on 1-4 % of the
+    # and grows with h kappa), which the loose passes tolerate (they give u(0) and the node
+    # weights; the target pass and the frozen Newton solve every stage afresh) but the
+    # target pass does not (its stages become final where the loose u(0) needs no frozen
+    # Newton pass).  Not in ``frozen_pass`` either (its shooting failed on 1-4 % of the
     # bench with it)
     rate = math.inf
     while t < 1.0:
         if n >= max_steps:
-            return Sweep(W, n, STEP_BUDGET_EXCEEDED, h, evaluations)
+            return PeriodPass(W, n, STEP_BUDGET_EXCEEDED, h, evaluations)
         t_stop = stops[next_stop] if next_stop < n_stops else 1.0
         lam, mu, ceiling, k_model = _model_at(model, t, k_model)
         h = min(h, _ceiling_over(model, t, h, k_model))
@@ -238,7 +238,7 @@ def adaptive_sweep(code, params, phys, point_stops, u0, h_first, aim, W):
             end_kind = ORDINARY
         attempts += 1
         if not h >= MIN_STEP or attempts > MAX_ATTEMPTS_PER_STEP * (n + 16):
-            return Sweep(W, n, TOLERANCE_NOT_REACHED, h, evaluations)
+            return PeriodPass(W, n, TOLERANCE_NOT_REACHED, h, evaluations)
         kin = stage_kinematics(code, params, t, h)
         if have_previous:  # the last step's collocation polynomial, extrapolated
             r = h / prev_h
@@ -334,14 +334,14 @@ def adaptive_sweep(code, params, phys, point_stops, u0, h_first, aim, W):
                 (END_D1 * kin.om1 + END_D2 * kin.om2 + END_D3 * kin.om3) / h)
         h = h_next
     close_period(W, n)
-    return Sweep(W, n, status, h, evaluations)
+    return PeriodPass(W, n, status, h, evaluations)
 
 
 @njit(cache=True, error_model="numpy")
-def frozen_sweep(code, params, phys, u0, atol, W, N):
+def frozen_pass(code, params, phys, u0, atol, W, N):
     """Solve the N recorded steps of ``W`` again from u(0) = u0, in place (the stages start
     at their previous values moved along their sensitivities; the step kinematics are
-    reused).  The error estimates are left as they were (``estimate_sweep`` makes them).
+    reused).  The error estimates are left as they were (``estimate_pass`` makes them).
 
     Returns (status, evaluations of F)."""
     u = u0

@@ -27,7 +27,7 @@ MAX_STAGE_ITERATIONS = 40
 #: Newton's first correction is taken as the last where the quadratic constant carried from
 #: the previous step predicts the next correction below this share of the tolerance
 #: (``radau5_step``'s ``rate``).  A prediction, not a bound (stages up to 3.7e5 atol off were
-#: measured), so ``periodic.integrator.adaptive_sweep`` uses it in the loose sweeps only (bench: 857 ->
+#: measured), so ``periodic.integrator.adaptive_pass`` uses it in the loose passes only (bench: 857 ->
 #: 601 evaluations per solve there; docs/validation.md)
 FIRST_CORRECTION_SHARE = 0.1
 #: ... and only where dF/du at the predicted stages is within this share of ``slope``
@@ -54,7 +54,7 @@ VARIABLE_SLOPE_LIMIT = 16.0
 #: the factor is multiplied by this (a step sized exactly at the tolerance fails half the time)
 SAFETY = 0.9
 #: smallest and largest change of the step size from one step to the next (MAX_FACTOR 6:
-#: 23 % of the target sweep's attempts were rejected, most right after a step whose error
+#: 23 % of the target pass's attempts were rejected, most right after a step whose error
 #: sat below the noise floor, which asks for the largest growth; 3: bench evaluations per
 #: solve 2,803 -> 2,571 at rtol 1e-4, 8,129 -> 7,669 at 1e-7; its earlier worst case was
 #: a missed int u error of ``periodic.defect.defect_error``, since fixed; docs/validation.md)
@@ -62,12 +62,12 @@ MIN_FACTOR = 0.2
 MAX_FACTOR = 3.0
 
 # -- step lengths and the period integrator's loop (``periodic.steps``, ``periodic.integrator``)
-#: the smallest step (in tau, period 1): below it a sweep fails (TOLERANCE_NOT_REACHED)
+#: the smallest step (in tau, period 1): below it a pass fails (TOLERANCE_NOT_REACHED)
 MIN_STEP = 2.0 ** -40
 #: a step this short is accepted whatever its error (which the estimate counts): next to a
 #: power law's corner omega ~ z^(gamma - 1), and for gamma near 1 (1.035 measured) the error
 #: per unit length does not fall as steps shrink, so no step size meets it: the steps
-#: approached the corner geometrically down to MIN_STEP and the sweep failed
+#: approached the corner geometrically down to MIN_STEP and the pass failed
 ACCEPT_STEP = 2.0 ** -36
 #: a step whose defect model does not fit (``periodic.defect.defect_error``) is judged by this many
 #: times its error estimate (measured: the fallback estimates were up to 12x too small next
@@ -75,7 +75,7 @@ ACCEPT_STEP = 2.0 ** -36
 FIT_DISTRUST = 16.0
 #: a step is stretched to a stop within this factor of it, and split evenly up to twice it
 STRETCH = 1.25
-#: a sweep gives up after this many attempted steps per accepted one (plus 16)
+#: a pass gives up after this many attempted steps per accepted one (plus 16)
 MAX_ATTEMPTS_PER_STEP = 32
 
 # ------------------------------------- state events (``periodic.events``, ``periodic.estimators``)
@@ -119,9 +119,9 @@ TRAP_FLOOR = 1e-3
 #: at the converged solution a step next to a turning point may exceed its ``trap_ceiling``
 #: by this factor before the round is rejected (the shooting's last shift moves u a little)
 TRAP_SLACK = 2.0
-#: ... and its ceiling, which the next sweep keeps over the whole recorded step
+#: ... and its ceiling, which the next pass keeps over the whole recorded step
 #: (``WeightModel.max_step``), splits the step into at most this many: the step next to the
-#: turning point gets the cap from that sweep's own ``trap_limit`` (from the converged u(0),
+#: turning point gets the cap from that pass's own ``trap_limit`` (from the converged u(0),
 #: where its u is the converged one).  The cap itself as the ceiling split a step of 0.014
 #: next to a flat turning point into steps of 4.5e-9 (u there 9e-8, in the friction's band):
 #: STEP_BUDGET_EXCEEDED after 4,000
@@ -140,19 +140,19 @@ SIMPLE_SHARE = 0.5
 STOP_GAP = 1e-12
 
 # ------------------------------------ the global estimate's refinement (``periodic.global_error``)
-#: a refinement ceiling is at most this factor below its step (the next sweep's own control
+#: a refinement ceiling is at most this factor below its step (the next pass's own control
 #: and the trap caps may still shrink it further).  A share far above the tolerance says that
 #: the step's estimate left its asymptotic regime, not how much smaller the step must be
 #: (measured: 3e291 rtol from a step whose shifted stage sat where dF/du > 0, the estimate's
 #: growth factor exp(h kappa dF/du) overflowing; its ceiling of ACCEPT_STEP then exhausted
-#: the step budget); the next round's sweep controls the finer steps itself
+#: the step budget); the next round's pass controls the finer steps itself
 MAX_REFINEMENT = 4.0
 
 # ---------------------------------------------- the tolerances from rtol (``periodic.tolerances``)
 #: tolerance of the loose shooting (step 2)
 LOOSE_RTOL = 1e-2
-#: the adaptive sweeps aim at this share of the tolerance (the rest is the margin for the
-#: node weights of the converged solution, which the sweep only knew approximately)
+#: the adaptive passes aim at this share of the tolerance (the rest is the margin for the
+#: node weights of the converged solution, which the pass only knew approximately)
 TARGET_SHARE = 0.8
 #: the stage Newton's tolerance is max(STAGE_SHARE rtol, STAGE_FLOOR) times the norm of u
 STAGE_SHARE = 1e-5
@@ -169,22 +169,22 @@ BRACKET_SPEEDS = 1e3
 BRACKET_GUESSES = 10.0
 
 # ----------------------------------- one point's solve (``periodic.point``, ``periodic.shooting``)
-#: at most this many loose sweeps
-MAX_LOOSE_SWEEPS = 8
+#: at most this many loose passes
+MAX_LOOSE_PASSES = 8
 #: rounds of steps 3-4
 MAX_ROUNDS = 4
 #: a shooting residual kept where the frozen period map jumps over its fixed point counts
 #: this many times its first-order effect on the period integrals (``solve_point``)
 RESIDUAL_WEIGHT = 2.0
-#: first step of the first sweep
+#: first step of the first pass
 FIRST_STEP = 1.0 / 16.0
 #: a warm solve stands only where the stage tolerance it used (set by the neighbour's norm and
 #: node weights) is at most this factor above the one the point's own converged solution sets
 #: (measured without this check: short_period_harmonic point 78 at rtol 1e-3, its neighbour's
 #: scaled period 10x longer, 51 steps, estimate 0.84 rtol, error 41 rtol)
 WARM_ATOL_SLACK = 2.0
-#: frozen-grid Newton sweeps per round
-MAX_FROZEN_SWEEPS = 30
+#: frozen-grid Newton passes per round
+MAX_FROZEN_PASSES = 30
 
 # --------------------------------------------------------- batches of points (``periodic.driver``)
 #: workspace capacity a thread starts with (steps; it doubles when a point needs more)

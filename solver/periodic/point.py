@@ -5,23 +5,23 @@ For each parameter point (``solve_point``, one compiled function; batched over t
 ``periodic.driver.solve_points``):
 
 1. **Stops.** The kinematic step ends of the period (``periodic.switching.kinematic_stops``).
-2. **Loose shooting.** Adaptive sweeps (``periodic.integrator.adaptive_sweep``) at the loose tolerance
+2. **Loose shooting.** Adaptive passes (``periodic.integrator.adaptive_pass``) at the loose tolerance
    LOOSE_RTOL from the fast limit's u(0), each followed by a Newton step on u(0) with the
-   sweep's monodromy, until u(0) moves by less than the loose tolerance: this finds the
+   pass's monodromy, until u(0) moves by less than the loose tolerance: this finds the
    periodic orbit's neighbourhood and the node weights cheaply.
-3. **Target sweep.** One adaptive sweep at the target, its steps judged by the loose
-   solution's node weights, then Newton on u(0) by frozen-grid sweeps (``periodic.shooting.frozen_newton``:
+3. **Target pass.** One adaptive pass at the target, its steps judged by the loose
+   solution's node weights, then Newton on u(0) by frozen-grid passes (``periodic.shooting.frozen_newton``:
    on one step sequence the discrete period map is smooth and its monodromy exact) until
-   the fixed point is within 1e-3 rtol V (the converged sweep is then shifted to it to first
+   the fixed point is within 1e-3 rtol V (the converged pass is then shifted to it to first
    order along the stage sensitivities).  Where the frozen steps do not
-   carry Newton there (a stage solve fails on them, or MAX_FROZEN_SWEEPS run out), the next
-   round starts here again with an adaptive sweep, which places its steps anew.
-4. **Estimate.** Every step's local error from its defect (``periodic.estimators.estimate_sweep``), or,
+   carry Newton there (a stage solve fails on them, or MAX_FROZEN_PASSES run out), the next
+   round starts here again with an adaptive pass, which places its steps anew.
+4. **Estimate.** Every step's local error from its defect (``periodic.estimators.estimate_pass``), or,
    where the shooting moved a state event off its node, from the step solved again split
    at the event (``periodic.estimators.event_split_errors``), carried to int u and int Pi by the node
    weights of the converged solution (``periodic.global_error``).  If the estimate exceeds rtol,
    the steps that asked for it get ceilings and steps 3-4 run again from the converged
-   u(0), so that the new sweep also puts the moved events on nodes (at most MAX_ROUNDS
+   u(0), so that the new pass also puts the moved events on nodes (at most MAX_ROUNDS
    times), then TOLERANCE_NOT_REACHED (or the last round's failure).  (Moving nodes onto
    the moved events instead cost more: bench at rtol 1e-7, 9,466 force evaluations per
    solve against 8,592.)
@@ -43,19 +43,21 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ..model.physics import PointPhysics
 from ..status import CONVERGED, NON_FINITE, NOT_PERIODIC, NO_MOTION, TOLERANCE_NOT_REACHED
-from .estimators import estimate_sweep, event_split_errors
+from .estimators import estimate_pass, event_split_errors
 from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
-from .integrator import Stops, SweepAim, WeightModel, adaptive_sweep, frozen_sweep
-from .options import (FIRST_STEP, MAX_LOOSE_SWEEPS, MAX_ROUNDS, MIN_STEP, RESIDUAL_WEIGHT,
+from .integrator import Stops, PassAim, WeightModel, adaptive_pass, frozen_pass
+from .options import (FIRST_STEP, MAX_LOOSE_PASSES, MAX_ROUNDS, MIN_STEP, RESIDUAL_WEIGHT,
                       WARM_ATOL_SLACK)
-from .radau import ERROR_ORDER, PointPhysics
+from .radau import ERROR_ORDER
 from .record import (CORNER_STOP, end_kind, new_workspace, node_columns, node_weight,
                      set_step_span, set_step_start, stage_kinematics_into, step_span)
-from .shooting import (bracketed_newton_update, frozen_newton, period_integrals, period_map,
-                       shift_onto_fixed_point)
+from .shooting import (bracketed_newton_update, frozen_newton, frozen_orbit, period_integrals,
+                       period_map, shift_onto_fixed_point)
 from .switching import MAX_STOPS, kinematic_stops, stop_speed, turning_stops
-from .tolerances import Tolerances, norm_scales, stage_atol, target_stage_atol, tolerances, u0_bound
+from .tolerances import (Tolerances, norm_scales, stage_atol, target_stage_atol, tolerances,
+                         u0_bound)
 from .traps import trapped_steps
 
 
@@ -73,8 +75,8 @@ class PointSolution(NamedTuple):
     """What ``solve_point`` returns besides its workspace.
 
     int_u, int_pi : the period integrals (NaN unless ``status`` is CONVERGED);
-    u0 : the last u(0); status : ``status`` code; n_steps : the final sweep's steps (its
-    solution is in the workspace's first n_steps columns); sweeps : sweeps made; estimate :
+    u0 : the last u(0); status : ``status`` code; n_steps : the final pass's steps (its
+    solution is in the workspace's first n_steps columns); passes : passes made; estimate :
     the global error estimate in rtol's norm (inf: none); evaluations : (N_COSTS,) the
     evaluations of F by phase (COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE);
     vscale : V = (1/4) int |dphi/dtau| dtau (``periodic.switching.stop_speed``; 0: phi is constant,
@@ -86,7 +88,7 @@ class PointSolution(NamedTuple):
     u0: float
     status: int
     n_steps: int
-    sweeps: int
+    passes: int
     estimate: float
     evaluations: np.ndarray
     vscale: float
@@ -130,7 +132,7 @@ class PointProblem(NamedTuple):
 
 class RoundStart(NamedTuple):
     """Where the rounds of steps 3-4 start: ``u0``; the first step ``h_first``; the weight
-    ``model`` (node weights and ceilings) that judges the adaptive sweep's steps; the stage
+    ``model`` (node weights and ceilings) that judges the adaptive pass's steps; the stage
     tolerance ``atol``; the norm of U and P, ``scale_u`` and ``scale_p``."""
 
     u0: float
@@ -161,7 +163,7 @@ def no_orbit():
 
 
 class Judged(NamedTuple):
-    """What ``_judge`` finds of a converged sweep: the period integrals ``int_u``,
+    """What ``_judge`` finds of a converged pass: the period integrals ``int_u``,
     ``int_p``; the norm ``scale_u``, ``scale_p``; the global ``estimate`` (rtol's norm);
     each step's weighted error ``shares`` (N,); the steps next to turning points over their
     trap ceilings, ``trapped``, with those ceilings in ``trap_caps`` (N,, inf elsewhere);
@@ -180,7 +182,7 @@ class Judged(NamedTuple):
 
 @njit(cache=True, error_model="numpy")
 def _judge(problem, W, N, atol, one_minus_M, residual):
-    """Step 4 on the converged sweep of ``W``: each step's local error (the defect, and
+    """Step 4 on the converged pass of ``W``: each step's local error (the defect, and
     where an event sits inside a step the step split there), the node weights, the global
     estimate, and the trap check of the steps next to turning points.  ``residual``: a
     shooting residual kept unshifted (``solve_point``'s frozen map that jumps over its
@@ -189,7 +191,7 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     corner_nodes = np.zeros(N, dtype=np.bool_)
     for n in range(N - 1):
         corner_nodes[n + 1] = end_kind(W, n) == CORNER_STOP
-    evaluations = estimate_sweep(code, params, phys, corner_nodes, atol, W, N)[1]
+    evaluations = estimate_pass(code, params, phys, corner_nodes, atol, W, N)[1]
     split = np.zeros(N, dtype=np.bool_)
     evaluations += event_split_errors(code, params, phys, atol, W, N, split)[1]
     node_weights(W, N, one_minus_M)
@@ -212,7 +214,7 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
 
 @njit(cache=True, error_model="numpy")
 def _refinement_model(W, N, judged, tols):
-    """The weight model of the next round: the converged sweep's node weights, and ceilings
+    """The weight model of the next round: the converged pass's node weights, and ceilings
     on the steps that asked for refinement (or all steps shrunk evenly where none asked
     alone) and on the trapped ones."""
     rtol = tols.rtol
@@ -229,7 +231,7 @@ def _refinement_model(W, N, judged, tols):
 
 
 @njit(cache=True, error_model="numpy")
-def _rounds(problem, start, W, evals, sweeps, start_kind):
+def _rounds(problem, start, W, evals, passes, start_kind):
     """Steps 3-4 of the module docstring, at most MAX_ROUNDS times from ``start``
     (RoundStart).  Returns (W, PointSolution)."""
     code, params, phys = problem.code, problem.params, problem.phys
@@ -242,18 +244,18 @@ def _rounds(problem, start, W, evals, sweeps, start_kind):
     N = 0
     failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
     for _ in range(MAX_ROUNDS):
-        aim = SweepAim(tols.target, scale_u, scale_p, model, atol, problem.max_steps,
+        aim = PassAim(tols.target, scale_u, scale_p, model, atol, problem.max_steps,
                        True, True)
-        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, h_first, aim, W)
-        W, N, status = sweep.W, sweep.N, sweep.status
-        sweeps += 1
-        evals[COST_ADAPTIVE] += sweep.evaluations
+        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, h_first, aim, W)
+        W, N, status = period_pass.W, period_pass.N, period_pass.status
+        passes += 1
+        evals[COST_ADAPTIVE] += period_pass.evaluations
         if status != CONVERGED:
-            return W, PointSolution(nan, nan, u0, status, N, sweeps, math.inf, evals, vscale,
+            return W, PointSolution(nan, nan, u0, status, N, passes, math.inf, evals, vscale,
                                     start_kind)
         round_start = u0
         fn = frozen_newton(code, params, phys, u0, atol, W, N, tols.shooting, problem.bound)
-        sweeps += fn.sweeps
+        passes += fn.passes
         evals[COST_FROZEN] += fn.evaluations
         u0, g, one_minus_M = fn.u0, fn.g, fn.one_minus_M
         residual = 0.0  # a shooting residual kept and counted (``_judge``)
@@ -264,7 +266,7 @@ def _rounds(problem, start, W, evals, sweeps, start_kind):
                 u0 = fn.restart_u0
                 continue
             if fn.status != NOT_PERIODIC:
-                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
+                return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals,
                                         vscale, start_kind)
             # The frozen period map jumps over its fixed point (its bisection closed in on a
             # step of g, and its best u(0) is the round's start, so another round would
@@ -273,15 +275,15 @@ def _rounds(problem, start, W, evals, sweeps, start_kind):
             # long_period_powerlaw point 356 at rtol 1e-7, g from +5.4e-11 to -2.8e-10 across
             # 1e-21 of u(0), M = 0; NOT_PERIODIC before.)
             u0 = round_start
-            status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
-            sweeps += 1
+            status, e = frozen_pass(code, params, phys, u0, atol, W, N)
+            passes += 1
             evals[COST_FROZEN] += e
             if status != CONVERGED:
-                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
+                return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals,
                                         vscale, start_kind)
             g, one_minus_M = period_map(W, N, u0)
             if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
+                return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals,
                                         vscale, start_kind)
             residual = g
         else:
@@ -293,12 +295,12 @@ def _rounds(problem, start, W, evals, sweeps, start_kind):
         estimate = judged.estimate
         scale_u, scale_p = judged.scale_u, judged.scale_p
         if estimate <= rtol and judged.trapped == 0:
-            return W, PointSolution(judged.int_u, judged.int_p, u0, CONVERGED, N, sweeps,
+            return W, PointSolution(judged.int_u, judged.int_p, u0, CONVERGED, N, passes,
                                     estimate, evals, vscale, start_kind)
         failure = TOLERANCE_NOT_REACHED
         model = _refinement_model(W, N, judged, tols)
         h_first = min(h_first, step_span(W, 0)[1])
-    return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals, vscale,
+    return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals, vscale,
                             start_kind)
 
 
@@ -320,33 +322,33 @@ def _point_stops(code, params, corners):
 @njit(cache=True, error_model="numpy")
 def _cold_start(problem, u_guess, W, evals):
     """Step 2, the loose shooting from ``u_guess``.  Returns (W, RoundStart, status, N,
-    sweeps): status CONVERGED, or the failure that ends the solve."""
+    passes): status CONVERGED, or the failure that ends the solve."""
     code, params, phys = problem.code, problem.params, problem.phys
     tols, vscale = problem.tols, problem.vscale
     rtol, loose = tols.rtol, tols.loose
     u0 = u_guess
     empty = np.zeros(1)
     model = WeightModel(empty, empty, empty, empty, 0)
-    sweeps = 0
+    passes = 0
     N = 0
     # judged in u alone, relative to V (int u and int Pi are not known yet: the floor
     # 1e-3 V of U's norm would make it a thousand times too strict)
     lo, hi = -problem.bound, problem.bound
     scale_u = scale_p = 1.0
-    for _ in range(MAX_LOOSE_SWEEPS):
-        aim = SweepAim(tols.loose_target, vscale, math.inf, model,
+    for _ in range(MAX_LOOSE_PASSES):
+        aim = PassAim(tols.loose_target, vscale, math.inf, model,
                        stage_atol(loose, vscale, phys), problem.max_steps, True, False)
-        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, FIRST_STEP, aim, W)
-        W, N, status = sweep.W, sweep.N, sweep.status
-        sweeps += 1
-        evals[COST_LOOSE] += sweep.evaluations
+        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, FIRST_STEP, aim, W)
+        W, N, status = period_pass.W, period_pass.N, period_pass.status
+        passes += 1
+        evals[COST_LOOSE] += period_pass.evaluations
         if status != CONVERGED:
-            return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), status, N, sweeps
+            return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), status, N, passes
         int_u, int_p = period_integrals(W, N)
         scale_u, scale_p = norm_scales(int_u, int_p, vscale)
         g, one_minus_M = period_map(W, N, u0)
         if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-            return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), NON_FINITE, N, sweeps
+            return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), NON_FINITE, N, passes
         node_weights(W, N, one_minus_M)
         model = _model(W, N, np.full(N, math.inf))
         u_new, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
@@ -357,7 +359,7 @@ def _cold_start(problem, u_guess, W, evals):
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
     atol = target_stage_atol(rtol, scale_u, phys, _largest_weight(model, scale_u, scale_p))
     h_first = max((step_span(W, 0)[1]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
-    return W, RoundStart(u0, h_first, model, atol, scale_u, scale_p), CONVERGED, N, sweeps
+    return W, RoundStart(u0, h_first, model, atol, scale_u, scale_p), CONVERGED, N, passes
 
 
 @njit(cache=True, error_model="numpy")
@@ -405,7 +407,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit)
 
     Returns
     -------
-    (W, PointSolution, Orbit): W possibly grown, holding the final sweep, and this point's
+    (W, PointSolution, Orbit): W possibly grown, holding the final pass, and this point's
     orbit for the next point of a sweep (``no_orbit()`` unless CONVERGED).  Where phi is
     constant (V = 0) nothing is solved: status NO_MOTION, the integrals 0.
     """
@@ -431,21 +433,21 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit)
             start = RoundStart(sol.u0, step_span(W, 0)[1], _model(W, sol.n_steps,
                                np.full(sol.n_steps, math.inf)), own_atol, own.scale_u,
                                own.scale_p)
-            W, sol = _rounds(problem, start, W, evals, sol.sweeps, START_WARM)
+            W, sol = _rounds(problem, start, W, evals, sol.passes, START_WARM)
             if sol.status == CONVERGED:
                 return W, sol, _orbit_of(W, sol, problem)
         verdict = START_WARM_REJECTED
-    W, start, status, N, sweeps = _cold_start(problem, u_guess, W, evals)
+    W, start, status, N, passes = _cold_start(problem, u_guess, W, evals)
     if status != CONVERGED:
-        return W, PointSolution(math.nan, math.nan, start.u0, status, N, sweeps, math.inf,
+        return W, PointSolution(math.nan, math.nan, start.u0, status, N, passes, math.inf,
                                 evals, vscale, verdict), no_orbit()
-    W, sol = _rounds(problem, start, W, evals, sweeps, verdict)
+    W, sol = _rounds(problem, start, W, evals, passes, verdict)
     return W, sol, _orbit_of(W, sol, problem)
 
 
 @njit(cache=True, error_model="numpy")
 def _orbit_of(W, sol, problem):
-    """The ``Orbit`` of a solution whose final sweep is in ``W`` (none unless CONVERGED)."""
+    """The ``Orbit`` of a solution whose final pass is in ``W`` (none unless CONVERGED)."""
     if sol.status != CONVERGED:
         return no_orbit()
     scale_u, scale_p = norm_scales(sol.int_u, sol.int_pi, problem.vscale)
@@ -456,22 +458,16 @@ def _orbit_of(W, sol, problem):
 @njit(cache=True, error_model="numpy")
 def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
     """The periodic solution of the Radau IIA discretisation on the given ``grid`` (N + 1,
-    nodes from 0 to 1, with the corners of phi among them), without error control: Newton on
-    u(0) by frozen sweeps.  For order tests.  Returns (int_u, int_pi, status)."""
+    nodes from 0 to 1, with the corners of phi among them), without error control
+    (``periodic.shooting.frozen_orbit`` from ``u_guess``, every stage's first guess
+    ``u_guess``).  For order tests.  Returns (int_u, int_pi, status)."""
     N = grid.size - 1
     W = new_workspace(N)
-    phys_atol = stage_atol(rtol, vscale, phys)
     for n in range(N):
         set_step_span(W, n, grid[n], grid[n + 1])
         stage_kinematics_into(code, params, W, n)
         set_step_start(W, n, u_guess, u_guess, 0.0)
-    status, _ = frozen_sweep(code, params, phys, u_guess, phys_atol, W, N)
+    status, _, int_u, int_p = frozen_orbit(code, params, phys, u_guess, rtol, vscale, W, N)
     if status != CONVERGED:
         return math.nan, math.nan, status
-    fn = frozen_newton(code, params, phys, u_guess, phys_atol, W, N,
-                       tolerances(rtol, vscale).shooting, u0_bound(vscale, u_guess))
-    if fn.status != CONVERGED:
-        return math.nan, math.nan, fn.status
-    shift_onto_fixed_point(W, N, fn.g / fn.one_minus_M)
-    int_u, int_p = period_integrals(W, N)
     return int_u, int_p, CONVERGED

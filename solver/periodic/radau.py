@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit
 
 from ..model.force import force_slope_power_sc
+from ..model.physics import PointPhysics  # noqa: F401  (transitional: march.heun and tests import it from here)
 from .options import FIRST_CORRECTION_SHARE, MAX_STAGE_ITERATIONS, SLOPE_SHARE
 
 
@@ -81,16 +82,6 @@ A21, A22, A23 = RADAU5_A[1]
 A31, A32, A33 = RADAU5_A[2]
 E1, E2, E3 = RADAU5_E
 EA1, EA2, EA3 = RADAU5_EA
-
-
-class PointPhysics(NamedTuple):
-    """The physics of one parameter point as the kernels see it (eq. Newtonu, eq. tau)."""
-
-    kappa: float   # T^(2-p), the inertia factor in u' = kappa F
-    mu_n: float    # normal resistance coefficient
-    mu_s: float    # tangential resistance coefficient
-    p: float       # force-law exponent, 0 <= p < 2
-    dtau: float    # delta_tau = T delta
 
 
 class StageKinematics(NamedTuple):
@@ -159,8 +150,8 @@ class StepError(NamedTuple):
 @njit(cache=True, error_model="numpy")
 def runtime_bool(flag):
     """``flag`` as a run-time bool, not a literal.  numba compiles a kernel once per literal
-    argument (a bool or int constant at a call site: ``adaptive_sweep(..., True, False)`` and
-    ``(..., True)`` were two compilations of the sweep, its callees included); the engine
+    argument (a bool or int constant at a call site: ``adaptive_pass(..., True, False)`` and
+    ``(..., True)`` were two compilations of the pass, its callees included); the engine
     passes its constant flags, rows and starting indices through ``runtime_bool`` and
     ``runtime_int`` so that a kernel has one signature (docs/validation.md).  (An identity
     function would not do: its return type is the literal again.)"""
@@ -243,7 +234,7 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.n
         u at the step's start.
     U1, U2, U3 : float
         Starting stage values (a prediction: the previous step's collocation polynomial,
-        or the previous sweep's stages moved along their sensitivities).
+        or the previous pass's stages moved along their sensitivities).
     h : float
         Step length in tau.
     kin : StageKinematics

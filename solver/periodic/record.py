@@ -290,3 +290,24 @@ def set_step_start(W, n, u, stage, sensitivity):
     for i in range(3):
         W[STAGE + i, n] = stage
         W[SENS + i, n] = sensitivity
+
+
+@njit(cache=True, error_model="numpy")
+def set_grid_step(W, n, t0, t1, S, C, om, u, stage, sensitivity):
+    """Step n of a given grid before its first frozen pass (``periodic.shooting.frozen_orbit``):
+    from t0 to t1, with sin phi ``S``, cos phi ``C`` and dphi/dtau ``om`` at its stages (each
+    (3,)), u_n = ``u``, its stages and their sensitivities as ``set_step_start``, no error
+    estimate, an ORDINARY end."""
+    set_step_span(W, n, t0, t1)
+    _put3(W, SIN, n, S[0], S[1], S[2])
+    _put3(W, COS, n, C[0], C[1], C[2])
+    _put3(W, OMEGA, n, om[0], om[1], om[2])
+    set_step_start(W, n, u, stage, sensitivity)
+    _put3(W, ERR, n, 0.0, 0.0, 0.0)
+    W[END_KIND, n] = ORDINARY
+
+
+@njit(cache=True, error_model="numpy")
+def stage_columns(W, N):
+    """View of the stage values of steps 0 .. N - 1, shape (3, N)."""
+    return W[STAGE:STAGE + 3, :N]

@@ -18,7 +18,7 @@ DifferentialEquations.jl ``tstops``):
 
 - the functions of tau alone (S, C, omega, and omega' where |omega| has a small interior
   minimum: a near-tangency opens the same window without a zero) and the corners of phi
-  are known before the sweep: ``kinematic_stops`` finds their zeros once per point;
+  are known before the pass: ``kinematic_stops`` finds their zeros once per point;
 - the functions of u (g and the outer end's velocity) are state events: a sign change
   across a step is located on the step's collocation polynomial (``locate_state_event``,
   scipy ``ivp.py``'s ``solve_event_equation`` on the dense output) and the step is cut
@@ -61,7 +61,7 @@ class Bracket(NamedTuple):
 
 
 class SolvedStep(NamedTuple):
-    """A solved step of a sweep, as its events are sought in it (``periodic.events.find_event``).
+    """A solved step of a pass, as its events are sought in it (``periodic.events.find_event``).
 
     t0, h : its start and length; u_n : u at its start; sol : its stages
     (``periodic.radau.StepSolution``: U1, U2, U3 with u_n define the collocation polynomial,
@@ -180,7 +180,7 @@ def stop_speed(code, params, stops, n_stops):
 
 @njit(cache=True, error_model="numpy")
 def kinematic_stops(code, params, corners, out):
-    """The step ends every sweep of a point keeps: 0, the corners of phi, the zeros of sin phi,
+    """The step ends every pass of a point keeps: 0, the corners of phi, the zeros of sin phi,
     cos phi and omega, and the near-tangencies (minima of |omega| below TANGENCY_SHARE of
     its maximum).  Writes them sorted into ``out`` (0 first, all in [0, 1)); returns their
     count and max |omega| over the samples (for ``turning_stops``).
@@ -287,6 +287,12 @@ def illinois_update(a, b, fa, fb, c, fc, last):
     """One bracket update of Illinois regula falsi: the new point c (value fc) replaces the
     end of [a, b] on its side, and the other end's value is halved when the same end was kept
     twice running (``last``: -1 when b was replaced, 1 when a was, 0 at the start).
+
+    The three locators (``locate_exit``, ``locate_state_event``, ``_refine_root``) share
+    this update but keep their own short loops: one root finder taking the function as an
+    argument (numba's first-class functions) returned the same bits but made every kernel
+    that calls it uncacheable ("dynamic globals": each process recompiled the engine),
+    measured in issue 37.
 
     Returns (a, b, fa, fb, last)."""
     if fc * fa < 0.0:

@@ -30,7 +30,7 @@ def trap_ceiling(code, params, phys, t_z, side, u):
         return math.inf
     # (|u| itself, not the friction's band when smaller: at scaled period 0.0085 a body at
     # |u| ~ 1e-6 ~ the band was trapped, 3.3 rtol off; a body at rest, u ~ 1e-18, gets
-    # steps of ACCEPT_STEP from the sweep)
+    # steps of ACCEPT_STEP from the pass)
     return TRAP_SHARE * abs(u) / abs(kF)
 
 
@@ -69,8 +69,8 @@ def trap_clip(h, cap):
 
 @njit(cache=True, error_model="numpy")
 def trapped_steps(code, params, phys, point_stops, W, N, ceilings):
-    """The ``trap_ceiling`` of ``adaptive_sweep`` checked again on the converged solution of
-    ``W``: the sweep judged the steps next to a turning point by its own u, and the frozen
+    """The ``trap_ceiling`` of ``adaptive_pass`` checked again on the converged solution of
+    ``W``: the pass judged the steps next to a turning point by its own u, and the frozen
     Newton can move u there into the friction's band, where the ceiling is far smaller.  A
     step ending on such a node with its last stage in the band is damped as if the body
     stuck over the stage's share of the step (kappa dF/du ~ kappa mu / delta_tau): the step's

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 import solver
-from solver.periodic.driver import N_COSTS
+from solver.periodic.point import N_COSTS
 from solver.tools.honesty import References, Solves, engine_digest, judge
 
 RTOLS = (1e-4, 1e-7)
