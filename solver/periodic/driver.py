@@ -16,10 +16,6 @@ from ..status import CONVERGED, NON_FINITE
 from .options import GUESS_STEPS, IN_LINE_SHARE, START_CAPACITY
 from .point import N_COSTS, Orbit, fixed_grid_point, no_orbit, solve_point
 from .record import new_workspace, node_series
-# (transitional: ``adjoint.gradient`` imports these three from here)
-from .shooting import frozen_newton, shift_onto_fixed_point  # noqa: F401
-from .tolerances import stage_atol  # noqa: F401
-# (transitional: ``adjoint.gradient`` imports these three from here)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

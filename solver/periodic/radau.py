@@ -42,7 +42,6 @@ import numpy as np
 from numba import njit
 
 from ..model.force import force_slope_power_sc
-from ..model.physics import PointPhysics  # noqa: F401  (transitional: march.heun and tests import it from here)
 from .options import FIRST_CORRECTION_SHARE, MAX_STAGE_ITERATIONS, SLOPE_SHARE
 
 
