@@ -12,7 +12,8 @@ import pytest
 import solver
 from references import reference
 from cases import AGREEMENT_CASES, radau_reference
-from solver.periodic import defect, estimators, events, integrator, options, radau, record, steps, switching, traps
+from solver.periodic import (defect, estimators, events, integrator, options, radau, record, steps,
+                             switching, traps)
 from solver.model.kinematics import angle_and_rate
 from solver.model.physics import PointPhysics
 from solver.tools.bench import solution_error

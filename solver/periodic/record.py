@@ -107,7 +107,7 @@ def stage_kinematics_into(code, params, W, n):
 
 # ---------------------------------------------------------------- reading and writing a step
 # (the only code that indexes the rows: every other module reads and writes the record
-# through these; numba inlines them, so they cost nothing per call)
+# through these; no measurable cost per solve, docs/validation.md "The engine's anatomy")
 @njit(cache=True, error_model="numpy")
 def node_time(W, n):
     """tau_n."""
