@@ -5,7 +5,7 @@ int_0^1 Pi dtau of every point with an error estimate and a status:
 
 - ``"periodic"``, the engine (``periodic.driver``): event-driven 3-stage Radau IIA (order 5,
   L-stable, stiffly accurate), steps ending at the corners of phi and at the state events
-  of the friction, Newton on u(0) by frozen-grid sweeps with the exact monodromy, and one
+  of the friction, Newton on u(0) by frozen-grid passes with the exact monodromy, and one
   pass of error control from the collocation polynomial's defect carried to the period
   integrals by the node weights (the discrete adjoint of the shooting);
 - ``"march"``, the independent check (``march.driver``): explicit Heun RK2 from rest, period
@@ -29,7 +29,7 @@ import numpy as np
 from numba import get_num_threads
 
 from .march import driver as march_driver
-from .periodic import driver as periodic_driver
+from . import periodic
 from .model.kinematics import period_grid
 from .model.limits import fast_limit_velocity, kinematic_speed
 from .status import CONVERGED, NO_MOTION, OUT_OF_RANGE
@@ -62,7 +62,7 @@ ENGINES = {
 }
 #: the u floor of U's error norm, as a share of V (module docstring)
 U_FLOOR_FRACTION = 1e-3
-#: the default ``max_steps_per_period``: steps of one sweep (periodic), the finest grid (march)
+#: the default ``max_steps_per_period``: steps of one pass (periodic), the finest grid (march)
 MAX_STEPS_PER_PERIOD = 2 ** 17
 
 
@@ -76,19 +76,19 @@ class SolveResult:
     scaled_efficiency : sqrt(mu_n mu_s) lambda; efficiency_upper_bound : 1/min(mu_n, mu_s);
     relative_efficiency : lambda / lambda_ub (eq. relefficiency);
     status (int8, 0 = converged; ``status_reason``), converged (bool),
-    error_estimate (relative, see module docstring), iterations (sweeps of one period for
+    error_estimate (relative, see module docstring), iterations (passes over the period for
     ``periodic``, periods marched for ``march``, summed over grids), n_tau (steps per
     period of the final step sequence);
     u : u(tau) at the final steps' nodes (without tau = 1), shape (n_points, n_tau) where
     every point has as many, else a list of arrays, or None;
     tau : those nodes, same shape, or None.
     force_evaluations : evaluations of F per point: ``periodic`` by phase (loose shooting,
-    target sweeps, frozen-grid sweeps, estimates; shape (n_points, 4)), ``march`` in all
+    target passes, frozen-grid passes, estimates; shape (n_points, 4)), ``march`` in all
     (shape (n_points, 1)).
     method : the method that computed it.
     start : how each point's solve started (``periodic``; None for ``march``): 0 cold,
     1 warm from its sweep's previous point, 2 warm failed, then cold
-    (``periodic.driver.START_*``).
+    (``periodic.point.START_*``).
     Failed points have NaN in every float output.
     """
 
@@ -182,9 +182,9 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
     vscale = kinematic_speed(kinematics)
     u0 = fast_limit_velocity(kinematics, physics)
     grids = period_grid(kinematics, n_steps)
-    points = periodic_driver.Points(code, params, np.zeros((n, 0)), physics.inertia_factor,
+    points = periodic.Points(code, params, np.zeros((n, 0)), physics.inertia_factor,
                                     physics.mu_n, physics.mu_s, physics.p, physics.delta_tau, u0)
-    return periodic_driver.fixed_grid_points(points, grids, float(rtol),
+    return periodic.fixed_grid_points(points, grids, float(rtol),
                                              np.maximum(vscale, 1e-300), get_num_threads())
 
 
@@ -213,7 +213,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         Solve the points as sweeps (``periodic`` only): (n_sweeps + 1,) increasing offsets
         from 0 to n_points; points sweeps[k] .. sweeps[k + 1] - 1 form one sweep, solved in
         that order, each point starting from its predecessor's periodic orbit (its u(0),
-        node weights and norm; ``periodic.driver.warm_start``), the first cold.  Order the
+        node weights and norm; ``periodic.point.warm_start``), the first cold.  Order the
         points so that neighbours follow each other (``snake_order``).  Every result is
         judged by the same error estimate as a cold solve; where the warm start fails the
         point is solved cold.  A sweep's results depend on its own points only.  Default:
@@ -237,7 +237,7 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     start = time.perf_counter()
     max_steps = max_steps_per_period or MAX_STEPS_PER_PERIOD
     if method == "periodic":
-        out = periodic_driver.solve(kinematics, physics, rtol, max_steps, return_series, sweeps)
+        out = periodic.solve(kinematics, physics, rtol, max_steps, return_series, sweeps)
     else:
         out = march_driver.solve(kinematics, physics, rtol, max_steps, return_series)
     return _result(out, physics, method, start)
@@ -293,7 +293,7 @@ def _checked_sweeps(sweeps, n, method):
 
 
 def _result(out, physics, method, start):
-    """The ``SolveResult`` of a driver's output dict (``periodic.driver.solve``,
+    """The ``SolveResult`` of a driver's output dict (``periodic.solve``,
     ``march.driver.solve``: int_u, int_pi, status, estimate, n_tau, iterations, still,
     series, evaluations): the physical outputs, NaN where not converged, phi constant as
     NO_MOTION with U = P = 0, and U or P beyond the float range as OUT_OF_RANGE."""

@@ -12,9 +12,10 @@ import pytest
 import solver
 from references import reference
 from cases import AGREEMENT_CASES, radau_reference
-from solver.periodic import radau, sweep, switching
+from solver.periodic import (defect, estimators, events, integrator, options, radau, record, steps,
+                             switching, traps)
 from solver.model.kinematics import angle_and_rate
-from solver.periodic.radau import PointPhysics
+from solver.model.physics import PointPhysics
 from solver.tools.bench import solution_error
 from test_solver_methods import ORDER_CASES
 
@@ -55,11 +56,11 @@ def _step_against_scipy(kin, physics, t0, u_n, h):
     code, params = kin.kernel_encoding()
     params = params[0]
     phys = _point_physics(physics)
-    f0, J0, P0, Pu0 = sweep.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)
-    kin3 = sweep.stage_kinematics(code, params, t0, h)
+    f0, J0, P0, Pu0 = steps.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)
+    kin3 = steps.stage_kinematics(code, params, t0, h)
     step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
-    err, used = radau.defect_error(u_n, f0, J0, P0, Pu0, step, h,
-                                     sweep.sample_kinematics(code, params, t0, h), phys)
+    err, used = defect.defect_error(u_n, f0, J0, P0, Pu0, step, h,
+                                     steps.sample_kinematics(code, params, t0, h), phys)
     int_ref, u_ref = radau_reference(code, params, tuple(phys), t0, t0 + h, u_n)
     int_u, _ = radau.step_integrals(h, step)
     return step, err, used, u_ref - step.U3, int_ref - int_u
@@ -91,7 +92,7 @@ def test_embedded_estimate_is_the_fallback_and_larger():
     code, params = kin.kernel_encoding()
     phys = _point_physics(physics)
     h, t0, u_n = 0.05, 0.2, 0.05
-    f0, J0, P0, Pu0 = sweep.start_values(code, params[0], t0, t0 + 0.5 * h, u_n, phys)
+    f0, J0, P0, Pu0 = steps.start_values(code, params[0], t0, t0 + 0.5 * h, u_n, phys)
     step, err, used, du, dv = _step_against_scipy(kin, physics, t0, u_n, h)
     embedded = radau.embedded_error(u_n, f0, J0, P0, Pu0, step, h)
     assert abs(embedded.u) > 10 * abs(du) and abs(embedded.int_u) > 10 * abs(dv)
@@ -127,18 +128,18 @@ def test_an_event_in_the_first_sixth_of_a_step_is_found():
     h = 0.02
     t0 = t_c - 0.1 * h
     u_n = sol.sol(t0)[0]
-    kin3 = sweep.stage_kinematics(code, params, t0, h)
+    kin3 = steps.stage_kinematics(code, params, t0, h)
     step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
     phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
-    f0 = sweep.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)[0]
+    f0 = steps.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)[0]
     solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
-    theta = sweep.find_event(code, params, phys, solved, 1e-14, True, sweep.new_exit_memo())
+    theta = events.find_event(code, params, phys, solved, 1e-14, True, events.new_exit_memo())
     assert abs(theta - 0.1) < 1e-2, theta
     h = theta * h
-    kin3 = sweep.stage_kinematics(code, params, t0, h)
+    kin3 = steps.stage_kinematics(code, params, t0, h)
     step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
     solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
-    cut = sweep.find_event(code, params, phys, solved, 1e-14, False, sweep.new_exit_memo())
+    cut = events.find_event(code, params, phys, solved, 1e-14, False, events.new_exit_memo())
     true = (t_c - t0) / h
     assert abs(true - 1.0) < 0.05  # the cut step ends near the true crossing ...
     if cut > 0:                    # ... and any crossing left in it is located to 1e-6
@@ -177,7 +178,7 @@ def test_a_corner_next_to_a_zero_stays_a_stop():
     count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out)
     stops = out[:count]
     assert 0.5 in stops, stops
-    near = stops[np.abs(stops - 0.5) <= switching.STOP_GAP]
+    near = stops[np.abs(stops - 0.5) <= options.STOP_GAP]
     assert list(near) == [0.5], near  # (the root merged into the corner)
 
 
@@ -272,8 +273,8 @@ def test_power_floor_does_not_erase_the_power_error():
     reviewer's find: with int u's error below its floor, P's own quadrature error of 1e-6
     counted as 0)."""
     err = radau.StepError(0.0, 1e-20, 1e-6)
-    assert sweep.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1.0) >= 0.99e-6
-    assert sweep.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1e12) == 0.0
+    assert estimators.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1.0) >= 0.99e-6
+    assert estimators.weighted_error(err, 1.0, 1.0, 1.0, 1.0, 1e-12, 0.01, 1e12) == 0.0
 
 
 def test_a_body_passing_a_turning_point_is_not_trapped():
@@ -315,13 +316,13 @@ def _flat_inflection_errors(scaled_period, rtols):
 
 
 def test_the_trap_clip_never_lengthens_a_step():
-    """``periodic.sweep.trap_clip``: a step next to a turning point is cut to its ceiling, not below
+    """``periodic.traps.trap_clip``: a step next to a turning point is cut to its ceiling, not below
     ACCEPT_STEP, and never made longer (a step already ending on a stop closer than
     ACCEPT_STEP keeps its length: it must not cross the stop)."""
-    accept = sweep.ACCEPT_STEP
+    accept = options.ACCEPT_STEP
     for h in (1e-14, 0.3 * accept, accept, 3.0 * accept, 1e-6, 0.1):
         for cap in (0.0, 1e-15, 0.5 * accept, 2.0 * accept, 1e-7, 1e-3, 1.0):
-            clipped = sweep.trap_clip(h, cap)
+            clipped = traps.trap_clip(h, cap)
             assert clipped <= h
             assert clipped >= min(h, accept)
             if accept <= cap < h:
@@ -336,7 +337,7 @@ def test_a_flat_inflection_keeps_the_trap_cap():
 
 
 def test_flat_inflections_are_honest_at_tight_tolerances():
-    """A scan over rtol 2e-6 .. 3e-5 at two scaled periods.  Before ``periodic.sweep.trapped_steps``
+    """A scan over rtol 2e-6 .. 3e-5 at two scaled periods.  Before ``periodic.traps.trapped_steps``
     5 of 15 converged solves were 2.5 .. 10.0 rtol off with estimates of 0.2 .. 0.9 (and one
     failed): the frozen Newton had moved u at tau = 0 into the friction's band, where the step
     into that turning point, judged by the adaptive sweep's u, exceeded its trap ceiling 10 ..
@@ -352,7 +353,7 @@ def test_flat_inflections_are_honest_at_tight_tolerances():
 
 
 def test_exponential_moments_match_quadrature():
-    """Both branches of ``periodic.radau.exponential_moments`` (the power series from tables for
+    """Both branches of ``periodic.defect.exponential_moments`` (the power series from tables for
     |z| <= 1, the recurrence beyond) against adaptive quadrature of their definitions."""
     from scipy.integrate import quad
 
@@ -360,7 +361,7 @@ def test_exponential_moments_match_quadrature():
     for _ in range(60):
         z = rng.choice([-1.0, 1.0]) * 10.0 ** rng.uniform(-6.0, 1.5)
         q = rng.normal(size=5)
-        s_i, s_g = radau.exponential_moments(z, *q)
+        s_i, s_g = defect.exponential_moments(z, *q)
         ref_i = sum(q[k - 1] * quad(lambda x, k=k: x ** k * np.exp(z * x), 0.0, 1.0,
                                     epsabs=0.0, epsrel=1e-13)[0] for k in range(1, 6))
         ref_g = sum(q[k - 1] * quad(lambda x, k=k: x ** k * np.expm1(z * x) / z, 0.0, 1.0,
@@ -473,10 +474,11 @@ def test_a_round_refines_a_step_at_most_max_refinement_times():
     """``periodic.global_error.refinement_ceiling``: a share 2^5 above its step's target asks for a
     step half as long; one far above it (an estimate out of its regime), for at most
     MAX_REFINEMENT times shorter, not for ACCEPT_STEP; within the target, for nothing."""
-    from solver.periodic.global_error import MAX_REFINEMENT, refinement_ceiling
+    from solver.periodic.global_error import refinement_ceiling
+    from solver.periodic.options import MAX_REFINEMENT
 
-    W = sweep.new_workspace(4)
-    W[sweep.T, :4] = [0.0, 0.25, 0.5, 1.0]
+    W = record.new_workspace(4)
+    W[record.T, :4] = [0.0, 0.25, 0.5, 1.0]
     target = 1e-4
     shares = np.array([0.5 * target * 0.25, 32.0 * target * 0.25, 3e291])
     ceilings = np.empty(3)
@@ -584,7 +586,7 @@ def _newton_correction(u_n, stages, h, kin, phys):
 
 
 def test_stage_newton_at_an_infinite_slope_converges_to_the_roots():
-    """The sweeps' step solve (``periodic.sweep.solve_step``: ``radau5_step`` from the prediction,
+    """The sweeps' step solve (``periodic.steps.solve_step``: ``radau5_step`` from the prediction,
     then from u_n and from rest) at omega = 0 (F = -K |u|^p sign u, p = 0.5, delta = 0: an infinite
     slope at u = 0) from many starts: the sign-flip cut (``periodic.radau.flip_cut``) must lead
     Newton to the stage roots, not accept unconverged stages (the former engine's first cut
@@ -598,7 +600,7 @@ def test_stage_newton_at_an_infinite_slope_converges_to_the_roots():
         kin = radau.StageKinematics(S, S, S, C, C, C, 0.0, 0.0, 0.0)
         for u_n in (*np.geomspace(1e-8, 1.0, 7), *-np.geomspace(1e-8, 1.0, 7)):
             for guess in (u_n, 0.3, -0.3, 1e-3, -1e-3):
-                sol, _ = sweep.solve_step(u_n, guess, guess, guess, h, kin, phys, atol)
+                sol, _ = steps.solve_step(u_n, guess, guess, guess, h, kin, phys, atol)
                 assert sol.ok, (h, u_n, guess)
                 dx = _newton_correction(u_n, (sol.U1, sol.U2, sol.U3), h, kin, phys)
                 assert np.max(np.abs(dx)) <= 10 * atol, (h, u_n, guess, dx)
@@ -620,7 +622,7 @@ def test_an_exact_fixed_point_stays():
 
 
 def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
-    """``periodic.sweep.trapped_steps`` on the steps between the kinematic stops of the
+    """``periodic.traps.trapped_steps`` on the steps between the kinematic stops of the
     optimiser's flat turning point (``test_engine_regressions``), with u = -9e-8 on the step
     of 0.014 between the turning points at tau 0.02555 and 0.0398 (as the shooting left it
     there): its trap cap (at the step's end) is 4.5e-9, and as that step's ceiling, which
@@ -635,23 +637,23 @@ def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
     stops = np.empty(switching.MAX_STOPS)
     n_stops, omax = switching.kinematic_stops(code, row, kin.corners()[0].copy(), stops)
     turning = switching.turning_stops(code, row, stops, n_stops, omax)
-    point_stops = sweep.Stops(stops, np.zeros(n_stops, dtype=np.bool_), turning, n_stops)
+    point_stops = integrator.Stops(stops, np.zeros(n_stops, dtype=np.bool_), turning, n_stops)
     j = int(np.argmin(abs(stops[:n_stops] - 0.025553882)))
     assert turning[j] == turning[j + 1] == switching.TURNING  # not simple: no TRAP_FLOOR
     N = n_stops
-    W = sweep.new_workspace(N)
-    W[sweep.T, :N] = stops[:n_stops]
-    W[sweep.T, N] = 1.0
-    W[sweep.U, :N + 1] = 1e-2
-    W[sweep.U, j] = -9e-8
+    W = record.new_workspace(N)
+    W[record.T, :N] = stops[:n_stops]
+    W[record.T, N] = 1.0
+    W[record.U, :N + 1] = 1e-2
+    W[record.U, j] = -9e-8
     ceilings = np.full(N, np.inf)
-    count, _ = sweep.trapped_steps(code, row, _point_physics(phys), point_stops, W, N, ceilings)
+    count, _ = traps.trapped_steps(code, row, _point_physics(phys), point_stops, W, N, ceilings)
     assert count >= 1
-    h = W[sweep.T, j + 1] - W[sweep.T, j]
-    cap = sweep.trap_ceiling(code, row, _point_physics(phys), stops[j + 1], stops[j] + 0.5 * h,
+    h = W[record.T, j + 1] - W[record.T, j]
+    cap = traps.trap_ceiling(code, row, _point_physics(phys), stops[j + 1], stops[j] + 0.5 * h,
                              -9e-8)
     assert cap < 1e-8 and h > 1e-2
-    assert ceilings[j] == h / sweep.TRAP_SPAN
+    assert ceilings[j] == h / options.TRAP_SPAN
     flagged = np.isfinite(ceilings)
-    steps = np.diff(W[sweep.T, :N + 1])
-    assert np.all(ceilings[flagged] >= steps[flagged] / sweep.TRAP_SPAN)
+    steps = np.diff(W[record.T, :N + 1])
+    assert np.all(ceilings[flagged] >= steps[flagged] / options.TRAP_SPAN)

@@ -15,7 +15,8 @@ import pytest
 
 import solver
 from solver.periodic import driver as periodic_driver
-from solver.periodic.radau import RADAU5_C, PointPhysics
+from solver.model.physics import PointPhysics
+from solver.periodic.radau import RADAU5_C
 from solver.adjoint.gradient import (POWER_ROOT_RTOL, FixedGrid, adaptive_grid, discrete_objective,
                               discrete_solution,
                               family_parameters, force_partials, force_partials_quadrature,

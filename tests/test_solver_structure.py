@@ -13,7 +13,9 @@ from test_pipeline_structure import REPO, import_cycles, private_imports
 #: kernel, the controller, the events, the estimator and the driver by their file names)
 LAYOUT = {
     "model": {"kinematics", "force", "physics", "limits"},
-    "periodic": {"radau", "control", "switching", "sweep", "global_error", "shooting", "driver"},
+    "periodic": {"radau", "defect", "control", "steps", "record", "switching", "events", "traps",
+                 "integrator", "estimators", "global_error", "shooting", "point", "driver",
+                 "options", "tolerances"},
     "march": {"heun", "driver"},
     "adjoint": {"gradient", "optimize"},
     "tools": {"bench", "bench_optimize", "bench_sweep", "honesty"},
@@ -92,3 +94,69 @@ def test_the_checks_walk_subpackages(tmp_path):
     assert import_cycles(graph) == [["a.x", "b.y", "a.x"]]
     assert private_imports(graph) == ["b.y: from a.x import _secret"]
     assert set(graph["top"]) == {"a.x", "b.y"}
+
+
+#: no module of the engine longer than this (issue 37: a module holds one role; scipy's
+#: ``integrate/_ivp/radau.py`` is ~570 lines with its dense output)
+MAX_ENGINE_MODULE_LINES = 550
+
+
+def test_engine_modules_hold_one_role_each():
+    long = {p.name: n for p in (REPO / "solver" / "periodic").glob("*.py")
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_ENGINE_MODULE_LINES}
+    assert long == {}
+
+
+def _record_rows() -> set[str]:
+    """The row constants of the step record (``periodic.record``: integer assignments)."""
+    tree = ast.parse((REPO / "solver" / "periodic" / "record.py").read_text(encoding="utf-8"))
+    return {t.id for node in tree.body if isinstance(node, ast.Assign)
+            and isinstance(node.value, ast.Constant) and type(node.value.value) is int
+            for t in node.targets if isinstance(t, ast.Name)}
+
+
+def test_only_the_record_indexes_its_rows():
+    rows = _record_rows()
+    assert {"T", "U", "STAGE", "SENS", "N_FIELDS"} <= rows  # the check sees the layout
+    leaks = {module: names & rows
+             for module, deps in package_imports(REPO / "solver").items()
+             if module != "periodic.record"
+             for target, names in deps.items() if target == "periodic.record" and names & rows}
+    assert leaks == {}
+
+
+def _names_from_the_engine(folder: str) -> dict[str, set[str]]:
+    """{engine module imported: names} over the files of ``solver/<folder>`` (``from ..periodic
+    import x`` is the package's boundary, "periodic"; ``from .. import periodic``, "periodic"
+    with the name "periodic")."""
+    found: dict[str, set[str]] = {}
+    for path in (REPO / "solver" / folder).glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            module = (node.module or "").split(".")
+            if node.level == 0 and module[0] == "solver":
+                module = module[1:]
+            elif node.level != 2:
+                continue
+            names = {a.asname or a.name for a in node.names}
+            if module and module[0] == "periodic":
+                found.setdefault(".".join(module), set()).update(names)
+            elif not module and "periodic" in names:
+                found.setdefault("periodic", set()).add("periodic")
+    return found
+
+
+#: the most names ``adjoint/`` takes from the engine (issue 37: the engine's public boundary
+#: instead of its internals, which it took 33 of)
+MAX_ADJOINT_ENGINE_NAMES = 12
+
+
+def test_the_adjoint_uses_the_engines_public_boundary():
+    found = _names_from_the_engine("adjoint")
+    assert set(found) == {"periodic"}, found  # the package, none of its modules
+    assert 0 < len(found["periodic"]) <= MAX_ADJOINT_ENGINE_NAMES, found
+
+
+def test_the_march_needs_nothing_from_the_engine():
+    assert _names_from_the_engine("march") == {}

@@ -1,4 +1,4 @@
-"""Warm starts along sweeps (``solve_periodic(..., sweeps=...)``, ``periodic.driver.warm_start``).
+"""Warm starts along sweeps (``solve_periodic(..., sweeps=...)``, ``periodic.point.warm_start``).
 
 A warm result is judged by the same estimate as a cold one, so it must be as honest; a sweep's
 results depend on its own points only (not on the other sweeps of the batch, nor on the
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import solver
-from solver.periodic import driver
+from solver.periodic import driver, point
 from solver.tools import bench_sweep
 from solver.tools.bench import solution_error
 
@@ -41,11 +41,11 @@ def test_warm_results_are_as_honest_as_cold_ones(family, ratio, scaled_period, r
     assert np.max(error) <= 10.0
     assert np.mean(error <= 1.0) >= 0.99
     assert np.all(warm.error_estimate <= rtol)
-    assert np.count_nonzero(warm.start == driver.START_WARM) >= n - 2 * 2  # all but 2 runs' firsts
+    assert np.count_nonzero(warm.start == point.START_WARM) >= n - 2 * 2  # all but 2 runs' firsts
     # a warm start skips the loose shooting
-    loose = warm.force_evaluations[:, driver.COST_LOOSE]
-    assert np.all(loose[warm.start == driver.START_WARM] == 0)
-    assert np.all(loose[warm.start == driver.START_COLD] > 0)
+    loose = warm.force_evaluations[:, point.COST_LOOSE]
+    assert np.all(loose[warm.start == point.START_WARM] == 0)
+    assert np.all(loose[warm.start == point.START_COLD] > 0)
 
 
 def test_a_sweep_depends_on_its_own_points_only():
@@ -68,8 +68,8 @@ def test_a_sweep_depends_on_its_own_points_only():
     points = driver.Points(code, params, kin.corners(), phys.inertia_factor, phys.mu_n,
                            phys.mu_s, phys.p, phys.delta_tau,
                            fast_limit_velocity(kin, phys, driver.GUESS_STEPS))
-    one = driver.solve_points(points, 1e-5, 2 ** 17, runs, 1, driver.no_series())
-    two = driver.solve_points(points, 1e-5, 2 ** 17, runs, 2, driver.no_series())
+    one, _ = driver.solve_points(points, 1e-5, 2 ** 17, runs, 1)
+    two, _ = driver.solve_points(points, 1e-5, 2 ** 17, runs, 2)
     for a, b in zip(one, two):
         np.testing.assert_array_equal(a, b)
 
@@ -82,7 +82,7 @@ def test_cold_batches_are_unchanged_by_the_sweep_machinery():
     singles = solver.solve_periodic(kin, phys, rtol=1e-5, sweeps=np.arange(n + 1))
     for name in ("U", "P", "error_estimate", "n_tau", "status"):
         np.testing.assert_array_equal(getattr(default, name), getattr(singles, name))
-    assert np.all(default.start == driver.START_COLD)
+    assert np.all(default.start == point.START_COLD)
 
 
 def test_series_of_a_sweep_are_its_final_steps():
@@ -140,7 +140,7 @@ def test_a_neighbour_from_another_regime_does_not_loosen_the_stages():
     warm = solver.solve_periodic(kin, phys, rtol=1e-3, sweeps=np.array([0, run.size]))
     ref = solver.solve_periodic(kin.take([run.size - 1]), phys.take([run.size - 1]), rtol=1e-8)
     assert ref.converged.all() and warm.converged.all()
-    assert warm.start[-1] == driver.START_WARM
+    assert warm.start[-1] == point.START_WARM
     error = solution_error(warm.U[-1:], warm.P[-1:], ref.U, ref.P, phys.period[-1:],
                            solver.kinematic_speed(kin.take([run.size - 1])))
     assert error[0] <= 1e-3

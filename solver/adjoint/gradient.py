@@ -106,14 +106,17 @@ from ..model.force import E_FLOOR, link_moments, link_setup_sc, radial_power
 from ..model.kinematics import FOURIER, POWER_LAW, Fourier, Harmonic, PowerLaw, period_grid
 from ..model.limits import fast_limit_velocity
 from ..model.kinematics import angle_and_rate
-from ..periodic.shooting import monodromy_factor, one_minus_monodromy
-from ..periodic.radau import (A11, A12, A13, A21, A22, A23, A31, A32, A33, C1, C2, PointPhysics, solve3,
-                      stage_matrix)
-from ..periodic.driver import frozen_newton, shift_onto_fixed_point, stage_atol
-from ..periodic.sweep import (COS, END_KIND, ERR, INT_P, INT_U, OMEGA, SENS, SIN, STAGE,
-                              T as W_T, U as W_U, frozen_sweep, new_workspace)
-from ..periodic import driver as periodic_driver
+from ..model.physics import PointPhysics
+from .. import periodic
+from ..periodic import (RADAU5_A, RADAU5_C, frozen_orbit, monodromy_factor, new_workspace,
+                        one_minus_monodromy, set_grid_step, solve3, stage_columns, stage_matrix)
 from ..status import CONVERGED
+
+# the engine's tableau as scalars for the compiled kernels (as ``periodic.radau``'s)
+C1, C2 = RADAU5_C[0], RADAU5_C[1]
+A11, A12, A13 = RADAU5_A[0]
+A21, A22, A23 = RADAU5_A[1]
+A31, A32, A33 = RADAU5_A[2]
 
 _x10, _w10 = np.polynomial.legendre.leggauss(10)
 GL10_NODES = 0.5 * (_x10 + 1.0)
@@ -427,62 +430,38 @@ def step_length_partials(code, params, h, tau_phase, dh):
 def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     """Periodic solution of the 3-stage Radau IIA discretisation on ``nodes`` (N steps).
 
-    The engine's own fixed-grid solve (``periodic.driver.fixed_grid_point``: a frozen sweep,
-    Newton on u(0) by frozen sweeps, the converged sweep shifted onto the fixed point), on
-    the workspace ``W`` (``periodic.sweep.new_workspace(N)``), which holds the converged stages
-    afterwards (rows STAGE .. STAGE + 2).  Writes phi, dphi/dtau, sin phi, cos phi at the
+    The engine's own fixed-grid solve (``periodic.frozen_orbit``: a frozen pass, Newton on
+    u(0) by frozen passes, the converged pass shifted onto the fixed point), on the
+    workspace ``W`` (``periodic.new_workspace(N)``), which holds the converged stages
+    afterwards (``periodic.stage_columns``).  Writes phi, dphi/dtau, sin phi, cos phi at the
     stage times tau_n + c_i h_n (each on its step's side of a corner) into
     ``stage_kinematics`` (4, 3N).  The first sweep starts every stage at its step's start
     value (``fixed_grid_point`` starts it at u0; the two agree to the stage tolerance).
 
     Returns (status, u0, I_u, I_Pi); the speed scale V = (1/4) int |dphi/dtau| dtau (Radau
-    rule) sets the nonlinear tolerances as in the engine (``periodic.driver.stage_atol``).
+    rule) sets the nonlinear tolerances as in the engine (``periodic.tolerances``).
     """
     vscale = 0.0
     for n in range(N):
         t0 = nodes[n]
         h = nodes[n + 1] - t0
         side = t0 + 0.5 * h
-        W[W_T, n] = t0
-        W[W_T, n + 1] = nodes[n + 1]
         for i in range(3):
             c = C1 if i == 0 else (C2 if i == 1 else 1.0)
             phi, om = angle_and_rate(code, params, t0 + c * h, side)
             S = math.sin(phi)
             C = math.cos(phi)
-            W[SIN + i, n] = S
-            W[COS + i, n] = C
-            W[OMEGA + i, n] = om
             stage_kinematics[0, 3 * n + i] = phi
             stage_kinematics[1, 3 * n + i] = om
             stage_kinematics[2, 3 * n + i] = S
             stage_kinematics[3, 3 * n + i] = C
             b = A31 if i == 0 else (A32 if i == 1 else A33)
             vscale += 0.25 * h * b * abs(om)
-            # the first sweep's stage prediction W[STAGE] + W[SENS] (u_n - W[W_U]) is u_n
-            W[STAGE + i, n] = u0
-            W[SENS + i, n] = 1.0
-        W[W_U, n] = u0
-        W[ERR, n] = W[ERR + 1, n] = W[ERR + 2, n] = 0.0
-        W[END_KIND, n] = 0.0
-    vscale = max(vscale, 1e-300)
-    atol = stage_atol(rtol, vscale, phys)
-    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
-    bound = 1e3 * vscale + 10.0 * abs(u0)
-    status, _ = frozen_sweep(code, params, phys, u0, atol, W, N)
-    if status != CONVERGED:
-        return status, u0, math.nan, math.nan
-    fn = frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound)
-    if fn.status != CONVERGED:
-        return fn.status, fn.u0, math.nan, math.nan
-    shift = fn.g / fn.one_minus_M
-    shift_onto_fixed_point(W, N, shift)
-    int_u = 0.0
-    int_pi = 0.0
-    for n in range(N):  # summed in order, as ``periodic.driver._integrals``
-        int_u += W[INT_U, n]
-        int_pi += W[INT_P, n]
-    return CONVERGED, fn.u0 + shift, int_u, int_pi
+        # the first pass's stage prediction, stage + sensitivity (u_n - u0), is u_n
+        set_grid_step(W, n, t0, nodes[n + 1], stage_kinematics[2, 3 * n:3 * n + 3],
+                      stage_kinematics[3, 3 * n:3 * n + 3], stage_kinematics[1, 3 * n:3 * n + 3],
+                      u0, u0, 1.0)
+    return frozen_orbit(code, params, phys, u0, rtol, max(vscale, 1e-300), W, N)
 
 
 @njit(cache=True, error_model="numpy")
@@ -707,9 +686,9 @@ MAX_STEPS_PER_PERIOD = 2 ** 17
 def adaptive_grid(kinematics, physics, *, rtol=1e-6, max_steps_per_period=None):
     """The step sequence of the order-5 engine's converged solve at ``rtol`` (one point) as a
     ``FixedGrid``: its adaptive steps, with the corners of phi, the other kinematic stops and
-    the state events as step ends (``periodic.driver.solve(..., return_series=True)``)."""
+    the state events as step ends (``periodic.solve(..., return_series=True)``)."""
     max_steps = MAX_STEPS_PER_PERIOD if max_steps_per_period is None else int(max_steps_per_period)
-    out = periodic_driver.solve(kinematics, physics, rtol, max_steps, True)
+    out = periodic.solve(kinematics, physics, rtol, max_steps, True)
     status = int(out["status"][0])
     if status != CONVERGED:
         raise RuntimeError(f"adaptive solve did not converge (status {status})")
@@ -814,7 +793,7 @@ def discrete_solution(kinematics, physics, grid, *, rtol=1e-13, u0=None):
     stage_kinematics = np.empty((4, 3 * N))
     status, u0, int_u, int_pi = _forward(code, params, nodes, N, phys, float(u0), float(rtol), W,
                                          stage_kinematics)
-    stages = np.ascontiguousarray(W[STAGE:STAGE + 3, :N].T).reshape(-1)
+    stages = np.ascontiguousarray(stage_columns(W, N).T).reshape(-1)
     return DiscreteSolution(kinematics, physics, nodes, stages, stage_kinematics, int_u, int_pi,
                             int(status), u0)
 

@@ -22,7 +22,7 @@ from numba import njit, prange
 
 from ..model.force import force_and_slope, power_density
 from ..model.kinematics import angle_and_rate
-from ..periodic.radau import PointPhysics
+from ..model.physics import PointPhysics
 from ..status import CONVERGED, NON_FINITE, STEP_BUDGET_EXCEEDED, UNSTABLE
 
 #: Heun's method (explicit trapezoidal RK2).

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -116,3 +117,14 @@ def physical_from_scaled(anisotropy_ratio, scaled_period, p=0.0, friction_scale=
     mu_s = g / np.sqrt(r)
     T = Ts / g ** (1.0 / (2.0 - p))
     return T, mu_n, mu_s
+
+
+class PointPhysics(NamedTuple):
+    """The physics of one parameter point as the kernels see it (eq. Newtonu, eq. tau):
+    what the engine's and the march's compiled kernels take per point."""
+
+    kappa: float   # T^(2-p), the inertia factor in u' = kappa F
+    mu_n: float    # normal resistance coefficient
+    mu_s: float    # tangential resistance coefficient
+    p: float       # force-law exponent, 0 <= p < 2
+    dtau: float    # delta_tau = T delta

@@ -1,8 +1,35 @@
 """The engine (method "periodic"): event-driven 3-stage Radau IIA with one-pass error control.
 
-radau: the step kernel, its tableau and its local error estimates; control: the step-size
-rule; switching: kinematic stops and state events (the switching functions); sweep: one
-period as an adaptive or frozen-grid sweep; global_error: the estimate of the period
-integrals' error and the refinement it asks for; shooting: the monodromy and the bracketed
-Newton update of u(0); driver: one point from stops to estimate, batched over points.
+Files by role (as scipy's ``integrate/_ivp`` and diffrax separate them):
+
+- ``radau``: the step kernel (Radau IIA stages, ``radau5_step``), its tableau and the
+  embedded error estimate; ``defect``: the defect error estimate; ``control``: the
+  step-size controller; ``steps``: one step as a pass takes it (stage kinematics, start
+  values, the stage solve with its fallbacks).
+- ``switching``: the kinematic stops and the switching functions with their root finder;
+  ``events``: state events in a solved step (detection, location) and stop placement;
+  ``traps``: the turning-point traps.
+- ``record``: the step record (the one module that knows its layout); ``integrator``: one
+  pass over the period, adaptive (propose, clip, step, events, accept, record) or frozen;
+  ``estimators``: the error of a recorded pass's steps; ``global_error``: their estimate
+  for the period integrals and the refinement it asks for.
+- ``shooting``: the monodromy and Newton on u(0); ``point``: one point's solve (stops,
+  loose shooting, rounds, estimate, warm starts); ``driver``: batches of points and the
+  entry of ``solve.solve_periodic``.
+- ``options``: every tuning constant; ``tolerances``: every tolerance from rtol.
+
+"Sweep" means one thing in the engine: a chain of points solved in order, each starting
+from its predecessor's orbit (``solve_periodic(..., sweeps=...)``); one integration over
+the period is a "pass".
+
+The names below are the engine's public boundary: what other packages (``solve``,
+``adjoint``) use; everything else is internal.
 """
+from .driver import Points, fixed_grid_points, solve, solve_points
+from .radau import RADAU5_A, RADAU5_C, solve3, stage_matrix
+from .record import new_workspace, set_grid_step, stage_columns
+from .shooting import frozen_orbit, monodromy_factor, one_minus_monodromy
+
+__all__ = ["Points", "fixed_grid_points", "solve", "solve_points", "RADAU5_A", "RADAU5_C",
+           "solve3", "stage_matrix", "new_workspace", "set_grid_step", "stage_columns",
+           "frozen_orbit", "monodromy_factor", "one_minus_monodromy"]

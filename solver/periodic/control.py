@@ -14,17 +14,9 @@ import math
 
 from numba import njit
 
+from .options import MAX_FACTOR, MIN_FACTOR, SAFETY
 from .radau import ERROR_ORDER
 
-#: the factor is multiplied by this (a step sized exactly at the tolerance fails half the time)
-SAFETY = 0.9
-#: smallest and largest change of the step size from one step to the next (MAX_FACTOR 6:
-#: 23 % of the target sweep's attempts were rejected, most right after a step whose error
-#: sat below the noise floor, which asks for the largest growth; 3: bench evaluations per
-#: solve 2,803 -> 2,571 at rtol 1e-4, 8,129 -> 7,669 at 1e-7; its earlier worst case was
-#: a missed int u error of ``periodic.radau.defect_error``, since fixed; docs/validation.md)
-MIN_FACTOR = 0.2
-MAX_FACTOR = 3.0
 _EXPONENT = 1.0 / ERROR_ORDER
 
 

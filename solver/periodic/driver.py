@@ -1,616 +1,21 @@
-"""The engine: the periodic steady state of eq. (Newtonu) by event-driven
-3-stage Radau IIA with one-pass error control.
-
-For each parameter point (``solve_point``, one compiled function, all points batched over
-threads by ``solve_points``):
-
-1. **Stops.** The kinematic step ends of the period (``periodic.switching.kinematic_stops``).
-2. **Loose shooting.** Adaptive sweeps (``periodic.sweep.adaptive_sweep``) at the loose tolerance
-   LOOSE_RTOL from the fast limit's u(0), each followed by a Newton step on u(0) with the
-   sweep's monodromy, until u(0) moves by less than the loose tolerance: this finds the
-   periodic orbit's neighbourhood and the node weights cheaply.
-3. **Target sweep.** One adaptive sweep at the target, its steps judged by the loose
-   solution's node weights, then Newton on u(0) by frozen-grid sweeps (``frozen_sweep``:
-   on one step sequence the discrete period map is smooth and its monodromy exact) until
-   the fixed point is within 1e-3 rtol V (the converged sweep is then shifted to it to first
-   order along the stage sensitivities).  Where the frozen steps do not
-   carry Newton there (a stage solve fails on them, or MAX_FROZEN_SWEEPS run out), the next
-   round starts here again with an adaptive sweep, which places its steps anew.
-4. **Estimate.** Every step's local error from its defect (``periodic.sweep.estimate_sweep``), or,
-   where the shooting moved a state event off its node, from the step solved again split
-   at the event (``periodic.sweep.event_split_errors``), carried to int u and int Pi by the node
-   weights of the converged solution (``periodic.global_error``).  If the estimate exceeds rtol,
-   the steps that asked for it get ceilings and steps 3-4 run again from the converged
-   u(0), so that the new sweep also puts the moved events on nodes (at most MAX_ROUNDS
-   times), then TOLERANCE_NOT_REACHED (or the last round's failure).  (Moving nodes onto
-   the moved events instead cost more: bench at rtol 1e-7, 9,466 force evaluations per
-   solve against 8,592.)
-
-**Warm starts.**  A batch may be solved as sweeps (``solve_points``' runs): each point of a
-sweep after the first starts from its predecessor's converged orbit (``Orbit``,
-``warm_start``): steps 3-4 from its u(0) (extrapolated linearly where the last three points
-lie evenly on a line, ``in_line``), its node weights and its norm, skipping step 2.  The
-result is judged by the same estimate as a cold solve; where the rounds fail, the point is
-solved cold.
-
-Failures are NaN plus a status code (``status``), never silent.
+"""The engine over a batch of points: ``solve_points`` deals the sweeps (warm-started
+chains of points) to threads, each lane keeping one step record; ``solve`` is the entry of
+``solve.solve_periodic(method="periodic")``; ``fixed_grid_points`` solves on given grids
+(order tests).  One point is ``periodic.point.solve_point``.
 """
 from __future__ import annotations
 
-import math
 from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import numpy as np
 from numba import get_num_threads, njit
 
-from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
-from .shooting import (bracketed_newton_update, monodromy_factor, one_minus_monodromy,
-                        stage_tolerance)
-from .radau import ERROR_ORDER, PointPhysics
-from ..status import (CONVERGED, NO_MOTION, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED,
-                      TOLERANCE_NOT_REACHED)
-from .sweep import (MIN_STEP, CORNER_STOP, END_KIND, INT_P, INT_U, LAMBDA, M_MINUS_1, MU, Q_P, Q_U,
-                     SENS, STAGE, T, U, SweepAim, WeightModel, adaptive_sweep, estimate_sweep, frozen_sweep,
-                     event_split_errors, new_workspace, stage_kinematics_into, trapped_steps, Stops)
-from .switching import MAX_STOPS, kinematic_stops, stop_speed, turning_stops
-
-#: the stage tolerance is at most this share of delta_tau (p = 0; ``stage_atol``)
-BAND_SHARE = 0.01
-#: tolerance of the loose shooting (step 2)
-LOOSE_RTOL = 1e-2
-#: at most this many loose sweeps
-MAX_LOOSE_SWEEPS = 8
-#: the adaptive sweeps aim at this share of the tolerance (the rest is the margin for the
-#: node weights of the converged solution, which the sweep only knew approximately)
-TARGET_SHARE = 0.8
-#: rounds of steps 3-4
-MAX_ROUNDS = 4
-#: frozen-grid Newton sweeps per round
-MAX_FROZEN_SWEEPS = 30
-#: a shooting residual kept where the frozen period map jumps over its fixed point counts
-#: this many times its first-order effect on the period integrals (``solve_point``)
-RESIDUAL_WEIGHT = 2.0
-#: the force evaluations of a solve, by phase (``solve_point``'s last output)
-COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE = 0, 1, 2, 3
-N_COSTS = 4
-#: how a solve started (``PointSolution.start``): cold (loose shooting from the fast limit);
-#: warm, from the previous point of its sweep (``warm_start``); warm start failed, then cold
-START_COLD, START_WARM, START_WARM_REJECTED = 0, 1, 2
-#: first step of the first sweep
-FIRST_STEP = 1.0 / 16.0
-#: workspace capacity a thread starts with (steps; it doubles when a point needs more)
-START_CAPACITY = 512
-
-
-class PointSolution(NamedTuple):
-    """What ``solve_point`` returns besides its workspace.
-
-    int_u, int_pi : the period integrals (NaN unless ``status`` is CONVERGED);
-    u0 : the last u(0); status : ``status`` code; n_steps : the final sweep's steps (its
-    solution is in the workspace's first n_steps columns); sweeps : sweeps made; estimate :
-    the global error estimate in rtol's norm (inf: none); evaluations : (N_COSTS,) the
-    evaluations of F by phase (COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE);
-    vscale : V = (1/4) int |dphi/dtau| dtau (``periodic.switching.stop_speed``; 0: phi is constant,
-    nothing was solved); start : how the solve started (START_COLD, START_WARM,
-    START_WARM_REJECTED)."""
-
-    int_u: float
-    int_pi: float
-    u0: float
-    status: int
-    n_steps: int
-    sweeps: int
-    estimate: float
-    evaluations: np.ndarray
-    vscale: float
-    start: int
-
-
-@njit(cache=True, error_model="numpy")
-def stage_atol(rtol, scale, phys):
-    """The stage Newton's tolerance: ``periodic.shooting.stage_tolerance`` of the scale, and for p = 0
-    at most BAND_SHARE delta_tau: where the body sticks F rises by O(mu) across a band of
-    u ~delta_tau wide, and stages solved only to a tolerance wider than it land anywhere on
-    the saturated force (measured: delta 1e-10, tolerance 4e-8 V, u chattering +-1e-6 around
-    rest, 131,072 steps)."""
-    atol = stage_tolerance(rtol, scale)
-    if phys.p == 0.0:
-        atol = min(atol, BAND_SHARE * phys.dtau)
-    return atol
-
-
-@njit(cache=True, error_model="numpy")
-def _largest_weight(model, scale_u, scale_p):
-    """max(1, |lambda|, |mu| scale_u / scale_p) over the model's nodes: a stage error e moves
-    U by lambda e (relative to scale_u) and P by mu e (relative to scale_p), so the stage
-    tolerance is divided by it (at short periods lambda reaches 4e3, and stages solved to the
-    plain tolerance left errors of 5 rtol)."""
-    largest = 1.0
-    for n in range(model.N + 1):
-        largest = max(largest, abs(model.lam[n]), abs(model.mu[n]) * scale_u / scale_p)
-    return largest
-
-
-@njit(cache=True, error_model="numpy")
-def _period_map(W, N, u0):
-    """(g = u(1) - u(0), 1 - M) of a sweep: the shooting residual and one minus the
-    monodromy (``periodic.shooting.one_minus_monodromy``)."""
-    log_m = 0.0
-    sign_m = 1.0
-    for n in range(N):
-        log_m, sign_m = monodromy_factor(log_m, sign_m, W[M_MINUS_1, n])
-    return W[U, N] - u0, one_minus_monodromy(log_m, sign_m)
-
-
-@njit(cache=True, error_model="numpy")
-def _integrals(W, N):
-    int_u = 0.0
-    int_p = 0.0
-    for n in range(N):
-        int_u += W[INT_U, n]
-        int_p += W[INT_P, n]
-    return int_u, int_p
-
-
-@njit(cache=True, error_model="numpy")
-def shift_onto_fixed_point(W, N, shift):
-    """Move the converged sweep, which starts ``shift`` short of the fixed point, onto it to
-    first order along the sensitivities (no force evaluations)."""
-    for n in range(N):
-        W[U, n] += shift
-        for i in range(3):
-            W[STAGE + i, n] += W[SENS + i, n] * shift
-        W[INT_U, n] += W[Q_U, n] * shift
-        W[INT_P, n] += W[Q_P, n] * shift
-        shift *= 1.0 + W[M_MINUS_1, n]
-    W[U, N] += shift
-
-
-@njit(cache=True, error_model="numpy")
-def _model(W, N, ceilings):
-    return WeightModel(W[T, :N + 1].copy(), W[LAMBDA, :N + 1].copy(), W[MU, :N + 1].copy(),
-                       ceilings[:N].copy(), N)
-
-
-class FrozenNewton(NamedTuple):
-    """What ``frozen_newton`` returns.
-
-    u0 : the last u(0); g, one_minus_M : the period map there (``_period_map``); status :
-    CONVERGED (the fixed point within tol_fix, u0 inside the bracket) or the failure;
-    restart_u0 : after a failure, where the next round's adaptive sweep starts (NaN: the
-    failure stands); sweeps, evaluations : frozen sweeps made and their evaluations of F."""
-
-    u0: float
-    g: float
-    one_minus_M: float
-    status: int
-    restart_u0: float
-    sweeps: int
-    evaluations: int
-
-
-@njit(cache=True, error_model="numpy")
-def frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound):
-    """Newton on u(0) over the N recorded steps of ``W`` (``frozen_sweep``, in place) until
-    |g| <= tol_fix |1 - M|, bracketed in +-bound.
-
-    Where the frozen steps do not carry Newton to the fixed point (a stage solve fails on
-    them, a sweep is not finite, or MAX_FROZEN_SWEEPS run out), the next round's adaptive
-    sweep places its steps anew: from Newton's last proposal after a failed stage solve,
-    else from the best u(0) seen (smallest |g / (1 - M)|); where that is the start, the next
-    round would repeat this one, and the failure stands (restart_u0 NaN), as it does where
-    the period map itself is not finite."""
-    lo, hi = -bound, bound
-    start = best_u0 = u0
-    best_residual = math.inf
-    sweeps = 0
-    evaluations = 0
-    g = 0.0
-    one_minus_M = 1.0
-    status = NOT_PERIODIC
-    for _ in range(MAX_FROZEN_SWEEPS):
-        g, one_minus_M = _period_map(W, N, u0)
-        if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-            return FrozenNewton(u0, g, one_minus_M, NON_FINITE, math.nan, sweeps, evaluations)
-        if abs(g) <= tol_fix * abs(one_minus_M):
-            status = CONVERGED if abs(u0) < 0.999 * bound else NOT_PERIODIC
-            break
-        if abs(g / one_minus_M) < best_residual:
-            best_u0, best_residual = u0, abs(g / one_minus_M)
-        u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
-        status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
-        sweeps += 1
-        evaluations += e
-        if status == STAGE_SOLVE_FAILED:
-            return FrozenNewton(u0, g, one_minus_M, status, u0, sweeps, evaluations)
-        if status != CONVERGED:
-            break
-        status = NOT_PERIODIC
-    if status == CONVERGED:
-        return FrozenNewton(u0, g, one_minus_M, status, math.nan, sweeps, evaluations)
-    restart = best_u0 if best_u0 != start else math.nan
-    return FrozenNewton(u0, g, one_minus_M, status, restart, sweeps, evaluations)
-
-
-class PointProblem(NamedTuple):
-    """One point's problem as every phase of ``solve_point`` sees it: the kinematics' kernel
-    encoding ``code``, ``params`` (one row, ``model.kinematics``); ``phys`` (PointPhysics);
-    ``stops`` (its kinematic ``Stops``); ``vscale`` = V; ``rtol``; ``max_steps`` (steps per
-    period before STEP_BUDGET_EXCEEDED); ``tol_fix`` (the shooting's tolerance on
-    |g / (1 - M)|, 1e-3 rtol V) and ``bound`` (u(0) is bracketed in +-bound)."""
-
-    code: int
-    params: np.ndarray
-    phys: PointPhysics
-    stops: Stops
-    vscale: float
-    rtol: float
-    max_steps: int
-    tol_fix: float
-    bound: float
-
-
-class RoundStart(NamedTuple):
-    """Where the rounds of steps 3-4 start: ``u0``; the first step ``h_first``; the weight
-    ``model`` (node weights and ceilings) that judges the adaptive sweep's steps; the stage
-    tolerance ``atol``; the norm of U and P, ``scale_u`` and ``scale_p``."""
-
-    u0: float
-    h_first: float
-    model: WeightModel
-    atol: float
-    scale_u: float
-    scale_p: float
-
-
-class Orbit(NamedTuple):
-    """A converged point's periodic orbit, from which the next point of a sweep starts
-    (``solve_point``'s warm start).  Its steps are the workspace's first ``N`` columns
-    (``N`` = 0: there is none and the next point starts cold); ``u0``; the norm of U and P,
-    ``scale_u`` and ``scale_p``; ``largest_weight`` (``_largest_node_weight``)."""
-
-    N: int
-    u0: float
-    scale_u: float
-    scale_p: float
-    largest_weight: float
-
-
-@njit(cache=True, error_model="numpy")
-def no_orbit():
-    """The ``Orbit`` of no point: the next point starts cold."""
-    return Orbit(0, math.nan, 1.0, 1.0, 1.0)
-
-
-class Judged(NamedTuple):
-    """What ``_judge`` finds of a converged sweep: the period integrals ``int_u``,
-    ``int_p``; the norm ``scale_u``, ``scale_p``; the global ``estimate`` (rtol's norm);
-    each step's weighted error ``shares`` (N,); the steps next to turning points over their
-    trap ceilings, ``trapped``, with those ceilings in ``trap_caps`` (N,, inf elsewhere);
-    the ``evaluations`` of F it made."""
-
-    int_u: float
-    int_p: float
-    scale_u: float
-    scale_p: float
-    estimate: float
-    shares: np.ndarray
-    trap_caps: np.ndarray
-    trapped: int
-    evaluations: int
-
-
-@njit(cache=True, error_model="numpy")
-def _judge(problem, W, N, atol, one_minus_M, residual):
-    """Step 4 on the converged sweep of ``W``: each step's local error (the defect, and
-    where an event sits inside a step the step split there), the node weights, the global
-    estimate, and the trap check of the steps next to turning points.  ``residual``: a
-    shooting residual kept unshifted (``solve_point``'s frozen map that jumps over its
-    fixed point), counted RESIDUAL_WEIGHT times by its first-order effect."""
-    code, params, phys = problem.code, problem.params, problem.phys
-    corner_nodes = np.zeros(N, dtype=np.bool_)
-    for n in range(N - 1):
-        corner_nodes[n + 1] = W[END_KIND, n] == CORNER_STOP
-    evaluations = estimate_sweep(code, params, phys, corner_nodes, atol, W, N)[1]
-    split = np.zeros(N, dtype=np.bool_)
-    evaluations += event_split_errors(code, params, phys, atol, W, N, split)[1]
-    node_weights(W, N, one_minus_M)
-    int_u, int_p = _integrals(W, N)
-    scale_u = max(abs(int_u), 1e-3 * problem.vscale)
-    scale_p = abs(int_p) if int_p != 0.0 else 1.0
-    shares = np.zeros(N)
-    e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
-    # a kept shooting residual g is a jump of u at node 0: it moves int u by lambda_0 g
-    # and int Pi by mu_0 g to first order (the node weights' meaning), counted twice
-    e_u += RESIDUAL_WEIGHT * abs(W[LAMBDA, 0] * residual)
-    e_p += RESIDUAL_WEIGHT * abs(W[MU, 0] * residual)
-    estimate = combine(e_u, e_p, scale_u, scale_p)
-    # the steps next to turning points judged again by the converged u (``trapped_steps``)
-    trap_caps = np.full(N, math.inf)
-    trapped, e = trapped_steps(code, params, phys, problem.stops, W, N, trap_caps)
-    return Judged(int_u, int_p, scale_u, scale_p, estimate, shares, trap_caps, trapped,
-                  evaluations + e)
-
-
-@njit(cache=True, error_model="numpy")
-def _refinement_model(W, N, judged, rtol):
-    """The weight model of the next round: the converged sweep's node weights, and ceilings
-    on the steps that asked for refinement (or all steps shrunk evenly where none asked
-    alone) and on the trapped ones."""
-    ceilings = np.full(N, math.inf)
-    if judged.estimate > rtol:
-        asked = refinement_ceiling(W, N, judged.shares, TARGET_SHARE * rtol, ceilings)
-        if asked == 0:
-            shrink = 0.9 * (rtol / judged.estimate) ** (1.0 / ERROR_ORDER)
-            for n in range(N):
-                ceilings[n] = shrink * (W[T, n + 1] - W[T, n])
-    for n in range(N):
-        ceilings[n] = min(ceilings[n], judged.trap_caps[n])
-    return _model(W, N, ceilings)
-
-
-@njit(cache=True, error_model="numpy")
-def _rounds(problem, start, W, evals, sweeps, start_kind):
-    """Steps 3-4 of the module docstring, at most MAX_ROUNDS times from ``start``
-    (RoundStart).  Returns (W, PointSolution)."""
-    code, params, phys = problem.code, problem.params, problem.phys
-    rtol, vscale = problem.rtol, problem.vscale
-    u0, h_first, model, atol = start.u0, start.h_first, start.model, start.atol
-    scale_u, scale_p = start.scale_u, start.scale_p
-    nan = math.nan
-    estimate = math.inf
-    N = 0
-    failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
-    for _ in range(MAX_ROUNDS):
-        aim = SweepAim(TARGET_SHARE * rtol, scale_u, scale_p, model, atol, problem.max_steps,
-                       True, True)
-        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, h_first, aim, W)
-        W, N, status = sweep.W, sweep.N, sweep.status
-        sweeps += 1
-        evals[COST_ADAPTIVE] += sweep.evaluations
-        if status != CONVERGED:
-            return W, PointSolution(nan, nan, u0, status, N, sweeps, math.inf, evals, vscale,
-                                    start_kind)
-        round_start = u0
-        fn = frozen_newton(code, params, phys, u0, atol, W, N, problem.tol_fix, problem.bound)
-        sweeps += fn.sweeps
-        evals[COST_FROZEN] += fn.evaluations
-        u0, g, one_minus_M = fn.u0, fn.g, fn.one_minus_M
-        residual = 0.0  # a shooting residual kept and counted (``_judge``)
-        if fn.status != CONVERGED:
-            failure = fn.status
-            estimate = math.inf
-            if math.isfinite(fn.restart_u0):
-                u0 = fn.restart_u0
-                continue
-            if fn.status != NOT_PERIODIC:
-                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
-                                        vscale, start_kind)
-            # The frozen period map jumps over its fixed point (its bisection closed in on a
-            # step of g, and its best u(0) is the round's start, so another round would
-            # repeat this one): keep that start's solution unshifted and count its shooting
-            # residual g in the estimate instead (RESIDUAL_WEIGHT, ``_judge``).  (Measured:
-            # long_period_powerlaw point 356 at rtol 1e-7, g from +5.4e-11 to -2.8e-10 across
-            # 1e-21 of u(0), M = 0; NOT_PERIODIC before.)
-            u0 = round_start
-            status, e = frozen_sweep(code, params, phys, u0, atol, W, N)
-            sweeps += 1
-            evals[COST_FROZEN] += e
-            if status != CONVERGED:
-                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
-                                        vscale, start_kind)
-            g, one_minus_M = _period_map(W, N, u0)
-            if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-                return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals,
-                                        vscale, start_kind)
-            residual = g
-        else:
-            shift = g / one_minus_M
-            shift_onto_fixed_point(W, N, shift)
-            u0 += shift
-        judged = _judge(problem, W, N, atol, one_minus_M, residual)
-        evals[COST_ESTIMATE] += judged.evaluations
-        estimate = judged.estimate
-        scale_u, scale_p = judged.scale_u, judged.scale_p
-        if estimate <= rtol and judged.trapped == 0:
-            return W, PointSolution(judged.int_u, judged.int_p, u0, CONVERGED, N, sweeps,
-                                    estimate, evals, vscale, start_kind)
-        failure = TOLERANCE_NOT_REACHED
-        model = _refinement_model(W, N, judged, rtol)
-        h_first = min(h_first, W[T, 1] - W[T, 0])
-    return W, PointSolution(nan, nan, u0, failure, N, sweeps, estimate, evals, vscale,
-                            start_kind)
-
-
-@njit(cache=True, error_model="numpy")
-def _point_stops(code, params, corners):
-    """The point's kinematic ``Stops`` and V (``periodic.switching.stop_speed``)."""
-    stops = np.empty(MAX_STOPS)
-    n_stops, omax = kinematic_stops(code, params, corners, stops)
-    vscale = stop_speed(code, params, stops, n_stops)
-    stop_is_corner = np.zeros(n_stops, dtype=np.bool_)
-    for j in range(n_stops):
-        for c in corners:
-            if stops[j] == c:
-                stop_is_corner[j] = True
-    stop_is_turning = turning_stops(code, params, stops, n_stops, omax)
-    return Stops(stops, stop_is_corner, stop_is_turning, n_stops), vscale
-
-
-@njit(cache=True, error_model="numpy")
-def _cold_start(problem, u_guess, W, evals):
-    """Step 2, the loose shooting from ``u_guess``.  Returns (W, RoundStart, status, N,
-    sweeps): status CONVERGED, or the failure that ends the solve."""
-    code, params, phys = problem.code, problem.params, problem.phys
-    rtol, vscale = problem.rtol, problem.vscale
-    loose = max(LOOSE_RTOL, rtol)
-    u0 = u_guess
-    empty = np.zeros(1)
-    model = WeightModel(empty, empty, empty, empty, 0)
-    sweeps = 0
-    N = 0
-    # judged in u alone, relative to V (int u and int Pi are not known yet: the floor
-    # 1e-3 V of U's norm would make it a thousand times too strict)
-    lo, hi = -problem.bound, problem.bound
-    scale_u = scale_p = 1.0
-    for _ in range(MAX_LOOSE_SWEEPS):
-        aim = SweepAim(TARGET_SHARE * loose, vscale, math.inf, model,
-                       stage_atol(loose, vscale, phys), problem.max_steps, True, False)
-        sweep = adaptive_sweep(code, params, phys, problem.stops, u0, FIRST_STEP, aim, W)
-        W, N, status = sweep.W, sweep.N, sweep.status
-        sweeps += 1
-        evals[COST_LOOSE] += sweep.evaluations
-        if status != CONVERGED:
-            return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), status, N, sweeps
-        int_u, int_p = _integrals(W, N)
-        scale_u = max(abs(int_u), 1e-3 * vscale)
-        scale_p = abs(int_p) if int_p != 0.0 else 1.0
-        g, one_minus_M = _period_map(W, N, u0)
-        if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
-            return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), NON_FINITE, N, sweeps
-        node_weights(W, N, one_minus_M)
-        model = _model(W, N, np.full(N, math.inf))
-        u_new, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
-        moved = abs(u_new - u0)
-        u0 = u_new
-        if moved <= loose * vscale:
-            break
-    # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
-    atol = stage_atol(rtol, scale_u, phys) / _largest_weight(model, scale_u, scale_p)
-    h_first = max((W[T, 1] - W[T, 0]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
-    return W, RoundStart(u0, h_first, model, atol, scale_u, scale_p), CONVERGED, N, sweeps
-
-
-@njit(cache=True, error_model="numpy")
-def _largest_node_weight(W, N, scale_u, scale_p):
-    """``_largest_weight`` of the node weights in W's rows LAMBDA and MU."""
-    largest = 1.0
-    for n in range(N + 1):
-        largest = max(largest, abs(W[LAMBDA, n]), abs(W[MU, n]) * scale_u / scale_p)
-    return largest
-
-
-#: a warm solve stands only where the stage tolerance it used (set by the neighbour's norm and
-#: node weights) is at most this factor above the one the point's own converged solution sets
-#: (measured without this check: short_period_harmonic point 78 at rtol 1e-3, its neighbour's
-#: scaled period 10x longer, 51 steps, estimate 0.84 rtol, error 41 rtol)
-WARM_ATOL_SLACK = 2.0
-
-
-@njit(cache=True, error_model="numpy")
-def warm_start(W, orbit, problem):
-    """Where the rounds of steps 3-4 start from a neighbour's ``orbit`` (its steps in W):
-    its u(0) (``solve_lane`` extrapolates it along a line of points), its node weights as
-    the weight model (no ceilings), its norm of U and P and the stage tolerance they set,
-    and its first step.  This skips the loose shooting (step 2), whose only products these
-    are.  (Placing the neighbour's steps on the point instead and solving them frozen, with
-    its state events moved onto the point's and the steps that asked for it split, was
-    slower: ``docs/validation.md``, "Warm starts".)"""
-    N = orbit.N
-    model = _model(W, N, np.full(N, math.inf))
-    atol = stage_atol(problem.rtol, orbit.scale_u, problem.phys) / orbit.largest_weight
-    return RoundStart(orbit.u0, W[T, 1] - W[T, 0], model, atol, orbit.scale_u, orbit.scale_p)
-
-
-@njit(cache=True, error_model="numpy")
-def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit):
-    """The periodic solution of one point; see the module docstring.
-
-    Parameters
-    ----------
-    code, params : the kinematics' kernel encoding (``model.kinematics``), one row.
-    corners : (k,) corners of phi in [0, 1).
-    phys : PointPhysics
-    rtol : float
-    u_guess : float
-        Starting u(0) of a cold solve (the fast limit).
-    max_steps : int
-        Steps per period before STEP_BUDGET_EXCEEDED.
-    W : workspace (``periodic.sweep.new_workspace``); with a warm start it holds ``orbit``.
-    orbit : Orbit
-        A neighbour's converged orbit to start from (``no_orbit()``: start cold).
-
-    Returns
-    -------
-    (W, PointSolution, Orbit): W possibly grown, holding the final sweep, and this point's
-    orbit for the next point of a sweep (``no_orbit()`` unless CONVERGED).  Where phi is
-    constant (V = 0) nothing is solved: status NO_MOTION, the integrals 0.
-    """
-    point_stops, vscale = _point_stops(code, params, corners)
-    evals = np.zeros(N_COSTS, dtype=np.int64)
-    if vscale == 0.0:
-        return W, PointSolution(0.0, 0.0, 0.0, NO_MOTION, 0, 0, 0.0, evals, vscale,
-                                START_COLD), no_orbit()
-    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
-    bound = 1e3 * vscale + 10.0 * abs(u_guess)
-    problem = PointProblem(code, params, phys, point_stops, vscale, rtol, max_steps, tol_fix,
-                           bound)
-    verdict = START_COLD
-    if orbit.N > 0:
-        # warm: the rounds of steps 3-4 from the neighbour's orbit (``warm_start``)
-        start = warm_start(W, orbit, problem)
-        W, sol = _rounds(problem, start, W, evals, 0, START_WARM)
-        if sol.status == CONVERGED:
-            own = _orbit_of(W, sol, problem)
-            own_atol = stage_atol(rtol, own.scale_u, phys) / own.largest_weight
-            if start.atol <= WARM_ATOL_SLACK * own_atol:
-                return W, sol, own
-            # the neighbour's norm and node weights set a stage tolerance too loose for this
-            # point's (``_largest_weight``): the rounds again with the point's own
-            start = RoundStart(sol.u0, W[T, 1] - W[T, 0], _model(W, sol.n_steps,
-                               np.full(sol.n_steps, math.inf)), own_atol, own.scale_u,
-                               own.scale_p)
-            W, sol = _rounds(problem, start, W, evals, sol.sweeps, START_WARM)
-            if sol.status == CONVERGED:
-                return W, sol, _orbit_of(W, sol, problem)
-        verdict = START_WARM_REJECTED
-    W, start, status, N, sweeps = _cold_start(problem, u_guess, W, evals)
-    if status != CONVERGED:
-        return W, PointSolution(math.nan, math.nan, start.u0, status, N, sweeps, math.inf,
-                                evals, vscale, verdict), no_orbit()
-    W, sol = _rounds(problem, start, W, evals, sweeps, verdict)
-    return W, sol, _orbit_of(W, sol, problem)
-
-
-@njit(cache=True, error_model="numpy")
-def _orbit_of(W, sol, problem):
-    """The ``Orbit`` of a solution whose final sweep is in ``W`` (none unless CONVERGED)."""
-    if sol.status != CONVERGED:
-        return no_orbit()
-    scale_u = max(abs(sol.int_u), 1e-3 * problem.vscale)
-    scale_p = abs(sol.int_pi) if sol.int_pi != 0.0 else 1.0
-    return Orbit(sol.n_steps, sol.u0, scale_u, scale_p,
-                 _largest_node_weight(W, sol.n_steps, scale_u, scale_p))
-
-
-@njit(cache=True, error_model="numpy")
-def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
-    """The periodic solution of the Radau IIA discretisation on the given ``grid`` (N + 1,
-    nodes from 0 to 1, with the corners of phi among them), without error control: Newton on
-    u(0) by frozen sweeps.  For order tests.  Returns (int_u, int_pi, status)."""
-    N = grid.size - 1
-    W = new_workspace(N)
-    phys_atol = stage_atol(rtol, vscale, phys)
-    for n in range(N):
-        W[T, n] = grid[n]
-        W[T, n + 1] = grid[n + 1]
-        stage_kinematics_into(code, params, W, n)
-        W[U, n] = u_guess
-        for i in range(3):
-            W[STAGE + i, n] = u_guess
-            W[SENS + i, n] = 0.0
-    tol_fix = max(1e-3 * rtol, 1e-13) * vscale
-    bound = 1e3 * vscale + 10.0 * abs(u_guess)
-    status, _ = frozen_sweep(code, params, phys, u_guess, phys_atol, W, N)
-    if status != CONVERGED:
-        return math.nan, math.nan, status
-    fn = frozen_newton(code, params, phys, u_guess, phys_atol, W, N, tol_fix, bound)
-    if fn.status != CONVERGED:
-        return math.nan, math.nan, fn.status
-    shift_onto_fixed_point(W, N, fn.g / fn.one_minus_M)
-    int_u, int_p = _integrals(W, N)
-    return int_u, int_p, CONVERGED
+from ..model.physics import PointPhysics
+from ..status import CONVERGED, NON_FINITE
+from .options import GUESS_STEPS, IN_LINE_SHARE, START_CAPACITY
+from .point import N_COSTS, Orbit, fixed_grid_point, no_orbit, solve_point
+from .record import new_workspace, node_series
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -665,7 +70,7 @@ class Outputs(NamedTuple):
     u0: np.ndarray
     status: np.ndarray
     n_steps: np.ndarray
-    sweeps: np.ndarray
+    passes: np.ndarray
     estimate: np.ndarray
     vscale: np.ndarray
     evaluations: np.ndarray
@@ -687,32 +92,11 @@ def _store(out, i, sol):
     out.u0[i] = sol.u0
     out.status[i] = sol.status
     out.n_steps[i] = sol.n_steps
-    out.sweeps[i] = sol.sweeps
+    out.passes[i] = sol.passes
     out.estimate[i] = sol.estimate
     out.vscale[i] = sol.vscale
     out.evaluations[i, :] = sol.evaluations
     out.start[i] = sol.start
-
-
-class Series(NamedTuple):
-    """Where ``solve_points`` writes each point's final nodes (without tau = 1) and u there:
-    ``tau`` and ``u`` from ``offsets[i]`` to ``offsets[i + 1]`` (empty ``offsets``: nowhere),
-    and how many it wrote, ``counts`` (n,)."""
-
-    offsets: np.ndarray
-    tau: np.ndarray
-    u: np.ndarray
-    counts: np.ndarray
-
-
-@njit(cache=True, error_model="numpy")
-def no_series():
-    empty = np.zeros(0)
-    return Series(np.zeros(0, dtype=np.int64), empty, empty, np.zeros(0, dtype=np.int64))
-
-
-#: ``in_line``'s relative tolerance on a second difference
-IN_LINE_SHARE = 1e-9
 
 
 @njit(cache=True, error_model="numpy")
@@ -751,12 +135,29 @@ def predicted_u0(points, out, first, i):
     return 3.0 * u1 - 3.0 * u2 + out.u0[i - 3]
 
 
+@njit(cache=True, error_model="numpy")
+def _kept(buffer, size):
+    """``buffer`` with room for ``size`` values (doubled, contents kept), or itself."""
+    if size <= buffer.size:
+        return buffer
+    bigger = np.empty(max(2 * buffer.size, size))
+    bigger[:buffer.size] = buffer
+    return bigger
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, series):
+def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep_series):
     """The sweeps lane, lane + lanes, ... of ``solve_points`` on one workspace: each point
     of a sweep starts from its predecessor's orbit, the first cold.  Releases the GIL (the
-    lanes run on Python threads: numba's parallel loops do not take NamedTuples)."""
+    lanes run on Python threads: numba's parallel loops do not take NamedTuples).
+
+    Returns (tau, u): with ``keep_series``, the final pass's nodes (without tau = 1) and u
+    there of every point of the lane's sweeps in the order solved, ``out.n_steps[i]`` of
+    point i (read from the converged orbit in the workspace, not solved again); else empty."""
     W = new_workspace(START_CAPACITY)
+    kept_tau = np.empty(START_CAPACITY if keep_series else 0)
+    kept_u = np.empty(START_CAPACITY if keep_series else 0)
+    kept = 0
     for r in range(lane, runs.size - 1, lanes):
         orbit = no_orbit()
         for i in range(runs[r], runs[r + 1]):
@@ -769,45 +170,53 @@ def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, series):
             W, sol, orbit = solve_point(points.code, points.params[i], points.corners[i], phys,
                                         rtol, points.u_guess[i], max_steps, W, start)
             _store(out, i, sol)
-            if series.offsets.size > 0:
-                N = min(sol.n_steps, series.offsets[i + 1] - series.offsets[i])
-                series.tau[series.offsets[i]:series.offsets[i] + N] = W[T, :N]
-                series.u[series.offsets[i]:series.offsets[i] + N] = W[U, :N]
-                series.counts[i] = N
+            if keep_series:
+                N = sol.n_steps
+                tau, u = node_series(W, N)
+                kept_tau = _kept(kept_tau, kept + N)
+                kept_u = _kept(kept_u, kept + N)
+                kept_tau[kept:kept + N] = tau
+                kept_u[kept:kept + N] = u
+                kept += N
+    return kept_tau[:kept], kept_u[:kept]
 
 
-def solve_points(points, rtol, max_steps, runs, threads, series):
+def solve_points(points, rtol, max_steps, runs, threads, keep_series=False):
     """``solve_point`` over every point of ``points`` (Points), as the sweeps ``runs``:
     (n_runs + 1,) offsets from 0 to n, points runs[k] .. runs[k + 1] - 1 one sweep in that
-    order (every point its own sweep: all cold).  Returns ``Outputs``; with a ``series``
-    (``Series``, else ``no_series()``) also each point's nodes and u there.  The sweeps are
-    dealt to 4 ``threads`` lanes in turn (sweep k to lane k mod lanes), so that each
-    thread gets a share of the hard points; each lane keeps one workspace.  A sweep's
-    results depend on its points alone, not on the threads."""
+    order (every point its own sweep: all cold).  Returns (``Outputs``, series): with
+    ``keep_series`` the series is a list of each point's (u, tau) at its final nodes, else
+    None.  The sweeps are dealt to 4 ``threads`` lanes in turn (sweep k to lane k mod
+    lanes), so that each thread gets a share of the hard points; each lane keeps one
+    workspace.  A sweep's results depend on its points alone, not on the threads."""
     out = _new_outputs(points.params.shape[0])
     lanes = max(min(runs.size - 1, 4 * threads), 1)
+    keep = bool(keep_series)
     if threads <= 1 or lanes == 1:
-        for lane in range(lanes):
-            solve_lane(lane, lanes, points, rtol, max_steps, runs, out, series)
-        return out
-    with ThreadPoolExecutor(threads) as pool:
-        for done in pool.map(lambda lane: solve_lane(lane, lanes, points, rtol, max_steps,
-                                                     runs, out, series), range(lanes)):
-            pass
-    return out
-
-
-#: the fast limit's u (``model.limits.fast_limit_velocity``) that starts the shooting is taken on
-#: this many steps: it is a guess (bench, rtol 1e-4: 64 steps cost 18.7 ms per 2,000 points
-#: and the loose shooting 605 evaluations per solve, 8 steps 2.8 ms and 604, u = 0 571)
-GUESS_STEPS = 8
+        kept = [solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep)
+                for lane in range(lanes)]
+    else:
+        with ThreadPoolExecutor(threads) as pool:
+            kept = list(pool.map(lambda lane: solve_lane(lane, lanes, points, rtol, max_steps,
+                                                         runs, out, keep), range(lanes)))
+    if not keep:
+        return out, None
+    series = [None] * points.params.shape[0]
+    for lane, (tau, u) in enumerate(kept):
+        start = 0
+        for r in range(lane, runs.size - 1, lanes):
+            for i in range(runs[r], runs[r + 1]):
+                end = start + int(out.n_steps[i])
+                series[i] = (u[start:end], tau[start:end])
+                start = end
+    return out, series
 
 
 def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None):
     """Batched ``solve_point`` for ``solve.solve_periodic(method="periodic")``.
 
     ``sweeps``: None (every point cold) or the offsets of ``solve_points``' runs.  Returns a
-    dict with int_u, int_pi, status, estimate, n_tau, iterations (sweeps), still (phi
+    dict with int_u, int_pi, status, estimate, n_tau, iterations (passes over the period), still (phi
     constant: nothing solved), evaluations, start (``PointSolution.start``) and, with
     ``return_series``, per point (u nodes, tau nodes)."""
     from ..model.limits import fast_limit_velocity
@@ -818,18 +227,9 @@ def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None):
     points = Points(code, params, kinematics.corners(), physics.inertia_factor, physics.mu_n,
                     physics.mu_s, physics.p, physics.delta_tau,
                     fast_limit_velocity(kinematics, physics, GUESS_STEPS))
-    out = solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(),
-                       no_series())
-    series = None
-    if return_series:
-        # the same sweeps again (deterministic), writing each point's final steps
-        offsets = np.concatenate([[0], np.cumsum(out.n_steps)]).astype(np.int64)
-        written = Series(offsets, np.empty(offsets[-1]), np.empty(offsets[-1]),
-                         np.zeros(n, dtype=np.int64))
-        solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(), written)
-        if not np.array_equal(written.counts, out.n_steps):
-            raise RuntimeError("periodic: a point's second solve for its series took another grid")
-        series = [(written.u[a:b], written.tau[a:b]) for a, b in zip(offsets[:-1], offsets[1:])]
+    out, series = solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(),
+                               return_series)
     return dict(int_u=out.int_u, int_pi=out.int_pi, status=out.status, estimate=out.estimate,
-                n_tau=out.n_steps, iterations=out.sweeps, still=out.vscale == 0.0,
+                n_tau=out.n_steps, iterations=out.passes, still=out.vscale == 0.0,
                 series=series, evaluations=out.evaluations, start=out.start)
+

@@ -1,12 +1,12 @@
 """The global error of the engine's period integrals: one estimate behind one rule.
 
-Every estimator takes a converged periodic solution (the ``periodic.sweep`` workspace) and returns
+Every estimator takes a converged periodic solution (the ``periodic.record`` step record) and returns
 its errors of int u and int Pi (absolute) and, per step, the share of the tolerance it
 finds there; ``combine`` is the one rule that adds them up: the estimators' errors add (they
 count different errors: no cancellation is assumed between them), and the estimate is the
 larger of U's and P's relative errors in the solver's norm (``solve`` docstring: U relative
 to max(|int u|, 1e-3 V), P relative).  A step whose share is above its length times the
-tolerance asks for refinement: its ceiling for the next adaptive sweep is its length times
+tolerance asks for refinement: its ceiling for the next adaptive pass is its length times
 share^(-1/ERROR_ORDER) (``refinement_ceiling``).
 
 The node weights are the discrete adjoint of the shooting: for
@@ -18,8 +18,8 @@ lambda_{n+1} e, to first order.
 
 Estimators here:
 
-- ``local_error_estimate``: each step's local error from its defect (``periodic.radau.defect_error``,
-  or the split re-solve of ``periodic.sweep.event_split_errors``) weighted by the node weights, plus
+- ``local_error_estimate``: each step's local error from its defect (``periodic.defect.defect_error``,
+  or the split re-solve of ``periodic.estimators.event_split_errors``) weighted by the node weights, plus
   its own quadrature errors.
 """
 from __future__ import annotations
@@ -28,9 +28,11 @@ import math
 
 from numba import njit
 
-from .radau import ERROR_ORDER, StepError
-from .sweep import (ACCEPT_STEP, ERR, FLOOR, LAMBDA, M_MINUS_1, MU, PU_STAGE, Q_P, Q_U, T,
-                     floored_errors)
+from .estimators import floored_errors
+from .options import ACCEPT_STEP, MAX_REFINEMENT
+from .radau import ERROR_ORDER
+from .record import (error_floor, integral_sensitivity, largest_power_slope, monodromy_minus_1,
+                     node_weight, recorded_error, set_node_weight, step_span)
 
 
 @njit(cache=True, error_model="numpy")
@@ -38,34 +40,35 @@ def node_weights(W, N, one_minus_M):
     """lambda (int u) and mu (int Pi) at the N nodes into W[LAMBDA], W[MU] (node N is node
     0), by the backward recursion lambda_n = q_n + m_n lambda_{n+1}, started from lambda_0
     summed over the period and divided by 1 - M."""
-    for row, q_row in ((LAMBDA, Q_U), (MU, Q_P)):
+    for which in range(2):  # lambda from d(int_step u)/du_n, mu from d(int_step Pi)/du_n
         total = 0.0
         carried = 1.0
         for k in range(N):
-            total += W[q_row, k] * carried
-            carried *= 1.0 + W[M_MINUS_1, k]
+            total += integral_sensitivity(W, k, which) * carried
+            carried *= 1.0 + monodromy_minus_1(W, k)
         following = total / one_minus_M
-        W[row, N] = following
+        set_node_weight(W, N, which, following)
         for n in range(N - 1, -1, -1):
-            following = W[q_row, n] + (1.0 + W[M_MINUS_1, n]) * following
-            W[row, n] = following
+            following = (integral_sensitivity(W, n, which)
+                         + (1.0 + monodromy_minus_1(W, n)) * following)
+            set_node_weight(W, n, which, following)
 
 
 @njit(cache=True, error_model="numpy")
 def local_error_estimate(W, N, shares, scale_u, scale_p):
-    """The steps' local errors (``periodic.sweep.estimate_sweep``) carried to the period integrals:
+    """The steps' local errors (``periodic.estimators.estimate_pass``) carried to the period integrals:
     returns (error of int u, error of int Pi) and adds each step's weighted error (in the
     norm: the larger of U's and P's relative shares) to ``shares``.  Each step's errors are
-    counted above their rounding floor (``periodic.sweep.floored_errors``, rows FLOOR)."""
+    counted above their rounding floor (``periodic.estimators.floored_errors``, rows FLOOR)."""
     e_u = 0.0
     e_p = 0.0
     for n in range(N):
-        h = W[T, n + 1] - W[T, n]
-        lam = abs(W[LAMBDA, n + 1])
-        mu = abs(W[MU, n + 1])
-        pi_u = max(abs(W[PU_STAGE, n]), abs(W[PU_STAGE + 1, n]), abs(W[PU_STAGE + 2, n]))
-        eu, ev, ew = floored_errors(StepError(W[ERR, n], W[ERR + 1, n], W[ERR + 2, n]),
-                                    W[FLOOR, n], h, pi_u)
+        h = step_span(W, n)[1]
+        lam, mu = node_weight(W, n + 1)
+        lam = abs(lam)
+        mu = abs(mu)
+        pi_u = largest_power_slope(W, n)
+        eu, ev, ew = floored_errors(recorded_error(W, n), error_floor(W, n), h, pi_u)
         du = lam * eu + ev
         dp = mu * eu + ew
         e_u += du
@@ -80,30 +83,21 @@ def combine(error_u, error_p, scale_u, scale_p):
     return max(error_u / scale_u, error_p / scale_p)
 
 
-#: a refinement ceiling is at most this factor below its step (the next sweep's own control
-#: and the trap caps may still shrink it further).  A share far above the tolerance says that
-#: the step's estimate left its asymptotic regime, not how much smaller the step must be
-#: (measured: 3e291 rtol from a step whose shifted stage sat where dF/du > 0, the estimate's
-#: growth factor exp(h kappa dF/du) overflowing; its ceiling of ACCEPT_STEP then exhausted
-#: the step budget); the next round's sweep controls the finer steps itself
-MAX_REFINEMENT = 4.0
-
-
 @njit(cache=True, error_model="numpy")
 def refinement_ceiling(W, N, shares, target, ceilings):
-    """Per step, the largest step the next adaptive sweep may take inside it: inf where the
+    """Per step, the largest step the next adaptive pass may take inside it: inf where the
     step's share is within ``target`` times its length, else its length times
     (target h / share)^(1 / ERROR_ORDER) but at least 1 / MAX_REFINEMENT, and at least
-    ``periodic.sweep.ACCEPT_STEP``.  Returns how many steps ask for refinement."""
+    ``periodic.steps.ACCEPT_STEP``.  Returns how many steps ask for refinement."""
     asked = 0
     for n in range(N):
-        h = W[T, n + 1] - W[T, n]
+        h = step_span(W, n)[1]
         ratio = shares[n] / (target * h)
         if ratio > 1.0:
             shrink = ratio ** (-1.0 / ERROR_ORDER) if math.isfinite(ratio) else 0.0
             ceilings[n] = h * max(shrink, 1.0 / MAX_REFINEMENT)
-            # (not below ACCEPT_STEP, which the sweep takes whatever its error: a step of 1e-13
-            # cut to a state event asked for 1.2e-13, below MIN_STEP, and the sweep failed)
+            # (not below ACCEPT_STEP, which the pass takes whatever its error: a step of 1e-13
+            # cut to a state event asked for 1.2e-13, below MIN_STEP, and the pass failed)
             ceilings[n] = max(ceilings[n], ACCEPT_STEP)
             asked += 1
         else:

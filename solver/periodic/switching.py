@@ -12,13 +12,13 @@ integral) where:
 
 And the solution itself changes fast where the links stop rotating, omega = 0 (a turning
 point of phi): the whole body then slides one way and feels the full friction, so across a
-window ~ |u| / |phi''| the force changes by O(mu) (``periodic.sweep.trap_ceiling``).  A step whose stages do not sample such a feature does not see it, nor does its
+window ~ |u| / |phi''| the force changes by O(mu) (``periodic.traps.trap_ceiling``).  A step whose stages do not sample such a feature does not see it, nor does its
 embedded error estimate.  So every one of them is a step end (diffrax ``JumpStepWrapper``,
 DifferentialEquations.jl ``tstops``):
 
 - the functions of tau alone (S, C, omega, and omega' where |omega| has a small interior
   minimum: a near-tangency opens the same window without a zero) and the corners of phi
-  are known before the sweep: ``kinematic_stops`` finds their zeros once per point;
+  are known before the pass: ``kinematic_stops`` finds their zeros once per point;
 - the functions of u (g and the outer end's velocity) are state events: a sign change
   across a step is located on the step's collocation polynomial (``locate_state_event``,
   scipy ``ivp.py``'s ``solve_event_equation`` on the dense output) and the step is cut
@@ -34,22 +34,14 @@ from numba import njit
 
 from ..model.force import force_slope_power_sc
 from ..model.kinematics import FOURIER, angle_and_rate, rate_slope
+from .options import SAMPLES_PER_WAVENUMBER, SIMPLE_SHARE, STOP_GAP, TANGENCY_SHARE
 from .radau import StageKinematics, StepSolution, dense_value, runtime_int
 
-#: samples per wavenumber (and period) in the search for the zeros of the kinematic
-#: switching functions of a Fourier motion (a function of wavenumber K has at most 2K zeros)
-SAMPLES_PER_WAVENUMBER = 64
-#: a minimum of |omega| below this share of max |omega| is a near-tangency (a stop)
-TANGENCY_SHARE = 0.1
-#: a turning point is simple where |omega'| >= this share of 2 pi max |omega| (``turning_stops``)
-SIMPLE_SHARE = 0.5
 #: ``turning_stops``' codes
 TURNING = 1
 SIMPLE_TURNING = 2
 #: at most this many kinematic stops per period
 MAX_STOPS = 512
-#: two stops closer than this are one
-STOP_GAP = 1e-12
 
 #: the state switching functions, by index
 TANGENTIAL = 0   # g = u + omega S / 4: the link's tangential velocity is C g, its inner
@@ -69,7 +61,7 @@ class Bracket(NamedTuple):
 
 
 class SolvedStep(NamedTuple):
-    """A solved step of a sweep, as its events are sought in it (``periodic.sweep.find_event``).
+    """A solved step of a pass, as its events are sought in it (``periodic.events.find_event``).
 
     t0, h : its start and length; u_n : u at its start; sol : its stages
     (``periodic.radau.StepSolution``: U1, U2, U3 with u_n define the collocation polynomial,
@@ -188,7 +180,7 @@ def stop_speed(code, params, stops, n_stops):
 
 @njit(cache=True, error_model="numpy")
 def kinematic_stops(code, params, corners, out):
-    """The step ends every sweep of a point keeps: 0, the corners of phi, the zeros of sin phi,
+    """The step ends every pass of a point keeps: 0, the corners of phi, the zeros of sin phi,
     cos phi and omega, and the near-tangencies (minima of |omega| below TANGENCY_SHARE of
     its maximum).  Writes them sorted into ``out`` (0 first, all in [0, 1)); returns their
     count and max |omega| over the samples (for ``turning_stops``).
@@ -296,6 +288,12 @@ def illinois_update(a, b, fa, fb, c, fc, last):
     end of [a, b] on its side, and the other end's value is halved when the same end was kept
     twice running (``last``: -1 when b was replaced, 1 when a was, 0 at the start).
 
+    The three locators (``locate_exit``, ``locate_state_event``, ``_refine_root``) share
+    this update but keep their own short loops: one root finder taking the function as an
+    argument (numba's first-class functions) returned the same bits but made every kernel
+    that calls it uncacheable ("dynamic globals": each process recompiled the engine),
+    measured in issue 37.
+
     Returns (a, b, fa, fb, last)."""
     if fc * fa < 0.0:
         if last == -1:
@@ -338,7 +336,7 @@ def turning_stops(code, params, stops, n_stops, omax):
     near-tangencies, flat inflections, and the power law's corners where a phase starts or
     ends with omega = 0; SIMPLE_TURNING where moreover |omega'| there is at least
     SIMPLE_SHARE of 2 pi omax (a harmonic motion's turning points: omega' = 2 pi omax),
-    so that omega grows away from it like a simple zero (``periodic.sweep.TRAP_FLOOR``); 0 else."""
+    so that omega grows away from it like a simple zero (``periodic.traps.TRAP_FLOOR``); 0 else."""
     out = np.zeros(n_stops, dtype=np.int8)
     for j in range(n_stops):
         t = stops[j]

@@ -19,7 +19,7 @@ What is measured
    failures, the worst error over rtol.
 4. Cost.  Force evaluations per solve by phase (loose shooting, adaptive sweeps, frozen
    sweeps, estimates) and the mean steps per period, and how the warm solves started
-   (``periodic.driver.START_*``).
+   (``periodic.point.START_*``).
 
 Output: the figures, then one JSON line with ``warm_over_cold_rtol_1e-4``,
 ``warm_over_cold_rtol_1e-7``, ``warm_solves_per_s_rtol_1e-4``, ``cold_solves_per_s_rtol_1e-4``
@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 import solver
-from solver.periodic.driver import N_COSTS
+from solver.periodic.point import N_COSTS
 from solver.tools.honesty import References, Solves, engine_digest, judge
 
 RTOLS = (1e-4, 1e-7)

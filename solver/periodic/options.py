@@ -1,0 +1,197 @@
+"""The engine's tuning constants, in one place: the defaults of every choice the periodic
+engine makes that is not mathematics (issue 37).
+
+Each constant is documented where it is defined below, with the measurement that set it.
+The Radau IIA tableau (``periodic.radau``), the step record's layout (``periodic.record``)
+and the codes of stops, events and statuses keep their own modules; the tolerances that
+derive from rtol are in ``periodic.tolerances``.
+
+numba reads module globals as compile-time constants, so these are fixed when the kernels
+compile: changing one means editing it here (which also starts a fresh kernel cache,
+``solver._cache``), not passing it at run time.  ``engine_options()`` lists them, for
+provenance.
+"""
+from __future__ import annotations
+
+
+def engine_options() -> dict:
+    """{name: value} of every tuning constant of this module."""
+    return {name: value for name, value in globals().items()
+            if name.isupper() and isinstance(value, (int, float))}
+
+
+# ------------------------------------------------ the stage solve (``periodic.radau.radau5_step``)
+#: the stage Newton gives up (the step is retried, ``periodic.steps.solve_step``) after this
+#: many iterations
+MAX_STAGE_ITERATIONS = 40
+#: Newton's first correction is taken as the last where the quadratic constant carried from
+#: the previous step predicts the next correction below this share of the tolerance
+#: (``radau5_step``'s ``rate``).  A prediction, not a bound (stages up to 3.7e5 atol off were
+#: measured), so ``periodic.integrator.adaptive_pass`` uses it in the loose passes only (bench: 857 ->
+#: 601 evaluations per solve there; docs/validation.md)
+FIRST_CORRECTION_SHARE = 0.1
+#: ... and only where dF/du at the predicted stages is within this share of ``slope``
+SLOPE_SHARE = 0.25
+
+# ------------------------------------------------------- the defect estimate (``periodic.defect``)
+#: where the defect estimate samples a step besides its start and its stages (where the
+#: defect vanishes): one point between the first two stages, one between the last two
+THETA_MID = 0.5
+THETA_LATE = 0.85
+#: the defect estimate moves by about this many times a change of the stage values (the
+#: polynomial's slope at the start, divided by h, times h): its floor is this times the
+#: stages' error (the Newton tolerance plus rounding), which no smaller step reduces
+NOISE_GAIN = 16.0
+#: the defect divided by the stages' node polynomial, linear through the start and THETA_MID,
+#: must predict the late sample within this share of it; else the step's solution is not in
+#: the asymptotic regime and the embedded estimate (conservative) is used
+DEFECT_FIT = 0.5
+#: up to this |h kappa dF/du| the resolvent of the defect estimate is integrated with the
+#: slope varying along the step (8-point Gauss-Legendre: ~1e-3 relative at the limit)
+VARIABLE_SLOPE_LIMIT = 16.0
+
+# ------------------------------------------------- the step-size controller (``periodic.control``)
+#: the factor is multiplied by this (a step sized exactly at the tolerance fails half the time)
+SAFETY = 0.9
+#: smallest and largest change of the step size from one step to the next (MAX_FACTOR 6:
+#: 23 % of the target pass's attempts were rejected, most right after a step whose error
+#: sat below the noise floor, which asks for the largest growth; 3: bench evaluations per
+#: solve 2,803 -> 2,571 at rtol 1e-4, 8,129 -> 7,669 at 1e-7; its earlier worst case was
+#: a missed int u error of ``periodic.defect.defect_error``, since fixed; docs/validation.md)
+MIN_FACTOR = 0.2
+MAX_FACTOR = 3.0
+
+# -- step lengths and the period integrator's loop (``periodic.steps``, ``periodic.integrator``)
+#: the smallest step (in tau, period 1): below it a pass fails (TOLERANCE_NOT_REACHED)
+MIN_STEP = 2.0 ** -40
+#: a step this short is accepted whatever its error (which the estimate counts): next to a
+#: power law's corner omega ~ z^(gamma - 1), and for gamma near 1 (1.035 measured) the error
+#: per unit length does not fall as steps shrink, so no step size meets it: the steps
+#: approached the corner geometrically down to MIN_STEP and the pass failed
+ACCEPT_STEP = 2.0 ** -36
+#: a step whose defect model does not fit (``periodic.defect.defect_error``) is judged by this many
+#: times its error estimate (measured: the fallback estimates were up to 12x too small next
+#: to turning points at scaled period 0.01)
+FIT_DISTRUST = 16.0
+#: a step is stretched to a stop within this factor of it, and split evenly up to twice it
+STRETCH = 1.25
+#: a pass gives up after this many attempted steps per accepted one (plus 16)
+MAX_ATTEMPTS_PER_STEP = 32
+
+# ------------------------------------- state events (``periodic.events``, ``periodic.estimators``)
+#: a state event closer than this share of its step to the step's end is taken to be on it
+EVENT_END_SHARE = 1e-6
+#: ... and one closer than this share of the previous step to the step's start is not cut:
+#: mostly it is the one that step ended at (located on its polynomial, then missed by the
+#: re-solved step by a residue; cut there, steps of 1e-7 .. 1e-8 followed, grown back by
+#: MAX_FACTOR over 5-7 steps: bench, rtol 1e-4, median n_tau 116 -> 105 with this share
+#: instead of 1e-6), but after a kinematic stop it can be another event (a reviewer: 196 of
+#: ~17.8k skipped), which then stays inside its step, judged by the error estimate (no
+#: solve's error changed against the share 1e-6 on 7 sets x 150 points x 4 rtols)
+EVENT_START_SHARE = 1e-3
+#: state switching functions within this share of their terms' size have no sign
+SIGN_ROUNDING = 64.0 * 2.0 ** -52
+#: a switching function's value has a sign beyond this many stage tolerances
+EVENT_NOISE = 8.0
+#: ... and a sign change is an event where its sides differ by more than this many delta_tau
+CROSSING_BAND = 4.0
+#: the friction's band: the body is at rest where |g| is within this many delta_tau (stops)
+EVENT_BAND = 10.0
+#: an event is cut at most this many times in a row (the located root moves as the step
+#: shrinks; past this it is accepted where the last cut put it)
+MAX_EVENT_CUTS = 4
+#: a state event within this share of a recorded step's end counts as on it (rounding)
+SPLIT_SHARE = 1e-9
+
+# -------------------------------------------------------- turning-point traps (``periodic.traps``)
+#: next to a turning point of phi a step may change u by friction at most this share of u
+#: (``trap_ceiling``)
+TRAP_SHARE = 0.1
+#: ... but at a simple turning point (``periodic.switching.SIMPLE_TURNING``: a simple zero of omega,
+#: no corner) never below this step: where the body comes to rest at the turning point with
+#: the links (u -> 0 there) the cap shrinks with u and the steps approached the turning point
+#: geometrically (45 % of the bench's steps at rtol 1e-4).  An empirical floor, not a bound:
+#: measured honest on the harness's sets (also at 1e-2: worst 2.3 rtol) and a reviewer's
+#: short- and long-period harmonic sets; at every turning point it was 6.4 rtol off (estimate
+#: 0.6) on a sin^3 Fourier motion whose flat inflections are near-tangencies
+#: (``test_a_flat_inflection_keeps_the_trap_cap``), which keep the cap
+TRAP_FLOOR = 1e-3
+#: at the converged solution a step next to a turning point may exceed its ``trap_ceiling``
+#: by this factor before the round is rejected (the shooting's last shift moves u a little)
+TRAP_SLACK = 2.0
+#: ... and its ceiling, which the next pass keeps over the whole recorded step
+#: (``WeightModel.max_step``), splits the step into at most this many: the step next to the
+#: turning point gets the cap from that pass's own ``trap_limit`` (from the converged u(0),
+#: where its u is the converged one).  The cap itself as the ceiling split a step of 0.014
+#: next to a flat turning point into steps of 4.5e-9 (u there 9e-8, in the friction's band):
+#: STEP_BUDGET_EXCEEDED after 4,000
+#: (``tests/test_engine.py::test_a_trapped_step_is_split_into_at_most_trap_span_steps``)
+TRAP_SPAN = 64.0
+
+# -------------------------------------------------------- kinematic stops (``periodic.switching``)
+#: samples per wavenumber (and period) in the search for the zeros of the kinematic
+#: switching functions of a Fourier motion (a function of wavenumber K has at most 2K zeros)
+SAMPLES_PER_WAVENUMBER = 64
+#: a minimum of |omega| below this share of max |omega| is a near-tangency (a stop)
+TANGENCY_SHARE = 0.1
+#: a turning point is simple where |omega'| >= this share of 2 pi max |omega| (``turning_stops``)
+SIMPLE_SHARE = 0.5
+#: two stops closer than this are one
+STOP_GAP = 1e-12
+
+# ------------------------------------ the global estimate's refinement (``periodic.global_error``)
+#: a refinement ceiling is at most this factor below its step (the next pass's own control
+#: and the trap caps may still shrink it further).  A share far above the tolerance says that
+#: the step's estimate left its asymptotic regime, not how much smaller the step must be
+#: (measured: 3e291 rtol from a step whose shifted stage sat where dF/du > 0, the estimate's
+#: growth factor exp(h kappa dF/du) overflowing; its ceiling of ACCEPT_STEP then exhausted
+#: the step budget); the next round's pass controls the finer steps itself
+MAX_REFINEMENT = 4.0
+
+# ---------------------------------------------- the tolerances from rtol (``periodic.tolerances``)
+#: tolerance of the loose shooting (step 2)
+LOOSE_RTOL = 1e-2
+#: the adaptive passes aim at this share of the tolerance (the rest is the margin for the
+#: node weights of the converged solution, which the pass only knew approximately)
+TARGET_SHARE = 0.8
+#: the stage Newton's tolerance is max(STAGE_SHARE rtol, STAGE_FLOOR) times the norm of u
+STAGE_SHARE = 1e-5
+STAGE_FLOOR = 1e-14
+#: the stage tolerance is at most this share of delta_tau (p = 0; ``stage_atol``)
+BAND_SHARE = 0.01
+#: the shooting's fixed point is within max(SHOOTING_SHARE rtol, SHOOTING_FLOOR) V
+SHOOTING_SHARE = 1e-3
+SHOOTING_FLOOR = 1e-13
+#: U's norm is at least this share of the speed scale V (a body that hardly moves on average)
+U_NORM_FLOOR = 1e-3
+#: u(0) is bracketed in +-(BRACKET_SPEEDS V + BRACKET_GUESSES |u_guess|)
+BRACKET_SPEEDS = 1e3
+BRACKET_GUESSES = 10.0
+
+# ----------------------------------- one point's solve (``periodic.point``, ``periodic.shooting``)
+#: at most this many loose passes
+MAX_LOOSE_PASSES = 8
+#: rounds of steps 3-4
+MAX_ROUNDS = 4
+#: a shooting residual kept where the frozen period map jumps over its fixed point counts
+#: this many times its first-order effect on the period integrals (``solve_point``)
+RESIDUAL_WEIGHT = 2.0
+#: first step of the first pass
+FIRST_STEP = 1.0 / 16.0
+#: a warm solve stands only where the stage tolerance it used (set by the neighbour's norm and
+#: node weights) is at most this factor above the one the point's own converged solution sets
+#: (measured without this check: short_period_harmonic point 78 at rtol 1e-3, its neighbour's
+#: scaled period 10x longer, 51 steps, estimate 0.84 rtol, error 41 rtol)
+WARM_ATOL_SLACK = 2.0
+#: frozen-grid Newton passes per round
+MAX_FROZEN_PASSES = 30
+
+# --------------------------------------------------------- batches of points (``periodic.driver``)
+#: workspace capacity a thread starts with (steps; it doubles when a point needs more)
+START_CAPACITY = 512
+#: ``in_line``'s relative tolerance on a second difference
+IN_LINE_SHARE = 1e-9
+#: the fast limit's u (``model.limits.fast_limit_velocity``) that starts the shooting is taken on
+#: this many steps: it is a guess (bench, rtol 1e-4: 64 steps cost 18.7 ms per 2,000 points
+#: and the loose shooting 605 evaluations per solve, 8 steps 2.8 ms and 604, u = 0 571)
+GUESS_STEPS = 8
