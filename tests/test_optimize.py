@@ -1,4 +1,6 @@
 """optimize_motion: convergence to gtol with counted work, phase fix, bounds, ill-conditioning."""
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -194,3 +196,49 @@ def test_options_travel_as_one_bundle_and_keywords_still_work():
             by_keyword.iterations, by_keyword.solves, by_keyword.stop_reason)
     with pytest.raises(TypeError, match="gtool"):
         optimize_motion(start, physics, grid=64, gtool=1e-6)
+
+
+class _Wall:
+    """f = (x - 5)^2 with a jump of +100 from x = WALL on (exact gradient where smooth): a
+    search from 0 toward 5 runs into the jump and can only creep up to it, in runs of steps
+    each 10 times shorter than the run before (the line search's cuts by 0.1)."""
+
+    WALL = 2.0 ** -0.5
+
+    lower = np.array([-np.inf])
+    upper = np.array([np.inf])
+
+    def __init__(self):
+        self.solves = 0
+
+    def solve(self, x, u0=None):
+        self.solves += 1
+        return float((x[0] - 5.0) ** 2 + (100.0 if x[0] >= self.WALL else 0.0)), x.copy()
+
+    def differentiate(self, x):
+        return 2.0 * (x - 5.0), SimpleNamespace(u0=0.0)
+
+
+def _walk(problem, creep_limit, steps=200):
+    from solver.adjoint.optimize import State, optimizer_step
+    state = State(x=np.array([0.0]), f=25.0, g=np.array([-10.0]), hinv=np.eye(1),
+                  result=SimpleNamespace(u0=0.0), first_gradient_norm=10.0)
+    for _ in range(steps):
+        state = optimizer_step(problem, state, max_step=0.5, newton_switch=0.0,
+                               max_condition=1e12, creep_limit=creep_limit)
+        if state.stop_reason:
+            break
+    return state
+
+
+def test_a_search_creeping_up_to_a_jump_stops_after_creep_limit_steps():
+    """``creep_limit`` steps in a row accepted at below CREEP_FRACTION of their first trial end
+    the step with the reason "creeping" (the optimiser then adapts the grid there), the last
+    step taken; without the limit the same search creeps on until its line search fails."""
+    limited, free = _Wall(), _Wall()
+    stopped = _walk(limited, 3)
+    assert stopped.stop_reason == "creeping" and stopped.creeping == 3
+    assert _Wall.WALL - 5e-4 < stopped.x[0] < _Wall.WALL
+    on = _walk(free, 0)
+    assert on.stop_reason == "line_search_failed"
+    assert on.iteration > stopped.iteration + 10 and free.solves > 2 * limited.solves
