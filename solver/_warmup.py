@@ -59,7 +59,7 @@ def _dispatchers():
                     yield value
 
 
-def _compiled_count() -> int:
+def compiled_count() -> int:
     """Kernels compiled in this process so far (numba's cache misses)."""
     return sum(sum(d.stats.cache_misses.values()) for d in set(_dispatchers()))
 
@@ -112,8 +112,8 @@ def warm_up(kernel_sets=("periodic",)) -> WarmUp:
     if unknown:
         raise ValueError(f"kernel set {unknown[0]!r}: must be one of {', '.join(KERNEL_SETS)}")
     todo = tuple(k for k in dict.fromkeys(kernel_sets) if k not in _warm)
-    before, t0 = _compiled_count(), time.perf_counter()
+    before, t0 = compiled_count(), time.perf_counter()
     for kernel_set in todo:
         _solve(kernel_set)
         _warm.add(kernel_set)
-    return WarmUp(todo, time.perf_counter() - t0, _compiled_count() - before)
+    return WarmUp(todo, time.perf_counter() - t0, compiled_count() - before)

@@ -91,14 +91,14 @@ def test_the_timed_solve_compiles_nothing():
     compiled no kernel (else it would have timed a second solve)."""
     import solver
     from solver.__main__ import _timed_solve, build_parser
-    from solver._warmup import _compiled_count
+    from solver._warmup import compiled_count
 
     args = build_parser().parse_args(["point", *HARMONIC, "--rtol", "1e-5", "--series"])
     kin, phys = solver.Harmonic(1.2, 0.3), solver.Physics(1.0, 0.0625, 1.0)
     res, seconds, kernels = _timed_solve(kin, phys, args)
-    before = _compiled_count()
+    before = compiled_count()
     again = solver.solve_periodic(kin, phys, rtol=1e-5, return_series=True)
-    assert _compiled_count() == before  # the warm-up left nothing for a solve of this kind to compile
+    assert compiled_count() == before  # the warm-up left nothing for a solve of this kind to compile
     assert res.U[0] == again.U[0] and seconds > 0 and kernels.kernel_sets in ((), ("periodic",))
 
 
