@@ -42,11 +42,13 @@ from pathlib import Path
 
 import numpy as np
 
+import workflows
+
 from ._schedule import usable_cores
 
 __all__ = ["main"]
 
-DEFAULT_SCENE = Path(__file__).resolve().parent.parent / "workflows" / "harmonic_grid.toml"
+DEFAULT_SCENE = workflows.scene_file("harmonic_grid")
 
 
 def _worker_counts(cores: int) -> list[int]:
@@ -146,7 +148,8 @@ def projection(row: dict, run: dict, n: int) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m pipeline.bench_scale", description=__doc__.splitlines()[0])
-    ap.add_argument("scene", nargs="?", default=str(DEFAULT_SCENE), help="grid scene (default harmonic_grid)")
+    ap.add_argument("scene", nargs="?", default=str(DEFAULT_SCENE),
+                    help="grid scene: a .toml file or a shipped scene's name (default harmonic_grid)")
     ap.add_argument("--workers", default=None, help="comma-separated worker counts (default 1, 2, 4, ... cores)")
     ap.add_argument("--engine", default="cold,swept", help="engine-alone modes: cold, swept (default both)")
     ap.add_argument("--repeats", type=int, default=1, help="engine calls per mode and count, the best kept")
@@ -156,6 +159,8 @@ def main(argv=None) -> int:
     from ._registry import load_scene
     from ._scene import SceneError
 
+    if not args.scene.endswith(".toml") and not Path(args.scene).exists() and workflows.scene_file(args.scene).exists():
+        args.scene = str(workflows.scene_file(args.scene))
     try:
         scene = load_scene(args.scene)
     except SceneError as exc:
