@@ -314,13 +314,17 @@ def _grid_text(sd, dims) -> str:
     return " × ".join(f"{axis_name(d)} {sd.ds.sizes[d]}" for d in dims if d in sd.ds.sizes)
 
 
+def _continuous_argmax_axes(sd, reduction) -> list[str]:
+    """The axes ``reduction`` maximises over that are continuous coordinates of the store (the
+    shape switches of power-law motions excluded): those whose arg-max can sit at a range end."""
+    return [ax for ax in _reduction(sd, reduction).get("over", [])
+            if ax in sd.ds.coords and ax not in ("closing_shape", "opening_shape")]
+
+
 def _edges(sd, reduction, cell_sel) -> tuple:
     """Continuous arg-max axes of ``reduction`` at an end of their scanned range in the cell."""
-    red = _reduction(sd, reduction)
     out = []
-    for ax in red.get("over", []):
-        if ax not in sd.ds.coords or ax in ("closing_shape", "opening_shape"):
-            continue
+    for ax in _continuous_argmax_axes(sd, reduction):
         try:
             arg_da, _, _ = grid_role_array(sd, reduction, ax)
             arg = float(np.asarray(cell_sel(arg_da).values).ravel()[0])
@@ -337,11 +341,8 @@ def _edges(sd, reduction, cell_sel) -> tuple:
 def _edge_shares(sd, reduction, sel) -> tuple:
     """For a statistic over many cells: per continuous arg-max axis, how many of the selected
     cells have their optimum at an end of the scanned range (said in the verdict)."""
-    red = _reduction(sd, reduction)
     out = []
-    for ax in red.get("over", []):
-        if ax not in sd.ds.coords or ax in ("closing_shape", "opening_shape"):
-            continue
+    for ax in _continuous_argmax_axes(sd, reduction):
         try:
             arg = np.asarray(sel(grid_role_array(sd, reduction, ax)[0]).values, dtype=np.float64).ravel()
         except (NotComputed, IndexError, ValueError, KeyError):
