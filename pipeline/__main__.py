@@ -46,9 +46,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--version", action=VersionAction)
     sub = ap.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="compute one scene into its Zarr store (resumes an interrupted run)")
-    run.add_argument("scene", help="scene TOML file, e.g. workflows/quick.toml")
+    run.add_argument("scene", help="scene TOML file (e.g. my_scene.toml) or a shipped scene's name (e.g. quick)")
     est = sub.add_parser("estimate", help="time a probe of each scene and print its projected run time")
-    est.add_argument("scenes", nargs="+", help="scene TOML files")
+    est.add_argument("scenes", nargs="+", help="scene TOML files or shipped scenes' names")
     est.add_argument("--workers", type=int, default=None, help="parallel workers assumed (default: all cores)")
     est.add_argument("--probe", type=int, default=32, help="points solved per scene (default 32)")
     paper = sub.add_parser("paper", help="run every shipped scene, print the total time, build the report")
@@ -114,7 +114,7 @@ def _estimate(args) -> int:
     scenes = []
     for path in args.scenes:
         try:
-            scenes.append(load_scene(path))
+            scenes.append(load_scene(_workflows.scene_path(path)))
         except SceneError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_BAD_SCENE
@@ -139,7 +139,7 @@ def main(argv=None) -> int:
         return EXIT_BAD_SCENE
     if args.command == "run":
         try:
-            scene = load_scene(args.scene)
+            scene = load_scene(_workflows.scene_path(args.scene))
         except SceneError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_BAD_SCENE

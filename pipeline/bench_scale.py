@@ -159,8 +159,7 @@ def main(argv=None) -> int:
     from ._registry import load_scene
     from ._scene import SceneError
 
-    if not args.scene.endswith(".toml") and not Path(args.scene).exists() and workflows.scene_file(args.scene).exists():
-        args.scene = str(workflows.scene_file(args.scene))
+    args.scene = workflows.scene_path(args.scene)
     try:
         scene = load_scene(args.scene)
     except SceneError as exc:

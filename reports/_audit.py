@@ -202,8 +202,8 @@ def evaluate_claims(claims, stores) -> list[AuditRow]:
     for c in claims:
         missing = [s for s in c.scenes if s not in by_name]
         if missing:
-            rows.append(AuditRow(c, "not run", f"no store of scene {', '.join(missing)} (python -m pipeline run "
-                                                f"{' '.join(f'workflows/{s}.toml' for s in missing)})", None))
+            rows.append(AuditRow(c, "not run", f"no store of scene {', '.join(missing)} ("
+                                                f"{'; '.join(f'python -m pipeline run {s}' for s in missing)})", None))
             continue
         try:
             m = COMPUTE[c.compute](by_name, **c.args)

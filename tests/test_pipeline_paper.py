@@ -110,3 +110,25 @@ def test_a_pool_worker_starts_on_an_empty_and_on_a_populated_kernel_cache(tmp_pa
     assert warmed == [("periodic",)]
     assert (tmp_path / ".twolink-compile.lock").exists() == (not populated)
     assert numba.get_num_threads() == threads
+
+
+def test_a_shipped_scene_is_named_or_given_as_a_file(tmp_path, monkeypatch):
+    """``pipeline run quick`` from any directory reads the installed workflows/quick.toml; a file
+    argument stays a file (a local file of a shipped scene's name wins), an unknown name is left to
+    the parser, which refuses it by name."""
+    import workflows
+
+    monkeypatch.chdir(tmp_path)
+    assert workflows.scene_path("quick") == str(workflows.DIRECTORY / "quick.toml")
+    assert workflows.scene_path("no_such_scene") == "no_such_scene"
+    assert workflows.scene_path("mine.toml") == "mine.toml"
+    (tmp_path / "quick").write_text("")
+    assert workflows.scene_path("quick") == "quick"  # an existing local path is never replaced
+
+
+def test_run_refuses_an_unknown_scene_name_in_one_line(capsys):
+    from pipeline.__main__ import main
+
+    assert main(["run", "no_such_scene"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no_such_scene" in err[0]
