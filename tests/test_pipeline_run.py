@@ -285,11 +285,18 @@ def test_one_pool_serves_several_scenes(reference, tmp_path):
     scene, ref_store, _ = reference
     with Session("processes", 2, ("periodic",)) as session:
         stores = [tmp_path / f"{i}.zarr" for i in range(2)]
+        workers = []
         for store in stores:
             run_scene(scene, store, session=session, progress=False)
+            workers.append(set(session._pool._processes))  # the pool's worker processes (pids)
+    # One pool: the same two processes ran both scenes (a second pool would have new pids).
+    assert len(workers[0]) == 2 and workers[1] == workers[0], workers
     starts = [store_meta(s)["run"]["timing"]["not_solving_worker_seconds"].get("worker start-up", 0.0)
               for s in stores]
-    assert starts[0] > 0 and starts[1] == 0, starts
+    # A worker's start-up is reported once, with its first task: the first run's first task has it.
+    # (Which run a worker's first task falls in is the scheduler's choice: on an idle machine one
+    # worker can take all of a small scene's tasks, and the other reports its start in the second.)
+    assert starts[0] > 0, starts
     for store in stores:
         assert_stores_equal(store, ref_store)
 
