@@ -20,6 +20,7 @@ reduction's map the cell of each block's largest maximum with its arg-max and co
 
 from __future__ import annotations
 
+import base64
 import functools
 import html
 import math
@@ -586,16 +587,41 @@ def _axes_of(fig, row: int, col: int) -> dict:
     return {"xaxis": sub.xaxis.plotly_name.replace("axis", ""), "yaxis": sub.yaxis.plotly_name.replace("axis", "")}
 
 
+#: numpy dtypes plotly.js reads as typed arrays, and their short names
+_TYPED_ARRAY_DTYPES = {"int8": "i1", "uint8": "u1", "int16": "i2", "uint16": "u2", "int32": "i4",
+                       "uint32": "u4", "float32": "f4", "float64": "f8"}
+
+
+def typed_array_spec(v: np.ndarray):
+    """``v`` as a plotly.js typed array, ``{"dtype": "f8", "bdata": base64, "shape": "r, c"}`` (the
+    encoding plotly.py gives arrays it validates; written here rather than imported from plotly's
+    private ``_plotly_utils``). 64-bit integers are narrowed to the smallest type that holds them;
+    an array no typed array holds (empty, bool, out-of-range 64-bit) is returned unchanged."""
+    v = np.ascontiguousarray(v)
+    if v.size == 0:
+        return v
+    if v.dtype.kind in "iu" and v.dtype.itemsize == 8:
+        lo, hi = v.min(), v.max()
+        for t in (("int8", "int16", "int32") if v.dtype.kind == "i" else ("uint8", "uint16", "uint32")):
+            if np.iinfo(t).min <= lo and hi <= np.iinfo(t).max:
+                v = v.astype(t)
+                break
+        else:
+            return v
+    short = _TYPED_ARRAY_DTYPES.get(str(v.dtype))
+    if short is None:
+        return v
+    spec = {"dtype": short, "bdata": base64.b64encode(v).decode("ascii")}
+    if v.ndim > 1:
+        spec["shape"] = str(v.shape)[1:-1]
+    return spec
+
+
 def _with_traces(fig, traces: list) -> dict:
     """The JSON spec of ``fig`` (layout, and any traces it holds) followed by ``traces`` (dicts);
     their numeric arrays are encoded as plotly.py encodes validated ones (base64 typed arrays)."""
-    try:
-        from _plotly_utils.utils import to_typed_array_spec
-    except ImportError:  # an older plotly: plain lists
-        def to_typed_array_spec(v):
-            return v
     spec = fig.to_plotly_json()
-    encoded = [{k: to_typed_array_spec(v) if isinstance(v, np.ndarray) and v.dtype.kind in "fiub" else v
+    encoded = [{k: typed_array_spec(v) if isinstance(v, np.ndarray) and v.dtype.kind in "fiub" else v
                 for k, v in t.items()} for t in traces]
     spec["data"] = list(spec.get("data", [])) + encoded
     return spec

@@ -522,3 +522,28 @@ def test_block_helpers_against_brute_force():
     assert not small.decimated and np.array_equal(block_reduce(a, small), a, equal_nan=True)
     # more panels, fewer cells each
     assert map_blocks(1000, 1000, panels=1).ky == 3 and map_blocks(1000, 1000, panels=4).ky == 5
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32", "int64", "int32", "int16", "int8", "uint64", "uint8", "bool"])
+@pytest.mark.parametrize("shape", [(7,), (3, 5), (0,)])
+def test_typed_array_spec_is_plotlys_encoding(dtype, shape):
+    """reports._panels.typed_array_spec (ours, so the package imports no private plotly module)
+    gives what plotly.py's own encoder gives, byte for byte, dtype narrowing included; a 64-bit
+    integer beyond 32 bits stays an array (the control: plotly.js has no such typed array)."""
+    _plotly_utils = pytest.importorskip("_plotly_utils.utils")
+    from reports._panels import typed_array_spec
+
+    rng = np.random.default_rng(0)
+    for scale in (1, 100, 40_000, 3_000_000_000):
+        with np.errstate(invalid="ignore", over="ignore"):  # wrapped casts are fine test data
+            v = (rng.standard_normal(shape) * scale).astype(dtype) if dtype != "bool" else rng.random(shape) > 0.5
+            if dtype.startswith("uint"):
+                v = np.abs(rng.standard_normal(shape) * scale).astype(dtype)
+        ours, theirs = typed_array_spec(v), _plotly_utils.to_typed_array_spec(v)
+        assert type(ours) is type(theirs)
+        if isinstance(ours, dict):
+            assert ours == theirs
+        else:
+            assert np.array_equal(ours, theirs)
+    big = np.array([0, 2**40], dtype=np.int64)
+    assert isinstance(typed_array_spec(big), np.ndarray)
