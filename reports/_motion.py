@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._figure import Figure, encode_trace, subplots
 from ._labels import format_value, param_label
 
 __all__ = ["Motion", "compute_motion", "force_density", "body_outline", "motion_figure", "animation_figure"]
@@ -212,10 +213,7 @@ def _snapshot_geometry(m: Motion, tau_k: float, s, scale: float, x_shift: float 
 def motion_figure(m: Motion, p: float = 0.0, n_snapshots: int = 8):
     """Body snapshots through one period with force arrows (top); u(tau), phi(tau) and the path
     over three periods (bottom)."""
-    import plotly.graph_objects as go
-    from plotly.subplots import make_subplots
-
-    fig = make_subplots(rows=2, cols=3, row_heights=[0.45, 0.55], horizontal_spacing=0.08, vertical_spacing=0.16,
+    fig = subplots(rows=2, cols=3, row_heights=[0.45, 0.55], horizontal_spacing=0.08, vertical_spacing=0.16,
                         specs=[[{"colspan": 3}, None, None], [{}, {}, {}]],
                         subplot_titles=("body at eight instants of one period, side by side (arrows: horizontal "
                                         "force per unit length f<sub>x</sub>(s))", "u(τ)", "φ(τ)",
@@ -229,19 +227,20 @@ def motion_figure(m: Motion, p: float = 0.0, n_snapshots: int = 8):
         body_x, body_y, bx, by, ff, xc, phi, u = _snapshot_geometry(m, tk, s, scale, x_shift=gap * k)
         hover = (f"τ = {tk:.3f}<br>φ = {phi:.3f} rad<br>u = {u:.4g}<br>x<sub>cm</sub> = {xc - gap * k:.4g}"
                  "<extra></extra>")
-        fig.add_trace(go.Scatter(x=body_x, y=body_y, mode="lines+markers",
-                                 line={"color": "#1f3b73", "width": 3}, marker={"size": 4},
-                                 name="body", legendgroup="body", showlegend=k == 0, hovertemplate=hover),
+        fig.add_trace(dict(type="scatter", x=body_x, y=body_y, mode="lines+markers",
+                           line={"color": "#1f3b73", "width": 3}, marker={"size": 4},
+                           name="body", legendgroup="body", showlegend=k == 0, hovertemplate=hover),
                       row=1, col=1)
         ax, ay, tx, sym = _arrows(bx, by, ff, scale)
-        fig.add_trace(go.Scatter(x=ax, y=ay, mode="lines", line={"color": "#c0392b", "width": 1.5},
-                                 name="f<sub>x</sub>(s)", legendgroup="force", showlegend=k == 0, hoverinfo="skip"),
+        fig.add_trace(dict(type="scatter", x=ax, y=ay, mode="lines", line={"color": "#c0392b", "width": 1.5},
+                           name="f<sub>x</sub>(s)", legendgroup="force", showlegend=k == 0, hoverinfo="skip"),
                       row=1, col=1)
-        fig.add_trace(go.Scatter(x=tx, y=by, mode="markers", marker={"symbol": sym, "size": 7, "color": "#c0392b"},
-                                 customdata=np.stack([ff, np.concatenate([s, s])], axis=-1), showlegend=False,
-                                 legendgroup="force",
-                                 hovertemplate=f"τ = {tk:.3f}<br>s = %{{customdata[1]:.3f}}<br>"
-                                               "f<sub>x</sub> = %{customdata[0]:.4g}<extra></extra>"), row=1, col=1)
+        fig.add_trace(dict(type="scatter", x=tx, y=by, mode="markers",
+                           marker={"symbol": sym, "size": 7, "color": "#c0392b"},
+                           customdata=np.stack([ff, np.concatenate([s, s])], axis=-1), showlegend=False,
+                           legendgroup="force",
+                           hovertemplate=f"τ = {tk:.3f}<br>s = %{{customdata[1]:.3f}}<br>"
+                                         "f<sub>x</sub> = %{customdata[0]:.4g}<extra></extra>"), row=1, col=1)
         tick_x.append(gap * k)
         tick_t.append(f"τ = {k}/{n_snapshots}")
     fig.update_xaxes(tickmode="array", tickvals=tick_x, ticktext=tick_t, showgrid=False, row=1, col=1,
@@ -249,13 +248,13 @@ def motion_figure(m: Motion, p: float = 0.0, n_snapshots: int = 8):
     fig.update_yaxes(scaleanchor="x", scaleratio=1, range=[-0.6, 0.6], title_text="y", row=1, col=1)
 
     hov = params_text(m.params, p, "<br>")
-    fig.add_trace(go.Scatter(x=m.tau, y=m.u, mode="lines", name="u(τ)", line={"color": "#1f77b4"},
-                             hovertemplate="τ = %{x:.3f}<br>u = %{y:.4g}<br>" + hov + "<extra></extra>"), row=2, col=1)
+    fig.add_trace(dict(type="scatter", x=m.tau, y=m.u, mode="lines", name="u(τ)", line={"color": "#1f77b4"},
+                       hovertemplate="τ = %{x:.3f}<br>u = %{y:.4g}<br>" + hov + "<extra></extra>"), row=2, col=1)
     fig.add_hline(y=m.displacement, line={"dash": "dot", "color": "#888"}, row=2, col=1)
     fig.update_xaxes(title_text="τ = t/T", row=2, col=1)
     fig.update_yaxes(title_text="u = T dx<sub>cm</sub>/dt", row=2, col=1)
-    fig.add_trace(go.Scatter(x=m.tau, y=m.phi, mode="lines", name="φ(τ)", line={"color": "#2ca02c"},
-                             hovertemplate="τ = %{x:.3f}<br>φ = %{y:.4f} rad<extra></extra>"), row=2, col=2)
+    fig.add_trace(dict(type="scatter", x=m.tau, y=m.phi, mode="lines", name="φ(τ)", line={"color": "#2ca02c"},
+                       hovertemplate="τ = %{x:.3f}<br>φ = %{y:.4f} rad<extra></extra>"), row=2, col=2)
     fig.update_xaxes(title_text="τ = t/T", row=2, col=2)
     fig.update_yaxes(title_text="φ (rad)", row=2, col=2)
 
@@ -265,8 +264,8 @@ def motion_figure(m: Motion, p: float = 0.0, n_snapshots: int = 8):
     apex = xc - np.cos(phi3) / 4
     tips = xc + np.cos(phi3) / 4
     for y, name, color in ((xc, "x<sub>cm</sub>", "#1f3b73"), (apex, "apex", "#9467bd"), (tips, "link tips", "#ff7f0e")):
-        fig.add_trace(go.Scatter(x=t3, y=y, mode="lines", name=name, line={"color": color},
-                                 hovertemplate="t/T = %{x:.3f}<br>x = %{y:.4g}<extra>" + name + "</extra>"),
+        fig.add_trace(dict(type="scatter", x=t3, y=y, mode="lines", name=name, line={"color": color},
+                           hovertemplate="t/T = %{x:.3f}<br>x = %{y:.4g}<extra>" + name + "</extra>"),
                       row=2, col=3)
     fig.update_xaxes(title_text="t/T", row=2, col=3)
     fig.update_yaxes(title_text="x (body lengths)", row=2, col=3)
@@ -279,8 +278,6 @@ def animation_figure(m: Motion, p: float = 0.0, periods: int = 3, frames_per_per
     """The body sliding over ``periods`` periods: Plotly frames with play/pause buttons and a slider.
 
     Returned as a figure dict (``data``, ``layout``, ``frames``)."""
-    import plotly.graph_objects as go
-
     s = (np.arange(N_ARROWS) + 0.5) / (2 * N_ARROWS)
     scale = _force_scale(m, s)
     times = np.arange(periods * frames_per_period + 1) / frames_per_period
@@ -290,20 +287,18 @@ def animation_figure(m: Motion, p: float = 0.0, periods: int = 3, frames_per_per
         ax, ay, tx, sym = _arrows(bx, by, ff, scale)
         past = times[times <= t + 1e-12]
         return [
-            go.Scatter(x=body_x, y=body_y, mode="lines+markers", line={"color": "#1f3b73", "width": 4},
+            dict(type="scatter", x=body_x, y=body_y, mode="lines+markers", line={"color": "#1f3b73", "width": 4},
                        marker={"size": 6}, name="body",
                        hovertemplate=f"t/T = {t:.3f}<br>φ = {phi:.3f} rad<br>u = {u:.4g}<extra></extra>"),
-            go.Scatter(x=ax, y=ay, mode="lines", line={"color": "#c0392b", "width": 2}, name="f<sub>x</sub>(s)",
+            dict(type="scatter", x=ax, y=ay, mode="lines", line={"color": "#c0392b", "width": 2}, name="f<sub>x</sub>(s)",
                        hoverinfo="skip"),
-            go.Scatter(x=m.x_cm_at(past), y=np.zeros(past.size), mode="lines", line={"color": "#888", "dash": "dot"},
+            dict(type="scatter", x=m.x_cm_at(past), y=np.zeros(past.size), mode="lines", line={"color": "#888", "dash": "dot"},
                        name="x<sub>cm</sub> trail", hoverinfo="skip"),
         ]
 
     x_all = m.x_cm_at(times)
     lo, hi = float(x_all.min()) - 0.55, float(x_all.max()) + 0.55
-    # Frames as plain dicts: validating ~100 frames of go objects costs seconds and adds nothing.
-    frames = [{"name": f"{t:.3f}", "traces": [0, 1, 2],
-               "data": [tr.to_plotly_json() if hasattr(tr, "to_plotly_json") else tr for tr in traces(t)]}
+    frames = [{"name": f"{t:.3f}", "traces": [0, 1, 2], "data": [encode_trace(tr) for tr in traces(t)]}
               for t in times]
     play = {"frame": {"duration": 60, "redraw": False}, "fromcurrent": True, "transition": {"duration": 0},
             "mode": "immediate"}
@@ -311,7 +306,7 @@ def animation_figure(m: Motion, p: float = 0.0, periods: int = 3, frames_per_per
     steps = [{"method": "animate", "label": f"{t:.2f}",
               "args": [[f"{t:.3f}"], {"frame": {"duration": 0, "redraw": False}, "mode": "immediate",
                                       "transition": {"duration": 0}}]} for t in times]
-    fig = go.Figure(data=traces(0.0))
+    fig = Figure(data=traces(0.0))
     fig.update_layout(
         height=480, margin={"t": 50, "l": 60, "r": 20, "b": 40},
         xaxis={"range": [lo, hi], "title": {"text": "x (body lengths)"}, "constrain": "domain"},

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from ._figure import subplots
 from ._labels import axis_spec, param_label
 from ._site import esc, provenance_table, scroll_table
 
@@ -97,7 +98,7 @@ def _outcomes_table(sd) -> str:
             sec = seconds[:, ik, ip, :][done]
             sec_text = f"{np.median(sec):.2f} / {np.max(sec):.2f}" if sec.size else "n/a"
             n_ill = int(np.count_nonzero(ill[:, ik, ip, :] == 1))
-            n_bound = (int(np.count_nonzero(ds["period_at_bound"].values[:, ik, ip, :] == 1))
+            n_bound = (int(np.count_nonzero(sd.array("period_at_bound")[:, ik, ip, :] == 1))
                        if "period_at_bound" in ds else "n/a")
             rows.append(f"<tr><td class='num'>{p:g}</td><td class='num'>{int(k)}</td>"
                         f"<td class='num'>{int(done.sum())} / {st.size}</td>{counts}"
@@ -117,45 +118,42 @@ def _outcomes_table(sd) -> str:
 def _hover(sd, ir, ik, ip, rank) -> str:
     ds = sd.ds
     names = ds["coefficient"].attrs.get("names") or [str(i) for i in ds["coefficient"].values]
-    k = int(ds["max_wavenumber"].values[ik])
-    c = np.asarray(ds["optimum_coefficients"].values[ir, ik, ip, rank])
-    ratio = float(ds["anisotropy_ratio"].values[ir])
+    a = sd.array
+    k = int(a("max_wavenumber")[ik])
+    c = a("optimum_coefficients")[ir, ik, ip, rank]
+    ratio = float(a("anisotropy_ratio")[ir])
     return (f"μ<sub>n</sub>/μ<sub>s</sub> = 2<sup>{math.log2(ratio):.3g}</sup>, K<sub>max</sub> = {k}, "
-            f"p = {float(ds['p'].values[ip]):g}, rank {rank}<br>"
-            f"λ/λ<sub>ub</sub> = {float(ds['optimum_relative_efficiency'].values[ir, ik, ip, rank]):.5g}, "
-            f"scaled period = {float(ds['optimum_scaled_period'].values[ir, ik, ip, rank]):.5g}, "
-            f"found by {int(ds['optimum_multiplicity'].values[ir, ik, ip, rank])} start(s)<br>"
+            f"p = {float(a('p')[ip]):g}, rank {rank}<br>"
+            f"λ/λ<sub>ub</sub> = {float(a('optimum_relative_efficiency')[ir, ik, ip, rank]):.5g}, "
+            f"scaled period = {float(a('optimum_scaled_period')[ir, ik, ip, rank]):.5g}, "
+            f"found by {int(a('optimum_multiplicity')[ir, ik, ip, rank])} start(s)<br>"
             + _coefficient_text(c, k, names))
 
 
 def phi_figure(sd, ip: int):
     """phi(tau) of the best optimum of every ratio, one panel per Kmax, coloured by mu_n/mu_s."""
-    import plotly.graph_objects as go
-    from plotly.subplots import make_subplots
-
     ds = sd.ds
     kmax = ds["max_wavenumber"].values
     spec = _ratio_spec(sd)
     colors = _ratio_colors(spec.positions)
     tau = np.append(ds["tau"].values, 1.0)
-    fig = make_subplots(rows=1, cols=len(kmax), shared_yaxes=True, horizontal_spacing=0.03,
+    fig = subplots(rows=1, cols=len(kmax), shared_yaxes=True, horizontal_spacing=0.03,
                         subplot_titles=[f"K<sub>max</sub> = {int(k)}" for k in kmax])
     for ik in range(len(kmax)):
         for ir, color in enumerate(colors):
-            phi = np.asarray(ds["optimum_phi"].values[ir, ik, ip, 0])
+            phi = sd.array("optimum_phi")[ir, ik, ip, 0]
             if not np.isfinite(phi).any():
                 continue
             text = _hover(sd, ir, ik, ip, 0)
-            fig.add_trace(go.Scatter(x=tau, y=np.append(phi, phi[0]), mode="lines",
-                                     line={"color": color, "width": 1.6}, showlegend=False,
-                                     hovertemplate=f"τ = %{{x:.3f}}, φ = %{{y:.4f}} rad<br>{text}"
-                                                   "<extra></extra>"),
+            fig.add_trace(dict(type="scatter", x=tau, y=np.append(phi, phi[0]), mode="lines",
+                               line={"color": color, "width": 1.6}, showlegend=False,
+                               hovertemplate=f"τ = %{{x:.3f}}, φ = %{{y:.4f}} rad<br>{text}<extra></extra>"),
                           row=1, col=ik + 1)
         fig.update_xaxes(title_text="τ", range=[0, 1], row=1, col=ik + 1)
     fig.update_yaxes(title_text="φ (rad)", row=1, col=1)
     # the colour scale of mu_n/mu_s, as a marker-only trace with a colour bar
-    fig.add_trace(go.Scatter(
-        x=[None], y=[None], mode="markers", showlegend=False, hoverinfo="skip",
+    fig.add_trace(dict(
+        type="scatter", x=[None], y=[None], mode="markers", showlegend=False, hoverinfo="skip",
         marker={"color": [float(spec.positions.min())], "cmin": float(spec.positions.min()),
                 "cmax": float(spec.positions.max()), "colorscale": "Turbo", "showscale": True,
                 "colorbar": {"title": {"text": "μ<sub>n</sub>/μ<sub>s</sub>"}, "tickmode": "array",
@@ -169,20 +167,17 @@ def phi_figure(sd, ip: int):
 
 def efficiency_period_figure(sd, ip: int):
     """lambda/lambda_ub and scaled period against mu_n/mu_s per Kmax: kept optima and the best."""
-    import plotly.graph_objects as go
-    from plotly.subplots import make_subplots
-
     ds = sd.ds
     kmax = ds["max_wavenumber"].values
     spec = _ratio_spec(sd)
     p = float(ds["p"].values[ip])
     n_rank = ds.sizes["rank"]
-    fig = make_subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.06)
+    fig = subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.06)
     palette = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"]
     for row, name in ((1, "optimum_relative_efficiency"), (2, "optimum_scaled_period")):
         for ik, k in enumerate(kmax):
             color, symbol = palette[ik % len(palette)], _SYMBOLS[ik % len(_SYMBOLS)]
-            values = np.asarray(ds[name].values[:, ik, ip, :])
+            values = sd.array(name)[:, ik, ip, :]
             xs, ys, texts = [], [], []
             for ir in range(values.shape[0]):
                 for rank in range(n_rank):
@@ -191,21 +186,21 @@ def efficiency_period_figure(sd, ip: int):
                         ys.append(float(values[ir, rank]))
                         texts.append(_hover(sd, ir, ik, ip, rank))
             if xs:
-                fig.add_trace(go.Scatter(x=xs, y=ys, mode="markers", opacity=0.35,
-                                         marker={"color": color, "symbol": symbol, "size": 7},
-                                         name=f"K<sub>max</sub> = {int(k)}, kept optima",
-                                         legendgroup=f"k{k}", showlegend=row == 1, text=texts,
-                                         hovertemplate="%{text}<extra></extra>"), row=row, col=1)
+                fig.add_trace(dict(type="scatter", x=xs, y=ys, mode="markers", opacity=0.35,
+                                   marker={"color": color, "symbol": symbol, "size": 7},
+                                   name=f"K<sub>max</sub> = {int(k)}, kept optima",
+                                   legendgroup=f"k{k}", showlegend=row == 1, text=texts,
+                                   hovertemplate="%{text}<extra></extra>"), row=row, col=1)
             best = values[:, 0]
-            fig.add_trace(go.Scatter(x=spec.positions, y=best, mode="lines+markers",
-                                     line={"color": color, "width": 2},
-                                     marker={"color": color, "symbol": symbol, "size": 9},
-                                     name=f"K<sub>max</sub> = {int(k)}, best", legendgroup=f"k{k}",
-                                     showlegend=row == 1,
-                                     text=[_hover(sd, ir, ik, ip, 0) for ir in range(len(best))],
-                                     hovertemplate="%{text}<extra></extra>"), row=row, col=1)
+            fig.add_trace(dict(type="scatter", x=spec.positions, y=best, mode="lines+markers",
+                               line={"color": color, "width": 2},
+                               marker={"color": color, "symbol": symbol, "size": 9},
+                               name=f"K<sub>max</sub> = {int(k)}, best", legendgroup=f"k{k}",
+                               showlegend=row == 1,
+                               text=[_hover(sd, ir, ik, ip, 0) for ir in range(len(best))],
+                               hovertemplate="%{text}<extra></extra>"), row=row, col=1)
     fig.update_yaxes(title_text="λ/λ<sub>ub</sub>", row=1, col=1)
-    periods = np.asarray(ds["optimum_scaled_period"].values[:, :, ip, :])
+    periods = sd.array("optimum_scaled_period")[:, :, ip, :]
     periods = periods[np.isfinite(periods) & (periods > 0)]
     lo, hi = ((math.floor(np.log2(periods.min())), math.ceil(np.log2(periods.max())))
               if periods.size else (0, 1))

@@ -20,7 +20,6 @@ reduction's map the cell of each block's largest maximum with its arg-max and co
 
 from __future__ import annotations
 
-import base64
 import functools
 import html
 import math
@@ -28,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._figure import Figure, subplots
 from ._labels import SIGNED, AxisSpec, axis_spec, format_value, param_label, quantity_label
 from ._motion import params_text
 
@@ -225,8 +225,6 @@ def _map_axes(dims: list[str], sizes: dict[str, int]) -> tuple[str, str] | None:
 
 def quantity_maps(sd, name: str):
     """Maps of ``name`` over two axes, faceted over up to two others; None when the scene has no plane."""
-    from plotly.subplots import make_subplots
-
     da = sd.ds[name]
     dims = list(da.dims)
     sizes = dict(zip(dims, da.shape))
@@ -285,7 +283,7 @@ def quantity_maps(sd, name: str):
                         f"{format_value('anisotropy_ratio', ratio)}</span>")
             titles.append(text)
     nr, nc = len(ri), len(ci)
-    fig = make_subplots(rows=nr, cols=nc, subplot_titles=titles if (fx or fy) else None, shared_xaxes=True,
+    fig = subplots(rows=nr, cols=nc, subplot_titles=titles if (fx or fy) else None, shared_xaxes=True,
                         shared_yaxes=True, horizontal_spacing=0.04 if nc > 1 else 0.1,
                         vertical_spacing=min(0.1, 0.3 / max(nr, 1)) if nr > 1 else 0.1)
     finite = v[np.isfinite(v)]
@@ -339,7 +337,7 @@ def quantity_maps(sd, name: str):
                      + "".join(f"<br>{e}" for e in extra) + "<extra></extra>")
             kw = dict(x=xs.positions, y=ys.positions, z=_round(z), coloraxis="coloraxis", hovertemplate=hover,
                       customdata=custom, name=qlab)
-            axes = _axes_of(fig, r + 1, c + 1)
+            axes = fig.axes_of(r + 1, c + 1)
             if custom is None:
                 del kw["customdata"]
             if style == "contour":
@@ -369,13 +367,11 @@ def quantity_maps(sd, name: str):
         title += f"; {fixed_text}"
     if blocks.decimated:
         title += "<br>" + blocks.text("mean")
-    return _with_traces(_layout(fig, height=max(320, 250 * nr + 80), title=title), traces)
+    return _layout(fig.add_traces(traces), height=max(320, 250 * nr + 80), title=title).to_plotly_json()
 
 
 def _quantity_curve(sd, name: str, dim: str):
     """A quantity of a one-axis scene as a curve."""
-    import plotly.graph_objects as go
-
     xs = _spec(sd, dim)
     da = sd.ds[name]
     for d in da.dims:
@@ -383,11 +379,11 @@ def _quantity_curve(sd, name: str, dim: str):
             da = da.isel({d: 0})
     v = np.asarray(da.values, dtype=np.float64)
     qlab = quantity_label(name, sd.p)
-    fig = go.Figure(go.Scatter(x=xs.positions, y=_round(v), customdata=xs.values, mode="lines+markers", name=qlab,
-                               hovertemplate=f"{xs.title} = %{{customdata:.4g}}<br>{qlab} = %{{y:.5g}}<extra></extra>"))
+    fig = Figure([dict(type="scatter", x=xs.positions, y=_round(v), customdata=xs.values, mode="lines+markers",
+                       name=qlab, hovertemplate=f"{xs.title} = %{{customdata:.4g}}<br>{qlab} = %{{y:.5g}}<extra></extra>")])
     fig.update_xaxes(**xs.axis_layout())
     fig.update_yaxes(title_text=qlab)
-    return _layout(fig, 340, qlab)
+    return _layout(fig, 340, qlab).to_plotly_json()
 
 
 # ---------------------------------------------------------------------------
@@ -508,8 +504,6 @@ def _select(sd, name: str, keep: list[str]) -> np.ndarray:
 
 
 def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_dim: str | None):
-    from plotly.subplots import make_subplots
-
     roles = _plot_roles(red, arrays)
     keep = [d for d in (col_dim, line_dim, xdim) if d]
     xs = _spec(sd, xdim)
@@ -522,13 +516,11 @@ def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_di
             if col_dim:
                 t += f"<br>{param_label(col_dim, sd.p)} = {format_value(col_dim, float(sd.ds[col_dim].values[j]))}"
             titles.append(t)
-    fig = make_subplots(rows=len(roles), cols=len(cols), shared_xaxes=True, subplot_titles=titles,
+    fig = subplots(rows=len(roles), cols=len(cols), shared_xaxes=True, subplot_titles=titles,
                         vertical_spacing=min(0.08, 0.5 / len(roles)), horizontal_spacing=0.05)
     has_polished = "polished" in arrays
-    # Traces as plain dicts, added to the figure's JSON at the end: plotly.py's validation of
-    # thousands of small Scatter objects cost most of a report's build (issue 36).
     traces = []
-    axes = {(r, c): _axes_of(fig, r + 1, c + 1) for r in range(len(roles)) for c in range(len(cols))}
+    axes = {(r, c): fig.axes_of(r + 1, c + 1) for r in range(len(roles)) for c in range(len(cols))}
     for r, role in enumerate(roles):
         vspec = _arg_axis(sd, role)
         for c, j in enumerate(cols):
@@ -578,53 +570,7 @@ def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_di
     if line_dim and len(lines) < sd.ds.sizes[line_dim]:
         what += (f"<br>{len(lines)} of the {sd.ds.sizes[line_dim]:,} values of {param_label(line_dim, sd.p)}, "
                  "evenly spread")
-    return _with_traces(_layout(fig, height=max(360, 230 * len(roles) + 80), title=what), traces)
-
-
-def _axes_of(fig, row: int, col: int) -> dict:
-    """``{"xaxis": "x2", "yaxis": "y2"}``: the axes of subplot (row, col) of ``fig`` (make_subplots)."""
-    sub = fig.get_subplot(row, col)
-    return {"xaxis": sub.xaxis.plotly_name.replace("axis", ""), "yaxis": sub.yaxis.plotly_name.replace("axis", "")}
-
-
-#: numpy dtypes plotly.js reads as typed arrays, and their short names
-_TYPED_ARRAY_DTYPES = {"int8": "i1", "uint8": "u1", "int16": "i2", "uint16": "u2", "int32": "i4",
-                       "uint32": "u4", "float32": "f4", "float64": "f8"}
-
-
-def typed_array_spec(v: np.ndarray):
-    """``v`` as a plotly.js typed array, ``{"dtype": "f8", "bdata": base64, "shape": "r, c"}`` (the
-    encoding plotly.py gives arrays it validates; written here rather than imported from plotly's
-    private ``_plotly_utils``). 64-bit integers are narrowed to the smallest type that holds them;
-    an array no typed array holds (empty, bool, out-of-range 64-bit) is returned unchanged."""
-    v = np.ascontiguousarray(v)
-    if v.size == 0:
-        return v
-    if v.dtype.kind in "iu" and v.dtype.itemsize == 8:
-        lo, hi = v.min(), v.max()
-        for t in (("int8", "int16", "int32") if v.dtype.kind == "i" else ("uint8", "uint16", "uint32")):
-            if np.iinfo(t).min <= lo and hi <= np.iinfo(t).max:
-                v = v.astype(t)
-                break
-        else:
-            return v
-    short = _TYPED_ARRAY_DTYPES.get(str(v.dtype))
-    if short is None:
-        return v
-    spec = {"dtype": short, "bdata": base64.b64encode(v).decode("ascii")}
-    if v.ndim > 1:
-        spec["shape"] = str(v.shape)[1:-1]
-    return spec
-
-
-def _with_traces(fig, traces: list) -> dict:
-    """The JSON spec of ``fig`` (layout, and any traces it holds) followed by ``traces`` (dicts);
-    their numeric arrays are encoded as plotly.py encodes validated ones (base64 typed arrays)."""
-    spec = fig.to_plotly_json()
-    encoded = [{k: typed_array_spec(v) if isinstance(v, np.ndarray) and v.dtype.kind in "fiub" else v
-                for k, v in t.items()} for t in traces]
-    spec["data"] = list(spec.get("data", [])) + encoded
-    return spec
+    return _layout(fig.add_traces(traces), height=max(360, 230 * len(roles) + 80), title=what).to_plotly_json()
 
 
 def _argmax_custom(sd, red, roles, keep, j, li) -> list[np.ndarray]:
@@ -652,8 +598,6 @@ def _argmax_hover(sd, red, roles, keep, j, li, n) -> str:
 def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
     """The maximum, the arg-max parameters and the reported quantities over the kept plane, one
     row each (own colour scale), grid and polished optima side by side."""
-    from plotly.subplots import make_subplots
-
     # The paper draws these planes with mu_n/mu_s across and the scaled period up.
     xs, ys = _spec(sd, xd), _spec(sd, yd)
     roles = _plot_roles(red, arrays)
@@ -661,7 +605,7 @@ def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
     titles = [f"{_role_label(sd, red, role)} — {kind} optimum" for role in roles for kind in kinds]
     nr = len(roles)
     vgap = min(0.1, 0.35 / max(nr - 1, 1)) if nr > 1 else 0.1
-    fig = make_subplots(rows=nr, cols=len(kinds), shared_yaxes=True, shared_xaxes=True, horizontal_spacing=0.05,
+    fig = subplots(rows=nr, cols=len(kinds), shared_yaxes=True, shared_xaxes=True, horizontal_spacing=0.05,
                         vertical_spacing=vgap, subplot_titles=titles)
     gx, gy = np.meshgrid(xs.values, ys.values)
     # A fine plane is drawn by blocks: each block shows its cell of largest maximum (smallest
@@ -710,7 +654,7 @@ def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
             z = _to_pos(vspec, v) if vspec is not None else v
             traces.append(dict(type="heatmap", x=xs.positions, y=ys.positions, z=_round(z),
                                customdata=np.stack(extra, axis=-1), hovertemplate=hover, coloraxis=cname,
-                               name=kind, **_axes_of(fig, r + 1, c + 1)))
+                               name=kind, **fig.axes_of(r + 1, c + 1)))
         if (role in SIGNED or role == "signed") and allv.size:
             vmax = float(np.max(np.abs(allv))) or 1.0
             cax = {"colorscale": "RdBu_r", "cmin": -vmax, "cmax": vmax}
@@ -734,7 +678,7 @@ def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
         what += "<br>" + blocks.text("min" if best == "smallest" else "max",
                                      f"each drawn cell is its block's cell of {best} {_role_label(sd, red, 'value')}, "
                                      "with that cell's arg-max")
-    return _with_traces(_layout(fig, height=max(360, 260 * nr + 60), title=what), traces)
+    return _layout(fig.add_traces(traces), height=max(360, 260 * nr + 60), title=what).to_plotly_json()
 
 
 # ---------------------------------------------------------------------------
@@ -744,20 +688,18 @@ def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
 
 def series_figure(sd):
     """u(tau) at the scene's stored series points."""
-    import plotly.graph_objects as go
-
     if "series_u" not in sd.ds:
         return None
     u = np.asarray(sd.ds["series_u"].values, dtype=np.float64)
     tau = np.asarray(sd.ds["series_tau"].values, dtype=np.float64)
     status = np.asarray(sd.ds["series_status"].values) if "series_status" in sd.ds else np.zeros(u.shape[0])
-    fig = go.Figure()
+    fig = Figure()
     for i in range(u.shape[0]):
         params = {d: float(sd.ds[f"series_{d}"].values[i]) for d in sd.dims if f"series_{d}" in sd.ds}
         text = params_text(params, sd.p, "<br>")
-        fig.add_trace(go.Scatter(x=tau, y=_round(u[i]), mode="lines", name=f"point {i}" +
-                                 ("" if status[i] == 0 else f" (status {int(status[i])})"),
-                                 hovertemplate="τ = %{x:.3f}<br>u = %{y:.4g}<br>" + text + "<extra></extra>"))
+        fig.add_trace(dict(type="scatter", x=tau, y=_round(u[i]), mode="lines", name=f"point {i}" +
+                           ("" if status[i] == 0 else f" (status {int(status[i])})"),
+                           hovertemplate="τ = %{x:.3f}<br>u = %{y:.4g}<br>" + text + "<extra></extra>"))
     fig.update_xaxes(title_text="τ = t/T")
     fig.update_yaxes(title_text="u = T dx<sub>cm</sub>/dt")
-    return _layout(fig, 340, "stored u(τ) at the scene's series points")
+    return _layout(fig, 340, "stored u(τ) at the scene's series points").to_plotly_json()

@@ -108,15 +108,14 @@ def scroll_table(table_html: str) -> str:
     return f"<div class='table-scroll'>{table_html}</div>"
 
 
-def _template():
-    import plotly.graph_objects as go
-
+def _template() -> dict:
+    """The report's plotly template (as JSON: white background, light grid, framed axes)."""
     axis = {"showgrid": True, "gridcolor": "#e5e5e5", "zeroline": False, "linecolor": "#444", "ticks": "outside",
             "mirror": True, "showline": True}
-    return go.layout.Template(layout={"font": {"family": "system-ui, sans-serif", "size": 12},
-                                      "plot_bgcolor": "white", "paper_bgcolor": "white",
-                                      "xaxis": axis, "yaxis": axis, "colorway": [
-                                          "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"]})
+    return {"layout": {"font": {"family": "system-ui, sans-serif", "size": 12},
+                       "plot_bgcolor": "white", "paper_bgcolor": "white",
+                       "xaxis": axis, "yaxis": dict(axis), "colorway": [
+                           "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"]}}
 
 
 @dataclass
@@ -148,7 +147,7 @@ class SiteBuilder:
         self.n_figures = 0
         self.n_stores = 0
         self.errors: list[str] = []
-        self._template_json = _template().to_plotly_json()
+        self._template_json = _template()
 
     # -- figures -----------------------------------------------------------
     def figure(self, fig, note: str = "") -> str:

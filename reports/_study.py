@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from ._figure import subplots
 from ._site import esc, fmt, provenance_table, scroll_table
 
 __all__ = ["study_section", "combined_honesty", "honesty_records", "honesty_summary", "fitted_order",
@@ -37,7 +38,7 @@ def _labels(sd, name) -> list[str]:
 
 
 def _v(sd, name) -> np.ndarray:
-    return np.asarray(sd.ds[name].values)
+    return sd.array(name)
 
 
 # ---------------------------------------------------------------------------
@@ -181,17 +182,15 @@ def _status_table(sd) -> str:
 
 
 def _curve(fig, row, col, x, y, name, color, dash, order_text, hover, show):
-    import plotly.graph_objects as go
-
     ok = np.isfinite(x) & np.isfinite(y) & (y > 0)
     if not ok.any():
         return
     x, y, hover = np.asarray(x)[ok], np.asarray(y)[ok], [h for h, k in zip(hover, ok) if k]
     text = [""] * (len(x) - 1) + [order_text]
-    fig.add_trace(go.Scatter(x=x, y=y, mode="lines+markers+text", name=name, legendgroup=name, showlegend=show,
-                             line={"color": color, "dash": dash}, marker={"size": 6}, text=text,
-                             textposition="middle right", textfont={"size": 10, "color": color},
-                             hovertext=hover, hoverinfo="text"), row=row, col=col)
+    fig.add_trace(dict(type="scatter", x=x, y=y, mode="lines+markers+text", name=name, legendgroup=name,
+                       showlegend=show, line={"color": color, "dash": dash}, marker={"size": 6}, text=text,
+                       textposition="middle right", textfont={"size": 10, "color": color},
+                       hovertext=hover, hoverinfo="text"), row=row, col=col)
 
 
 def accuracy_orders(sd, quantity: str) -> dict:
@@ -215,13 +214,11 @@ def accuracy_orders(sd, quantity: str) -> dict:
 
 def work_precision_figure(sd, quantity: str):
     """Error in ``quantity`` (U or P) against seconds per solve, one panel per case."""
-    from plotly.subplots import make_subplots
-
     n = sd.ds.sizes["point"]
     cols = 3
     rows = -(-n // cols)
     names = [point_label(sd, i) for i in range(n)]
-    fig = make_subplots(rows=rows, cols=cols, subplot_titles=names, horizontal_spacing=0.07,
+    fig = subplots(rows=rows, cols=cols, subplot_titles=names, horizontal_spacing=0.07,
                         vertical_spacing=0.3 / rows)
     methods, rtols = _labels(sd, "method"), _v(sd, "rtol")
     orders = accuracy_orders(sd, quantity)
@@ -304,9 +301,6 @@ def _value_label(parameter: str, v: float) -> str:
 
 def _sweep_maps(sd, j: int):
     """Maps motion x swept value of status, log10(true error / rtol) and log10(seconds)."""
-    import plotly.graph_objects as go
-    from plotly.subplots import make_subplots
-
     sweep = _v(sd, "sweep")
     idx = np.flatnonzero(sweep == j)
     motions_all = _labels(sd, "motion")
@@ -318,7 +312,7 @@ def _sweep_maps(sd, j: int):
     row_names = [f"{m}, rtol {r:.0e}" for m in methods for r in rtols]
     titles = [f"{rn}: {what}" for rn in row_names for what in ("status", "log10(true error / rtol)",
                                                                 "log10(seconds)")]
-    fig = make_subplots(rows=len(row_names), cols=3, subplot_titles=titles, horizontal_spacing=0.08,
+    fig = subplots(rows=len(row_names), cols=3, subplot_titles=titles, horizontal_spacing=0.08,
                         vertical_spacing=0.25 / len(row_names))
     xlab = [_value_label(parameter, v) for v in xs]
     ylab = [motions_all[m] for m in motion_idx]
@@ -348,11 +342,11 @@ def _sweep_maps(sd, j: int):
             for c, (k, scale, zmin, zmax, bar_x) in enumerate((
                     ("status", status_scale, 0, n_codes - 1, 0.285), ("ratio", "RdBu_r", -3, 3, 0.645),
                     ("time", "Viridis", -2, 1, 1.005)), start=1):
-                fig.add_trace(go.Heatmap(z=grids[k], x=xlab, y=ylab, colorscale=scale, zmin=zmin, zmax=zmax,
-                                         hovertext=hover, hoverinfo="text", xgap=1, ygap=1,
-                                         showscale=row == 1, colorbar={"x": bar_x, "len": 0.9 / len(row_names),
-                                                                       "y": 1.0, "yanchor": "top", "thickness": 8,
-                                                                       "tickfont": {"size": 9}}),
+                fig.add_trace(dict(type="heatmap", z=grids[k], x=xlab, y=ylab, colorscale=scale, zmin=zmin,
+                                   zmax=zmax, hovertext=hover, hoverinfo="text", xgap=1, ygap=1,
+                                   showscale=row == 1, colorbar={"x": bar_x, "len": 0.9 / len(row_names),
+                                                                 "y": 1.0, "yanchor": "top", "thickness": 8,
+                                                                 "tickfont": {"size": 9}}),
                               row=row, col=c)
                 if c > 1:
                     fig.update_yaxes(showticklabels=False, row=row, col=c)
@@ -368,23 +362,20 @@ def _sweep_maps(sd, j: int):
 
 def _delta_figure(sd):
     """U and P of the reference against delta for every motion of the delta sweep."""
-    import plotly.graph_objects as go
-    from plotly.subplots import make_subplots
-
     sweeps = _labels(sd, "sweep")
     if "delta" not in sweeps:
         return None
     j = sweeps.index("delta")
     idx = np.flatnonzero(_v(sd, "sweep") == j)
-    fig = make_subplots(rows=1, cols=2, subplot_titles=["U (reference)", "P (reference)"])
+    fig = subplots(rows=1, cols=2, subplot_titles=["U (reference)", "P (reference)"])
     motions = _labels(sd, "motion")
     for k, m in enumerate(sorted(set(int(x) for x in _v(sd, "motion")[idx]))):
         sel = idx[_v(sd, "motion")[idx] == m]
         sel = sel[np.argsort(_v(sd, "delta")[sel])]
         for col, q in ((1, "U_ref"), (2, "P_ref")):
-            fig.add_trace(go.Scatter(x=_v(sd, "delta")[sel], y=_v(sd, q)[sel], mode="lines+markers", name=motions[m],
-                                     legendgroup=motions[m], showlegend=col == 1,
-                                     line={"color": STATUS_COLORS[k % len(STATUS_COLORS)]}), row=1, col=col)
+            fig.add_trace(dict(type="scatter", x=_v(sd, "delta")[sel], y=_v(sd, q)[sel], mode="lines+markers",
+                               name=motions[m], legendgroup=motions[m], showlegend=col == 1,
+                               line={"color": STATUS_COLORS[k % len(STATUS_COLORS)]}), row=1, col=col)
     fig.update_xaxes(type="log", title_text="δ", exponentformat="power")
     fig.update_yaxes(type="log", row=1, col=2)
     fig.update_layout(height=420, title={"text": "Effect of δ on U and P (paper: barely changes for δ ≤ 1e-2)",

@@ -527,11 +527,11 @@ def test_block_helpers_against_brute_force():
 @pytest.mark.parametrize("dtype", ["float64", "float32", "int64", "int32", "int16", "int8", "uint64", "uint8", "bool"])
 @pytest.mark.parametrize("shape", [(7,), (3, 5), (0,)])
 def test_typed_array_spec_is_plotlys_encoding(dtype, shape):
-    """reports._panels.typed_array_spec (ours, so the package imports no private plotly module)
+    """reports._figure.typed_array_spec (ours, so the package imports no private plotly module)
     gives what plotly.py's own encoder gives, byte for byte, dtype narrowing included; a 64-bit
     integer beyond 32 bits stays an array (the control: plotly.js has no such typed array)."""
     _plotly_utils = pytest.importorskip("_plotly_utils.utils")
-    from reports._panels import typed_array_spec
+    from reports._figure import typed_array_spec
 
     rng = np.random.default_rng(0)
     for scale in (1, 100, 40_000, 3_000_000_000):
