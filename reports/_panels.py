@@ -40,6 +40,11 @@ MAX_FACET = 4
 MAX_MAP_CELLS = 400
 #: Curves of one panel at most (evenly spread over the line axis, ends kept; the title says so).
 MAX_LINES = 16
+#: A curve of more points than this is drawn without markers: plotly.js draws each marker as an
+#: SVG element, and the 96 curves of 1,000 points of a refined scene's reduction took 5.1 s to
+#: draw in chromium (every other figure of that report 0.1-0.9 s); at this many points a
+#: line is as fine as the screen. The paper's scenes have at most 64 points on an axis (unchanged).
+MAX_MARKERS = 200
 #: Grids with at least this many points along both map axes are drawn as contour maps; coarser
 #: ones as heatmaps of their cells with contour lines on top.
 FINE_GRID = 48
@@ -379,7 +384,8 @@ def _quantity_curve(sd, name: str, dim: str):
             da = da.isel({d: 0})
     v = np.asarray(da.values, dtype=np.float64)
     qlab = quantity_label(name, sd.p)
-    fig = Figure([dict(type="scatter", x=xs.positions, y=_round(v), customdata=xs.values, mode="lines+markers",
+    fig = Figure([dict(type="scatter", x=xs.positions, y=_round(v), customdata=xs.values,
+                       mode="lines" if xs.values.size > MAX_MARKERS else "lines+markers",
                        name=qlab, hovertemplate=f"{xs.title} = %{{customdata:.4g}}<br>{qlab} = %{{y:.5g}}<extra></extra>")])
     fig.update_xaxes(**xs.axis_layout())
     fig.update_yaxes(title_text=qlab)
@@ -519,6 +525,7 @@ def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_di
     fig = subplots(rows=len(roles), cols=len(cols), shared_xaxes=True, subplot_titles=titles,
                         vertical_spacing=min(0.08, 0.5 / len(roles)), horizontal_spacing=0.05)
     has_polished = "polished" in arrays
+    dense = xs.values.size > MAX_MARKERS
     traces = []
     axes = {(r, c): fig.axes_of(r + 1, c + 1) for r in range(len(roles)) for c in range(len(cols))}
     for r, role in enumerate(roles):
@@ -551,10 +558,15 @@ def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_di
                                                                                j if col_dim else None,
                                                                                li if line_dim else None), axis=-1)
                     legend = (lname + " " if lname else "") + kind
+                    if dense:  # grid optimum dotted, polished solid
+                        style = dict(mode="lines", line={"color": color, "width": 2 if polished else 1.5,
+                                                         **({} if polished or not has_polished else {"dash": "dot"})})
+                    else:
+                        style = dict(mode="lines" if polished else ("markers" if has_polished else "lines+markers"),
+                                     line={"color": color, "width": 2},
+                                     marker={"color": color, "size": 6, "symbol": "circle-open"})
                     traces.append(dict(
-                        type="scatter", x=xs.positions, y=y, customdata=custom, hovertemplate=hover,
-                        mode="lines" if polished else ("markers" if has_polished else "lines+markers"),
-                        line={"color": color, "width": 2}, marker={"color": color, "size": 6, "symbol": "circle-open"},
+                        type="scatter", x=xs.positions, y=y, customdata=custom, hovertemplate=hover, **style,
                         name=legend, legendgroup=legend, showlegend=(r == 0 and c == 0), **axes[r, c]))
             if vspec is not None:
                 fig.update_yaxes(row=r + 1, col=c + 1, **_value_axis_layout(vspec, ""))
@@ -566,7 +578,10 @@ def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_di
     what = f"{red['name']}: {red.get('statistic', 'max')} of {quantity_label(red['quantity'], sd.p)} over " + \
         ", ".join(param_label(a, sd.p) for a in red.get("over", []))
     if has_polished:
-        what += " — grid optimum (markers) and polished optimum (lines)"
+        what += (" — grid optimum (dotted) and polished optimum (lines)" if dense else
+                 " — grid optimum (markers) and polished optimum (lines)")
+    if dense:
+        what += f"<br>{xs.values.size:,} points per curve, drawn without markers"
     if line_dim and len(lines) < sd.ds.sizes[line_dim]:
         what += (f"<br>{len(lines)} of the {sd.ds.sizes[line_dim]:,} values of {param_label(line_dim, sd.p)}, "
                  "evenly spread")

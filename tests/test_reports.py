@@ -486,6 +486,30 @@ def test_every_map_panel_is_at_most_400_cells_a_side_and_says_how(big_site):
     assert f"xr.open_zarr({str(big_site['store'])!r}" in html_unescape(big_site["html"])
 
 
+def test_curves_of_more_than_max_markers_points_are_drawn_without_markers(big_site, site):
+    """A refined scene's curves (1,000 points each) are lines, and their title says so: their
+    markers took chromium 5.1 s to draw. The shipped scenes' curves keep their markers (control)."""
+    from reports._panels import MAX_MARKERS
+
+    def curves(html):  # the reductions' curves: one trace per (line, grid or polished optimum)
+        return [(s, t) for s in _specs(html) for t in s["data"]
+                if t["type"] == "scatter" and str(t.get("name", "")).endswith(("grid", "polished"))]
+
+    dense = [(s, t) for s, t in curves(big_site["html"]) if _length(t["x"]) > MAX_MARKERS]
+    assert dense and all("markers" not in t["mode"] for _, t in dense)
+    assert all("drawn without markers" in s["layout"]["title"]["text"] for s, _ in dense)
+    coarse = [t for _, t in curves(site["html"]) if 1 < _length(t["x"]) <= MAX_MARKERS]
+    assert any("markers" in t.get("mode", "") for t in coarse)
+
+
+def _length(v) -> int:
+    if isinstance(v, dict):  # a typed array
+        import base64
+
+        return len(base64.b64decode(v["bdata"])) // np.dtype(v["dtype"]).itemsize
+    return len(v)
+
+
 def html_unescape(text: str) -> str:
     import html
 
