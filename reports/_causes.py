@@ -41,7 +41,8 @@ KIND_CHECK = {"resolution": "converges", "domain": "restricted", "cross-check": 
               "reading": "reading", "convention": "recompute"}
 
 #: the shared rules a tolerance or a reading's threshold may cite (CAUSES.md, "Shared rules")
-RULES = ("printed", "figure", "most", "all", "grid", "angle", "words", "half", "much", "judgement")
+RULES = ("printed", "figure", "most", "all", "grid", "angle", "words", "half", "much", "flat", "except", "trend",
+         "judgement")
 
 
 @dataclass(frozen=True)
