@@ -99,7 +99,7 @@ def _plain(v):
 
 def _arg_scenes(a: dict) -> set:
     out = {a["scene"]} if "scene" in a else set()
-    for side in ("numerator", "denominator"):
+    for side in ("numerator", "denominator", "base", "partial", "full"):
         if isinstance(a.get(side), dict) and "scene" in a[side]:
             out.add(a[side]["scene"])
     return out
@@ -270,7 +270,7 @@ def _reflected_control(holds_for, claim, m, what: str) -> dict:
 def _reductions_of(a: dict) -> list[tuple[str, str | None]]:
     """(scene, reduction or None) of every source of a computation's arguments."""
     out = []
-    for src in ([a] if "scene" in a else []) + [a[s] for s in ("numerator", "denominator")
+    for src in ([a] if "scene" in a else []) + [a[s] for s in ("numerator", "denominator", "base", "partial", "full")
                                                   if isinstance(a.get(s), dict)]:
         out.append((src["scene"], src.get("reduction")))
     return out

@@ -59,9 +59,9 @@ def _dims_and_roles(doc: dict):
 
 
 def _sources(claim: Claim):
-    if claim.compute == "gain":
-        return [claim.args["numerator"], claim.args["denominator"]]
-    return [claim.args]
+    sides = [claim.args[k] for k in ("numerator", "denominator", "base", "partial", "full")
+             if isinstance(claim.args.get(k), dict)]
+    return sides or [claim.args]
 
 
 def test_registry_parses_with_enough_claims_on_every_results_section():
@@ -90,14 +90,17 @@ def test_registry_names_existing_scenes_reductions_roles_and_dimensions():
             elif "quantity" in src:
                 assert src["quantity"] in outputs, (c.id, src["quantity"])
             else:
-                assert src.get("role") in ("relative_efficiency", "scaled_period", "phi_max", "phi_min",
+                assert src.get("role") in ("relative_efficiency", "scaled_period", "phi_max", "phi_min", "amplitude",
                                            "distinct", "share_at_best", "second_share",
                                            "second_relative_efficiency"), c.id
             named = set(src.get("at", {})) | set(src.get("ranges", {})) | set(src.get("peak_over", []))
+            named |= set(src.get("exclude_ranges", {})) | set(src.get("change", {}))
             named |= {d for cell in src.get("cells", []) + src.get("exclude", []) for d in cell}
             for key in ("location", "location_along", "along"):
                 if key in src:
                     named.add(src[key])
+                elif key in c.args and src is not c.args:  # a monotone gain: its axis is in both sides
+                    named.add(c.args[key])
             assert named <= dims, (c.id, named - dims)
 
 
@@ -438,6 +441,18 @@ def test_every_claim_states_the_basis_of_its_tolerance_by_a_shared_rule():
         head = c.basis.split(":")[0]
         rules = [w.strip() for w in head.split("+")]
         assert rules and all(r in RULES for r in rules), (c.id, c.basis)
+
+
+def test_a_claims_quote_is_the_papers_own_sentence():
+    """A claim that quotes the paper (``quote``, every claim of issue 33 item 5) quotes it
+    verbatim: found, whitespace aside, in the paper's source."""
+    if not PAPER.is_file():
+        pytest.skip(f"paper not found at {PAPER}")
+    paper = _norm(PAPER.read_text(encoding="utf-8"))
+    quoted = [c for c in load_claims() if c.quote]
+    assert len(quoted) >= 18
+    for c in quoted:
+        assert _norm(c.quote) in paper, (c.id, c.quote)
 
 
 @pytest.mark.parametrize("doc, match", [
