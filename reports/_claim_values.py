@@ -695,9 +695,10 @@ def monotone(stores, *, along: str, scene=None, numerator=None, denominator=None
     else:
         src = _selected(stores, scene, **source)
         sd, da, excluded = src.sd, src.da, src.excluded
-    shares, pairs = [], 0
+    shares, pairs, against = [], 0, []
     for d in dims or [along]:
-        v = np.moveaxis(np.asarray(da.values, dtype=np.float64), da.dims.index(d), -1)
+        dt = da.transpose(*[x for x in da.dims if x != d], d)
+        v = np.asarray(dt.values, dtype=np.float64)
         step = np.diff(v, axis=-1)
         if direction == "decreasing":
             step = -step
@@ -710,8 +711,23 @@ def monotone(stores, *, along: str, scene=None, numerator=None, denominator=None
             raise NotComputed(f"unknown tie rule {tie!r}")
         shares.append(np.mean(good[ok]) if ok.any() else math.nan)
         pairs += int(ok.sum())
-    m = Measurement(value=float(min(shares)), where=f"{pairs} adjacent pairs along "
-                    + ", ".join(axis_name(d) for d in dims or [along]), failed=_failures(da, excluded))
+        bad = ok & ~good
+        if bad.any():  # the pairs that go the other way: how many, and the largest (relative) of them
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rel = np.where(bad, -step / np.where(scale > 0, scale, np.inf), -np.inf)
+            ix = np.unravel_index(int(np.argmax(rel)), rel.shape)
+            cell = dt.isel({x: i for x, i in zip(dt.dims[:-1], ix[:-1])})
+            at = _where(cell)
+            c = np.asarray(dt[d].values, dtype=np.float64)
+            against.append(f"{int(bad.sum())} of {int(ok.sum())} pairs along {axis_name(d)} go the other way, the "
+                           f"largest {v[ix[:-1]][ix[-1]]:.4g} → {v[ix[:-1]][ix[-1] + 1]:.4g} ({100 * rel[ix]:.2g} %) "
+                           f"from {axis_name(d)} = {value_text(d, c[ix[-1]])} to {value_text(d, c[ix[-1] + 1])}"
+                           + (f" at {at}" if at else ""))
+    # an axis without a pair (one sample in the selection) says nothing either way
+    value = float(np.nanmin(shares)) if np.isfinite(shares).any() else math.nan
+    m = Measurement(value=value, where=f"{pairs} adjacent pairs along "
+                    + ", ".join(axis_name(d) for d in dims or [along]) + ("; " + "; ".join(against) if against else ""),
+                    failed=_failures(da, excluded))
     # a share of n pairs is resolved to one pair (the shared rule "grid": one step of what is counted)
     share_error = 1.0 / pairs if pairs else math.nan
     if numerator is not None:
