@@ -824,10 +824,8 @@ def switched(stores, *, scene: str, quantity: str, at: dict, change: dict, absol
     point = {d: float(best[d].values) for d in before.dims}
     after = float(np.asarray(_at(da, {**at, **change, **point}).values))
     m = Measurement(value=float(v.ravel()[i]) / after if after else math.inf,
-                    where=(f"best {float(v.ravel()[i]):.4g} at {_where(best)} with "
-                           + ", ".join(f"{axis_name(d)} = {value_text(d, at[d])}" for d in at)
-                           + f"; changed to " + ", ".join(f"{axis_name(d)} = {value_text(d, x)}"
-                                                          for d, x in change.items())
+                    where=(f"best {float(v.ravel()[i]):.4g} at {_where(best)}; changed to "
+                           + ", ".join(f"{axis_name(d)} = {value_text(d, x)}" for d, x in change.items())
                            + f": {after:.4g}"))
     m.resolution = (_grid_text(sd, before.dims) + f" (grid values, no polish); solver rtol {sd.rtol:g}")
     m.error = f"solver rtol {sd.rtol:g} of each value"

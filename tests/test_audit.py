@@ -408,7 +408,7 @@ def _cause_scenes(cause) -> set:
     for table in tables:
         if "scene" in table:
             out.add(table["scene"])
-        for side in ("numerator", "denominator"):
+        for side in ("numerator", "denominator", "base", "partial", "full"):
             if isinstance(table.get(side), dict) and "scene" in table[side]:
                 out.add(table[side]["scene"])
     return out
