@@ -262,7 +262,8 @@ def _cause_cell(r) -> str:
 
 
 def _claim_notes(c) -> str:
-    notes = f"<div class='small'>tolerance basis: {esc(c.basis)}</div>" if c.basis else ""
+    notes = f"<div class='small'>the paper: “{esc(c.quote)}”</div>" if c.quote else ""
+    notes += f"<div class='small'>tolerance basis: {esc(c.basis)}</div>" if c.basis else ""
     if c.by_construction:
         notes += f"<div class='small'><b>true by construction</b> (not counted as a reproduction): {esc(c.by_construction)}</div>"
     return notes
