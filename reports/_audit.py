@@ -60,12 +60,13 @@ class Claim:
     cause: Cause | None = None
     basis: str = ""
     by_construction: str = ""
+    quote: str = ""
 
     @property
     def scenes(self) -> list[str]:
         """Every scene the claim reads (from ``args``, including gain's two sides)."""
         out = [self.args["scene"]] if "scene" in self.args else []
-        for side in ("numerator", "denominator"):
+        for side in ("numerator", "denominator", "base", "partial", "full"):
             if isinstance(self.args.get(side), dict) and "scene" in self.args[side]:
                 out.append(self.args[side]["scene"])
         return list(dict.fromkeys(out))
@@ -98,7 +99,8 @@ class AuditRow:
                 "why": self.claim.cause.why if self.claim.cause and self.cause else None,
                 "evidence": self.evidence.to_json() if self.evidence else None,
                 "control": self.evidence.to_json()["control"] if self.evidence else None,
-                "basis": self.claim.basis, "by_construction": self.claim.by_construction or None}
+                "basis": self.claim.basis, "by_construction": self.claim.by_construction or None,
+                "quote": self.claim.quote or None}
 
 
 def _json_number(v):
@@ -130,7 +132,8 @@ def load_claims(path: Path | str = CLAIMS_FILE) -> list[Claim]:
             raise RegistryError(str(exc)) from None
         out.append(Claim(id=cid, figure=c["figure"], claim=c["claim"], paper_value=str(c["paper_value"]),
                          expect=dict(c["expect"]), compute=c["compute"], args=dict(c["args"]), cause=cause,
-                         basis=str(c["basis"]), by_construction=str(c.get("by_construction", ""))))
+                         basis=str(c["basis"]), by_construction=str(c.get("by_construction", "")),
+                         quote=str(c.get("quote", ""))))
     return out
 
 
@@ -259,7 +262,8 @@ def _cause_cell(r) -> str:
 
 
 def _claim_notes(c) -> str:
-    notes = f"<div class='small'>tolerance basis: {esc(c.basis)}</div>" if c.basis else ""
+    notes = f"<div class='small'>the paper: “{esc(c.quote)}”</div>" if c.quote else ""
+    notes += f"<div class='small'>tolerance basis: {esc(c.basis)}</div>" if c.basis else ""
     if c.by_construction:
         notes += f"<div class='small'><b>true by construction</b> (not counted as a reproduction): {esc(c.by_construction)}</div>"
     return notes

@@ -41,7 +41,8 @@ KIND_CHECK = {"resolution": "converges", "domain": "restricted", "cross-check": 
               "reading": "reading", "convention": "recompute"}
 
 #: the shared rules a tolerance or a reading's threshold may cite (CAUSES.md, "Shared rules")
-RULES = ("printed", "figure", "most", "all", "grid", "angle", "words", "half", "much", "judgement")
+RULES = ("printed", "figure", "most", "all", "grid", "angle", "words", "half", "much", "flat", "except", "trend",
+         "judgement")
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,7 @@ def _plain(v):
 
 def _arg_scenes(a: dict) -> set:
     out = {a["scene"]} if "scene" in a else set()
-    for side in ("numerator", "denominator"):
+    for side in ("numerator", "denominator", "base", "partial", "full"):
         if isinstance(a.get(side), dict) and "scene" in a[side]:
             out.add(a[side]["scene"])
     return out
@@ -269,7 +270,7 @@ def _reflected_control(holds_for, claim, m, what: str) -> dict:
 def _reductions_of(a: dict) -> list[tuple[str, str | None]]:
     """(scene, reduction or None) of every source of a computation's arguments."""
     out = []
-    for src in ([a] if "scene" in a else []) + [a[s] for s in ("numerator", "denominator")
+    for src in ([a] if "scene" in a else []) + [a[s] for s in ("numerator", "denominator", "base", "partial", "full")
                                                   if isinstance(a.get(s), dict)]:
         out.append((src["scene"], src.get("reduction")))
     return out

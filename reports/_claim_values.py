@@ -140,7 +140,8 @@ def grid_role_array(sd, reduction: str, role: str = "value"):
 
 def optima_role_array(sd, role: str):
     """A role of the best kept optimum per (anisotropy_ratio, max_wavenumber, p): |λ|/λub
-    (``relative_efficiency``), ``scaled_period``, ``phi_max``, ``phi_min`` [rad], the number
+    (``relative_efficiency``), ``scaled_period``, ``phi_max``, ``phi_min``, ``amplitude`` (half of
+    max − min of φ) [rad], the number
     of distinct optima kept (``distinct``), or the number of distinct optima among the ten most
     efficient starts counted with repetition (``distinct_in_best_ten``, what the paper's figures
     draw), the share of all starts that reached the best optimum (``share_at_best``), the share
@@ -156,6 +157,9 @@ def optima_role_array(sd, role: str):
     if role in ("phi_max", "phi_min"):
         phi = ds["optimum_phi"].isel(rank=0)
         return phi.max("tau", skipna=False) if role == "phi_max" else phi.min("tau", skipna=False)
+    if role == "amplitude":  # the stroke amplitude: half of max - min of phi over the period [rad]
+        phi = ds["optimum_phi"].isel(rank=0)
+        return (phi.max("tau", skipna=False) - phi.min("tau", skipna=False)) / 2
     if role == "distinct":
         kept = (ds["optimum_start"] >= 0).sum("rank")
         return kept.where(kept > 0).astype(float)
@@ -213,9 +217,10 @@ def _at(da, at: dict):
     return da.isel({d: _index(da, d, v) for d, v in (at or {}).items()})
 
 
-def select(da, *, at=None, cells=None, ranges=None, exclude=None):
+def select(da, *, at=None, cells=None, ranges=None, exclude=None, exclude_ranges=None):
     """(``da`` at ``at``, stacked over ``cells``, restricted to ``ranges``, with the cells of
-    ``exclude`` masked as NaN; the number of masked cells)."""
+    ``exclude`` and the region ``exclude_ranges`` (inclusive [lo, hi] per dimension: the cells
+    inside every range, a rectangle) masked as NaN; the number of masked cells)."""
     import xarray as xr
 
     excluded = 0
@@ -239,6 +244,17 @@ def select(da, *, at=None, cells=None, ranges=None, exclude=None):
             shape = [1] * da.ndim
             shape[da.dims.index(d)] = -1
             mask &= (da[d].values == hit[d].values).reshape(shape)
+        da = da.where(~mask)
+        excluded += int(mask.sum())
+    if exclude_ranges:
+        mask = np.ones(da.shape, dtype=bool)
+        for d, (lo, hi) in exclude_ranges.items():
+            if d not in da.dims:
+                raise NotComputed(f"no dimension {d!r}")
+            shape = [1] * da.ndim
+            shape[da.dims.index(d)] = -1
+            c = np.asarray(da[d].values, dtype=np.float64)
+            mask &= ((c >= lo) & (c <= hi)).reshape(shape)
         da = da.where(~mask)
         excluded += int(mask.sum())
     return da, excluded
@@ -275,6 +291,10 @@ def _collapse(da, statistic: str, test=None, location=None):
         return float(np.median(v[ok])), f"median over {ok.sum()} cells", None
     if statistic == "range":
         return (float(v[ok].min()), float(v[ok].max())), f"over {ok.sum()} cells", None
+    if statistic == "spread":
+        lo, hi = int(np.nanargmin(v)), int(np.nanargmax(v))
+        return (float(v[hi] - v[lo]), f"largest {v[hi]:.3g} ({_where(da, hi)}) minus smallest {v[lo]:.3g} "
+                                      f"({_where(da, lo)}), over {ok.sum()} cells", None)
     if statistic == "fraction":
         passed = _test(v[ok], test or {})
         return float(np.mean(passed)), f"{int(passed.sum())} of {ok.sum()} cells", None
@@ -435,7 +455,8 @@ class _Source:
 
 
 def _selected(stores, scene, *, reduction=None, role="value", quantity=None, absolute=False, at=None, cells=None,
-              ranges=None, exclude=None, peak_over=(), location_along=None, grid=False) -> _Source:
+              ranges=None, exclude=None, exclude_ranges=None, peak_over=(), location_along=None,
+              grid=False) -> _Source:
     """The selected array of one claim source (see the module docstring); ``grid``: the grid
     optimum even where a polished one is stored (what the grid alone resolves)."""
     sd = scene_store(stores, scene)
@@ -459,14 +480,15 @@ def _selected(stores, scene, *, reduction=None, role="value", quantity=None, abs
         grid_da = abs(grid_da) if grid_da is not None else None
 
     def sel(arr):
-        a, _ = select(arr, at=at, cells=cells, ranges=ranges, exclude=exclude)
+        a, _ = select(arr, at=at, cells=cells, ranges=ranges, exclude=exclude, exclude_ranges=exclude_ranges)
         for d in peak_over:
             a = a.max(d)
         if location_along:
             a = _location_along(a, location_along)
         return a
 
-    excluded = select(da, at=at, cells=cells, ranges=ranges, exclude=exclude)[1] if exclude else 0
+    excluded = (select(da, at=at, cells=cells, ranges=ranges, exclude=exclude, exclude_ranges=exclude_ranges)[1]
+                if exclude or exclude_ranges else 0)
     # a peak or a located coordinate has no grid counterpart of the same meaning
     grid = sel(grid_da) if grid_da is not None and not peak_over and not location_along else None
     return _Source(sd, sel(da), sel, grid, polished, excluded)
@@ -579,8 +601,48 @@ def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=N
     over their shared coordinates (a collapsed side broadcasts), then ``statistic``."""
     import xarray as xr
 
+    [(sa, a, pa), (sb, b, pb)], excluded, unpolished = _aligned_sides(stores, numerator, denominator)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = a / b
+    if test and test.get("figure_equal"):
+        r = xr.where(_figure_equal(a, b), 1.0, 0.0).where(np.isfinite(r))
+        test = {"min": 1.0}
+    value, where, index = _collapse(r, statistic, test)
+    m = Measurement(value=value, where=where, failed=_failures(r, excluded))
+    m.resolution = _sides_resolution((sa, pa), (sb, pb))
+    m.error = "ratio of two optima, each within its own resolution"
+    if unpolished:  # a ratio of grid optima: the grid's error is not bounded by anything stored
+        m.coarse, m.coarse_value = "; ".join(dict.fromkeys(unpolished)) + ", an error we cannot bound", math.inf
+    return m
+
+
+def _figure_equal(a, b):
+    """The shared rule "figure" (reports/CAUSES.md): a and b equal to two significant digits,
+    |a - b| <= half a unit in the second significant digit of the larger (elementwise)."""
+    big = np.maximum(abs(a), abs(b))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        half = 0.5 * 10.0 ** (np.floor(np.log10(big)) - 1)
+    return abs(a - b) <= half
+
+
+def _sides_resolution(*sides) -> str:
+    res = []
+    for sd, pol in sides:
+        if sd.meta.get("kind", "grid") == "optima":
+            res.append(f"{sd.name}: " + _optima_resolution(sd)[0])
+        else:
+            res.append(f"{sd.name}: rtol {sd.rtol:g}, " + ("polished optima" if pol else "grid optima"))
+    return "; ".join(dict.fromkeys(res))
+
+
+def _aligned_sides(stores, *sides):
+    """The selected arrays of two or more selections (gain's sides), aligned on the coordinates
+    they share (a side collapsed by its own ``statistic`` broadcasts): ([(store, array,
+    polished)], masked cells, notes on unpolished grid optima)."""
+    import xarray as xr
+
     parts, excluded, unpolished = [], 0, []
-    for side in (numerator, denominator):
+    for side in sides:
         side = dict(side)
         scene = side.pop("scene")
         side_stat = side.pop("statistic", None)
@@ -594,63 +656,86 @@ def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=N
             v, _, _ = _collapse(da, side_stat)
             da = xr.DataArray(v)
         parts.append((sd, da, polished))
-    (sa, a, pa), (sb, b, pb) = parts
-    shared = [d for d in a.dims if d in b.dims]
-    for d in shared:  # align on the coordinates both stores hold
-        common = np.intersect1d(np.round(a[d].values, 9), np.round(b[d].values, 9))
-        if not common.size:
-            raise NotComputed(f"the two selections share no {axis_name(d)}")
-        a = a.isel({d: np.flatnonzero(np.isin(np.round(a[d].values, 9), common))})
-        b = b.isel({d: np.flatnonzero(np.isin(np.round(b[d].values, 9), common))})
-        b = b.assign_coords({d: a[d].values})
-    extra_a = [c for c in a.coords if c not in a.dims and c in b.coords and c not in b.dims]
-    a = a.drop_vars(extra_a, errors="ignore")
-    b = b.drop_vars([c for c in b.coords if c not in b.dims], errors="ignore")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r = a / b
-    if test and test.get("figure_equal"):
-        # the shared rule "figure" (reports/CAUSES.md): equal to two significant digits,
-        # |a - b| <= half a unit in the second significant digit of the larger
-        big = np.maximum(abs(a), abs(b))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            half = 0.5 * 10.0 ** (np.floor(np.log10(big)) - 1)
-        r = xr.where(abs(a - b) <= half, 1.0, 0.0).where(np.isfinite(r))
-        test = {"min": 1.0}
-    value, where, index = _collapse(r, statistic, test)
-    m = Measurement(value=value, where=where, failed=_failures(r, excluded))
-    res = []
-    for sd, pol in ((sa, pa), (sb, pb)):
-        if sd.meta.get("kind", "grid") == "optima":
-            res.append(f"{sd.name}: " + _optima_resolution(sd)[0])
-        else:
-            res.append(f"{sd.name}: rtol {sd.rtol:g}, " + ("polished optima" if pol else "grid optima"))
-    m.resolution = "; ".join(dict.fromkeys(res))
-    m.error = "ratio of two optima, each within its own resolution"
-    if unpolished:  # a ratio of grid optima: the grid's error is not bounded by anything stored
-        m.coarse, m.coarse_value = "; ".join(dict.fromkeys(unpolished)) + ", an error we cannot bound", math.inf
-    return m
+    arrays = [p[1] for p in parts]
+    for k in range(1, len(arrays)):  # align every side with the first on the coordinates both hold
+        a, b = arrays[0], arrays[k]
+        for d in [d for d in a.dims if d in b.dims]:
+            common = np.intersect1d(np.round(a[d].values, 9), np.round(b[d].values, 9))
+            if not common.size:
+                raise NotComputed(f"the two selections share no {axis_name(d)}")
+            a = a.isel({d: np.flatnonzero(np.isin(np.round(a[d].values, 9), common))})
+            b = b.isel({d: np.flatnonzero(np.isin(np.round(b[d].values, 9), common))})
+            b = b.assign_coords({d: a[d].values})
+        arrays[0], arrays[k] = a, b
+    for k in range(1, len(arrays)):  # the first side's alignment may have narrowed after side k
+        arrays[k] = arrays[k].sel({d: arrays[0][d].values for d in arrays[k].dims if d in arrays[0].dims})
+    a = arrays[0]
+    extra_a = [c for c in a.coords if c not in a.dims and all(c in b.coords and c not in b.dims for b in arrays[1:])]
+    arrays[0] = a.drop_vars(extra_a, errors="ignore")
+    for k in range(1, len(arrays)):
+        arrays[k] = arrays[k].drop_vars([c for c in arrays[k].coords if c not in arrays[k].dims], errors="ignore")
+    return [(p[0], arr, p[2]) for p, arr in zip(parts, arrays)], excluded, unpolished
 
 
-def monotone(stores, *, scene, along: str, direction="increasing", slack=0.0, dims=None, **source) -> Measurement:
+def monotone(stores, *, along: str, scene=None, numerator=None, denominator=None, direction="increasing",
+             slack=0.0, tie=None, dims=None, **source) -> Measurement:
     """Share of adjacent pairs along ``along`` (or each of ``dims``) that do not decrease
-    (``increasing``) or increase (``decreasing``) by more than ``slack`` (relative)."""
-    src = _selected(stores, scene, **source)
-    sd, da, excluded = src.sd, src.da, src.excluded
-    shares, pairs = [], 0
+    (``increasing``) or increase (``decreasing``) by more than ``slack`` (relative); with
+    ``tie = "figure"`` a pair equal to two significant digits (the shared rule "figure") is a
+    tie, which counts as not going the other way. The array is one selection (``scene`` and
+    its source arguments) or the ratio ``numerator / denominator`` of two (as for :func:`gain`,
+    e.g. a gain along the period axis)."""
+    if numerator is not None:
+        if scene is not None or denominator is None:
+            raise NotComputed("monotone takes a scene, or a numerator and a denominator")
+        [(sd, a, pa), (sb, b, pb)], excluded, unpolished = _aligned_sides(stores, numerator, denominator)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            da = a / b
+        source = {}
+    else:
+        src = _selected(stores, scene, **source)
+        sd, da, excluded = src.sd, src.da, src.excluded
+    shares, pairs, against = [], 0, []
     for d in dims or [along]:
-        v = np.moveaxis(np.asarray(da.values, dtype=np.float64), da.dims.index(d), -1)
+        dt = da.transpose(*[x for x in da.dims if x != d], d)
+        v = np.asarray(dt.values, dtype=np.float64)
         step = np.diff(v, axis=-1)
         if direction == "decreasing":
             step = -step
         scale = np.maximum(np.abs(v[..., 1:]), np.abs(v[..., :-1]))
         ok = np.isfinite(step)
-        shares.append(np.mean(step[ok] >= -slack * scale[ok]) if ok.any() else math.nan)
+        good = step >= -slack * scale
+        if tie == "figure":
+            good |= np.asarray(_figure_equal(v[..., 1:], v[..., :-1]))
+        elif tie is not None:
+            raise NotComputed(f"unknown tie rule {tie!r}")
+        shares.append(np.mean(good[ok]) if ok.any() else math.nan)
         pairs += int(ok.sum())
-    m = Measurement(value=float(min(shares)), where=f"{pairs} adjacent pairs along "
-                    + ", ".join(axis_name(d) for d in dims or [along]), failed=_failures(da, excluded))
+        bad = ok & ~good
+        if bad.any():  # the pairs that go the other way: how many, and the largest (relative) of them
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rel = np.where(bad, -step / np.where(scale > 0, scale, np.inf), -np.inf)
+            ix = np.unravel_index(int(np.argmax(rel)), rel.shape)
+            cell = dt.isel({x: i for x, i in zip(dt.dims[:-1], ix[:-1])})
+            at = _where(cell)
+            c = np.asarray(dt[d].values, dtype=np.float64)
+            against.append(f"{int(bad.sum())} of {int(ok.sum())} pairs along {axis_name(d)} go the other way, the "
+                           f"largest {v[ix[:-1]][ix[-1]]:.4g} → {v[ix[:-1]][ix[-1] + 1]:.4g} ({100 * rel[ix]:.2g} %) "
+                           f"from {axis_name(d)} = {value_text(d, c[ix[-1]])} to {value_text(d, c[ix[-1] + 1])}"
+                           + (f" at {at}" if at else ""))
+    # an axis without a pair (one sample in the selection) says nothing either way
+    value = float(np.nanmin(shares)) if np.isfinite(shares).any() else math.nan
+    m = Measurement(value=value, where=f"{pairs} adjacent pairs along "
+                    + ", ".join(axis_name(d) for d in dims or [along]) + ("; " + "; ".join(against) if against else ""),
+                    failed=_failures(da, excluded))
     # a share of n pairs is resolved to one pair (the shared rule "grid": one step of what is counted)
     share_error = 1.0 / pairs if pairs else math.nan
-    if source.get("quantity"):
+    if numerator is not None:
+        m.resolution = _sides_resolution((sd, pa), (sb, pb))
+        m.error = "ratio of two optima, each within its own resolution"
+        if unpolished:
+            m.coarse, m.coarse_value = "; ".join(dict.fromkeys(unpolished)) + ", an error we cannot bound", math.inf
+    elif source.get("quantity"):
         m.resolution = _grid_text(sd, sd.dims) + f"; solver rtol {sd.rtol:g}"
         m.error = f"solver rtol {sd.rtol:g}"
     elif source.get("reduction"):
@@ -689,5 +774,65 @@ def harmonic_phi_span(stores, *, scene, reduction, statistic="max", **select_arg
     return m
 
 
+def improvement_share(stores, *, base: dict, partial: dict, full: dict, statistic="fraction", test=None) -> Measurement:
+    """Per cell, the share of the improvement from ``base`` to ``full`` that ``partial`` already
+    reaches, (partial − base) / (full − base) (three selections of nested families, aligned as
+    for :func:`gain`), over the cells where the improvement shows on a figure (``full`` and
+    ``base`` not equal to two significant digits, the shared rule "figure"); then ``statistic``
+    (e.g. the share of those cells where ``partial`` reaches more than half, "most of the
+    improvement")."""
+    [(sa, b, pa), (sp, p, pp), (sf, f, pf)], excluded, unpolished = _aligned_sides(stores, base, partial, full)
+    shows = ~np.asarray(_figure_equal(f, b)) & np.isfinite(np.asarray(f - b, dtype=np.float64))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = ((p - b) / (f - b)).where(shows)
+    value, where, _ = _collapse(share, statistic, test)
+    n_cells = int(np.asarray(np.isfinite(f - b)).sum())
+    m = Measurement(value=value, where=f"{where}; {int(shows.sum())} of {n_cells} cells show an improvement "
+                                       "(the others equal to two significant digits)",
+                    failed=_failures(f - b, excluded))
+    m.resolution = _sides_resolution((sa, pa), (sp, pp), (sf, pf))
+    m.error = "shares of differences of optima, each within its own resolution"
+    if unpolished:
+        m.coarse, m.coarse_value = "; ".join(dict.fromkeys(unpolished)) + ", an error we cannot bound", math.inf
+    return m
+
+
+def switched(stores, *, scene: str, quantity: str, at: dict, change: dict, absolute=True) -> Measurement:
+    """The factor by which one change of a motion's law reduces its value: the best |quantity|
+    of the grid store ``scene`` in the slice ``at`` (over every other dimension: the "efficient
+    motion" with the law ``at`` names), over |quantity| of the same grid point with the
+    dimensions of ``change`` set to their new values (e.g. ``opening_shape`` 3 → −3: the
+    opening stroke from concave up to concave down, all else the same). Grid values of the
+    stored field (solver-converged points only)."""
+    sd = scene_store(stores, scene)
+    if quantity not in sd.ds:
+        raise NotComputed(f"store {sd.name} has no quantity {quantity!r}")
+    da = sd.ds[quantity]
+    if "status" in sd.ds:
+        da = da.where(sd.ds["status"] == 0)
+    if absolute:
+        da = abs(da)
+    for d in change:
+        if d not in at:
+            raise NotComputed(f"the change of {axis_name(d)} needs its value before the change in 'at'")
+    before = _at(da, at)
+    v = np.asarray(before.values, dtype=np.float64)
+    if not np.isfinite(v).any():
+        return Measurement(value=math.nan, where="no valid value in the slice")
+    i = int(np.nanargmax(v))
+    best = before.isel(dict(zip(before.dims, np.unravel_index(i, before.shape))))
+    point = {d: float(best[d].values) for d in before.dims}
+    after = float(np.asarray(_at(da, {**at, **change, **point}).values))
+    m = Measurement(value=float(v.ravel()[i]) / after if after else math.inf,
+                    where=(f"best {float(v.ravel()[i]):.4g} at {_where(best)}; changed to "
+                           + ", ".join(f"{axis_name(d)} = {value_text(d, x)}" for d, x in change.items())
+                           + f": {after:.4g}"))
+    m.resolution = (_grid_text(sd, before.dims) + f" (grid values, no polish); solver rtol {sd.rtol:g}")
+    m.error = f"solver rtol {sd.rtol:g} of each value"
+    m.error_value = 2 * sd.rtol * abs(m.value) if math.isfinite(m.value) else math.nan
+    return m
+
+
 #: The reductions a claim may name (``compute = "<key>"``).
-COMPUTE = {"stat": stat, "gain": gain, "monotone": monotone, "harmonic_phi_span": harmonic_phi_span}
+COMPUTE = {"stat": stat, "gain": gain, "monotone": monotone, "harmonic_phi_span": harmonic_phi_span,
+           "improvement_share": improvement_share, "switched": switched}

@@ -59,9 +59,9 @@ def _dims_and_roles(doc: dict):
 
 
 def _sources(claim: Claim):
-    if claim.compute == "gain":
-        return [claim.args["numerator"], claim.args["denominator"]]
-    return [claim.args]
+    sides = [claim.args[k] for k in ("numerator", "denominator", "base", "partial", "full")
+             if isinstance(claim.args.get(k), dict)]
+    return sides or [claim.args]
 
 
 def test_registry_parses_with_enough_claims_on_every_results_section():
@@ -90,14 +90,17 @@ def test_registry_names_existing_scenes_reductions_roles_and_dimensions():
             elif "quantity" in src:
                 assert src["quantity"] in outputs, (c.id, src["quantity"])
             else:
-                assert src.get("role") in ("relative_efficiency", "scaled_period", "phi_max", "phi_min",
+                assert src.get("role") in ("relative_efficiency", "scaled_period", "phi_max", "phi_min", "amplitude",
                                            "distinct", "share_at_best", "second_share",
                                            "second_relative_efficiency"), c.id
             named = set(src.get("at", {})) | set(src.get("ranges", {})) | set(src.get("peak_over", []))
+            named |= set(src.get("exclude_ranges", {})) | set(src.get("change", {}))
             named |= {d for cell in src.get("cells", []) + src.get("exclude", []) for d in cell}
             for key in ("location", "location_along", "along"):
                 if key in src:
                     named.add(src[key])
+                elif key in c.args and src is not c.args:  # a monotone gain: its axis is in both sides
+                    named.add(c.args[key])
             assert named <= dims, (c.id, named - dims)
 
 
@@ -405,7 +408,7 @@ def _cause_scenes(cause) -> set:
     for table in tables:
         if "scene" in table:
             out.add(table["scene"])
-        for side in ("numerator", "denominator"):
+        for side in ("numerator", "denominator", "base", "partial", "full"):
             if isinstance(table.get(side), dict) and "scene" in table[side]:
                 out.add(table[side]["scene"])
     return out
@@ -438,6 +441,18 @@ def test_every_claim_states_the_basis_of_its_tolerance_by_a_shared_rule():
         head = c.basis.split(":")[0]
         rules = [w.strip() for w in head.split("+")]
         assert rules and all(r in RULES for r in rules), (c.id, c.basis)
+
+
+def test_a_claims_quote_is_the_papers_own_sentence():
+    """A claim that quotes the paper (``quote``, every claim of issue 33 item 5) quotes it
+    verbatim: found, whitespace aside, in the paper's source."""
+    if not PAPER.is_file():
+        pytest.skip(f"paper not found at {PAPER}")
+    paper = _norm(PAPER.read_text(encoding="utf-8"))
+    quoted = [c for c in load_claims() if c.quote]
+    assert len(quoted) >= 22
+    for c in quoted:
+        assert _norm(c.quote) in paper, (c.id, c.quote)
 
 
 @pytest.mark.parametrize("doc, match", [
@@ -801,3 +816,231 @@ def test_distinct_in_best_ten_counts_the_optima_the_papers_figures_draw():
     # 6 starts: both drawn; 15: the best alone covers ten; 12: 9 + 1 = ten, the third not drawn
     assert shown[:3].tolist() == [2.0, 1.0, 2.0] and np.isnan(shown[3])
     assert optima_role_array(sd, "distinct").values.ravel()[:3].tolist() == [2.0, 2.0, 3.0]
+
+
+# ---------------------------------------------------------------------------
+# The value functions of issue 33 item 5, each against brute force and with its negative control:
+# a synthetic store where the paper's statement is false gives "differs"
+# ---------------------------------------------------------------------------
+
+
+def _sets_store(gains, base=None):
+    """An 'exponent_sets'-like grid store: best_relative_efficiency (grid optima, not polished)
+    over (anisotropy_ratio, scaled_period, exponent_set); set 0 = ``base``, set 2 = base * gains,
+    set 1 half way (by ``gains``' own mid-point unless given as a (ratio, period, 3) array)."""
+    ratios, periods = np.array([0.015625, 1.0, 64.0]), np.array([0.125, 0.5, 2.0, 8.0])
+    if base is None:
+        base = np.full((3, 4), 0.1)
+    g = np.asarray(gains, dtype=np.float64)
+    if g.ndim == 3:
+        v = base[..., None] * g
+    else:
+        v = np.stack([base, base * (1 + g) / 2, base * g], axis=-1)
+    dims = ("anisotropy_ratio", "scaled_period", "exponent_set")
+    ds = xr.Dataset({"best_relative_efficiency": (dims, v)},
+                    coords={"anisotropy_ratio": ratios, "scaled_period": periods, "exponent_set": [0.0, 1.0, 2.0],
+                            "A0": np.linspace(0.02, 1.57, 5)})
+    red = {"name": "best_relative_efficiency", "quantity": "relative_efficiency", "statistic": "absmax",
+           "over": ["A0"]}
+    return {"sets": _store("sets", ds, [red])}
+
+
+def _trend_claim(**args):
+    a = {"along": "scaled_period", "tie": "figure",
+         "numerator": {"scene": "sets", "reduction": "best_relative_efficiency", "at": {"exponent_set": 2}},
+         "denominator": {"scene": "sets", "reduction": "best_relative_efficiency", "at": {"exponent_set": 0}}}
+    a.update(args)
+    return Claim(id="t", figure="EtaVsMinGamma", claim="c", paper_value="p", expect={"min": 1.0},
+                 compute="monotone", args=a, basis="trend + all: t")
+
+
+def test_monotone_of_a_gain_counts_figure_ties_and_fails_where_the_gain_falls():
+    """'The longer the period, the greater the improvement': the gain {1,3,10}/{1} along the
+    period axis; a fall within two significant digits is a tie (rule figure), a larger one is not."""
+    rising = np.array([[1.0, 1.2, 1.6, 2.0], [1.0, 1.003, 1.0, 1.004], [1.1, 1.3, 1.5, 1.9]])
+    stores = _sets_store(rising)
+    row = _row(_trend_claim(), stores)
+    assert row.verdict == "agrees" and row.measurement.value == 1.0, row.reason
+    # without the tie rule the 1.003 -> 1.0 step is a fall: 1 of 9 pairs
+    m = monotone(stores, along="scaled_period", numerator=_trend_claim().args["numerator"],
+                 denominator=_trend_claim().args["denominator"])
+    assert m.value == pytest.approx(8 / 9)
+    # negative control: the gain falls at the longest period at one ratio (1.6 -> 1.3, beyond two digits)
+    falling = rising.copy()
+    falling[0, 3] = 1.3
+    row = _row(_trend_claim(), _sets_store(falling))
+    assert row.verdict == "differs" and row.measurement.value == pytest.approx(8 / 9)
+    assert "1 of 9 pairs along scaled period go the other way" in row.measurement.where
+    assert "1.6 → 1.3" in row.measurement.where and "μn/μs = 2^-6" in row.measurement.where
+    # brute force: the share of non-falling pairs of the ratio array
+    v = falling
+    assert row.measurement.value == pytest.approx(np.mean(np.diff(v, axis=1) >= 0) + 1 / 9)
+
+
+def test_improvement_share_counts_cells_where_the_middle_family_reaches_most_of_the_gain():
+    base = np.full((3, 4), 0.1)
+    g = np.ones((3, 4, 3))
+    g[..., 2] = np.array([[1.0, 1.5, 2.0, 3.0], [1.0, 1.002, 1.5, 2.0], [1.2, 1.4, 1.8, 2.5]])
+    share = np.array([[0.0, 0.9, 0.7, 0.6], [0.0, 0.5, 0.2, 0.8], [0.9, 0.1, 0.55, 0.45]])
+    g[..., 1] = 1 + share * (g[..., 2] - 1)
+    stores = _sets_store(g, base)
+    args = {"statistic": "fraction", "test": {"min": 0.5},
+            **{k: {"scene": "sets", "reduction": "best_relative_efficiency", "at": {"exponent_set": s}}
+               for k, s in (("base", 0), ("partial", 1), ("full", 2))}}
+    claim = Claim(id="t", figure="EtaVsMinGamma", claim="c", paper_value="p", expect={"min": 0.5},
+                  compute="improvement_share", args=args, basis="most: t")
+    row = _row(claim, stores)
+    # brute force: the cells whose full gain shows to two significant digits (not 1.0, 1.002)
+    shows = ~np.isclose(g[..., 2], 1.0) & ~np.isclose(g[..., 2], 1.002)
+    expected = np.mean(share[shows] >= 0.5)
+    assert row.measurement.value == pytest.approx(expected) and shows.sum() == 9
+    assert row.verdict == "agrees" and "9 of 12 cells show an improvement" in row.measurement.where
+    # negative control: the cubic family reaches less than half of the gain in most cells
+    g2 = g.copy()
+    g2[..., 1] = 1 + 0.3 * (g[..., 2] - 1)
+    row = _row(claim, _sets_store(g2, base))
+    assert row.verdict == "differs" and row.measurement.value == 0.0
+
+
+def _power_store(dip_at=None):
+    """A 'harmonic_diagonals'-like quantity scaled_power over (anisotropy_ratio, A0, A1_ratio),
+    increasing in both; ``dip_at``: (A0 index from, A1_ratio index up to) where it falls along A0
+    (the body vertical)."""
+    a0, r = np.linspace(0.1, np.pi / 2, 24), np.linspace(0.05, 0.95, 10)
+    p = (a0[:, None] * (1 + r[None, :]))[None].repeat(2, axis=0)
+    if dip_at is not None:
+        i, j = dip_at
+        p[:, i:, :j] = p[:, i - 1:i, :j] * np.linspace(0.9, 0.5, a0.size - i)[None, :, None]
+    dims = ("anisotropy_ratio", "A0", "A1_ratio")
+    ds = xr.Dataset({"scaled_power": (dims, p), "status": (dims, np.zeros(p.shape, int))},
+                    coords={"anisotropy_ratio": [0.0625, 16.0], "A0": a0, "A1_ratio": r})
+    return {"harmonic_diagonals": _store("harmonic_diagonals", ds)}
+
+
+def test_monotone_except_a_region_holds_outside_it_and_the_exception_needs_a_fall_inside():
+    """'nearly monotonic …, except near A0 = π/2 at smaller A1/A0' (rule except): monotone on
+    every pair outside the region (exclude_ranges), and at least one fall inside it (ranges)."""
+    region = {"A0": [1.4399, 1.5708], "A1_ratio": [0.0, 0.5]}
+    base = {"scene": "harmonic_diagonals", "quantity": "scaled_power", "at": {"anisotropy_ratio": 0.0625},
+            "along": "A0", "dims": ["A0", "A1_ratio"], "slack": 2e-4}
+    away = Claim(id="a", figure="UPEtaDiag2", claim="c", paper_value="p", expect={"min": 1.0}, compute="monotone",
+                 args={**base, "exclude_ranges": region}, basis="except: t")
+    inside = Claim(id="i", figure="UPEtaDiag2", claim="c", paper_value="p", expect={"max": 0.999999},
+                   compute="monotone", args={**base, "ranges": region}, basis="except: t")
+    a0 = np.linspace(0.1, np.pi / 2, 24)
+    first = int(np.flatnonzero(a0 >= 1.4399)[0])
+    dipped = _power_store(dip_at=(first, 5))  # falls only inside the region (A1/A0 <= 0.45)
+    rows = evaluate_claims([away, inside], list(dipped.values()))
+    assert [r.verdict for r in rows] == ["agrees", "agrees"], [r.reason for r in rows]
+    masked = int(np.sum(a0 >= 1.4399)) * 5  # A1/A0 0.05 .. 0.45 of 10 values
+    assert rows[0].measurement.failed == (0, a0.size * 10 - masked)  # the masked cells are no failures
+    # negative controls: a power monotone everywhere has no exception ...
+    flat = evaluate_claims([away, inside], list(_power_store().values()))
+    assert [r.verdict for r in flat] == ["agrees", "differs"]
+    # ... and a fall reaching outside the region (from a smaller A0) is a difference
+    wide = evaluate_claims([away, inside], list(_power_store(dip_at=(first - 3, 8)).values()))
+    assert wide[0].verdict == "differs" and wide[0].measurement.value < 1
+    # brute force: the share of non-falling A0 pairs outside the region
+    sd = _power_store(dip_at=(first - 3, 8))["harmonic_diagonals"]
+    p = sd.ds["scaled_power"].values[0]
+    r = sd.ds["A1_ratio"].values
+    masked = np.where((a0[:, None] >= 1.4399) & (r[None, :] <= 0.5), np.nan, p)
+    st = np.diff(masked, axis=0)
+    ok = np.isfinite(st)
+    along_a0 = np.mean(st[ok] >= -2e-4 * np.maximum(abs(masked[1:]), abs(masked[:-1]))[ok])
+    assert wide[0].measurement.value == pytest.approx(along_a0)
+
+
+def test_spread_is_largest_minus_smallest_and_a_fluctuating_curve_is_not_flat(plane):
+    stores, value, signed, a0, ratios, periods = plane
+    m = stat(stores, scene="plane", reduction="best", role="A0", statistic="spread",
+             ranges={"anisotropy_ratio": [0.0, 0.1]})
+    low = a0[ratios <= 0.1]
+    assert m.value == pytest.approx(low.max() - low.min())
+    flat_a0 = np.full(a0.shape, 1.0)
+    flat_a0[ratios <= 0.1] += np.linspace(0, 0.1, flat_a0[ratios <= 0.1].size).reshape(flat_a0[ratios <= 0.1].shape)
+    flat_a0[ratios > 0.1] = np.random.default_rng(1).uniform(0, 1.5, flat_a0[ratios > 0.1].shape)
+    sd = stores["plane"]
+    for name in ("best_polished_A0", "best_A0"):
+        sd.ds[name] = (sd.ds[name].dims, flat_a0)
+    claim = Claim(id="t", figure="UEtaMax", claim="c", paper_value="p", expect={"max": 0.1571}, compute="stat",
+                  args={"scene": "plane", "reduction": "best", "role": "A0", "statistic": "spread",
+                        "ranges": {"anisotropy_ratio": [0.0, 0.1]}}, basis="flat: t")
+    assert _row(claim, stores).verdict == "agrees"
+    # negative control: the fluctuating part of the axis is not nearly flat
+    fluct = Claim(**{**claim.__dict__, "args": {**claim.args, "ranges": {"anisotropy_ratio": [0.2, 16.0]}}})
+    assert _row(fluct, stores).verdict == "differs"
+
+
+def _phi_store(name, amplitudes, p):
+    """An optima store whose best optimum per (ratio, Kmax) is φ = 0.8 + a sin 2πτ."""
+    tau = np.arange(64) / 64
+    amps = np.asarray(amplitudes, dtype=np.float64)  # (ratio, kmax)
+    phi = 0.8 + amps[:, :, None, None, None] * np.sin(2 * np.pi * tau)
+    phi = np.broadcast_to(phi, amps.shape + (1, 2, tau.size)).copy()
+    d4 = ("anisotropy_ratio", "max_wavenumber", "p", "rank")
+    shape = amps.shape + (1, 2)
+    ds = xr.Dataset({"optimum_relative_efficiency": (d4, -np.full(shape, 0.2)), "optimum_phi": (d4 + ("tau",), phi),
+                     "optimum_start": (d4, np.zeros(shape, int)), "optimum_scaled_period": (d4, np.ones(shape))},
+                    coords={"anisotropy_ratio": [0.0625, 1.0, 16.0], "max_wavenumber": [1, 3], "p": [p], "tau": tau})
+    return _store(name, ds, kind="optima", science={"optimizer": {"grid_rtol": 1e-4}, "starts": {"num": 4}})
+
+
+def test_amplitude_role_is_half_the_stroke_and_larger_amplitudes_can_fail():
+    from reports._claim_values import optima_role_array
+
+    small = np.array([[0.3, 0.4], [0.5, 0.2], [0.35, 0.45]])
+    sd = _phi_store("fourier_optima", small, 0.0)
+    amp = optima_role_array(sd, "amplitude").values[..., 0]
+    phi = sd.ds["optimum_phi"].values[:, :, 0, 0]
+    assert amp == pytest.approx((phi.max(-1) - phi.min(-1)) / 2) and amp == pytest.approx(small, rel=1e-2)
+    claim = Claim(id="t", figure="OptMotionsp0p5", claim="c", paper_value="p", expect={"min": 0.5}, compute="gain",
+                  args={"statistic": "fraction", "test": {"min": 1.000001},
+                        "numerator": {"scene": "force_laws", "role": "amplitude", "at": {"p": 0.5}},
+                        "denominator": {"scene": "fourier_optima", "role": "amplitude", "at": {"p": 0.0}}},
+                  basis="most: t")
+    larger = [sd, _phi_store("force_laws", small * 1.1, 0.5)]
+    assert evaluate_claims([claim], larger)[0].verdict == "agrees"
+    # negative control: smaller amplitudes with p = 0.5 in most cells
+    smaller = small * 0.9
+    smaller[0, 0] = 0.4
+    row = evaluate_claims([claim], [sd, _phi_store("force_laws", smaller, 0.5)])[0]
+    assert row.verdict == "differs" and row.measurement.value == pytest.approx(1 / 6)
+
+
+def _shapes_store(flip_factor):
+    """A 'power_law'-like field: scaled_efficiency over (anisotropy_ratio, closing_shape,
+    opening_shape, A0); the opening law 3 down gives the same motions ``flip_factor`` times
+    less efficient than 3 up. The global best lies elsewhere (opening 10 up), so the check
+    must take the best within its slice."""
+    rng = np.random.default_rng(4)
+    shapes = np.array([-10.0, -3.0, 1.0, 3.0, 10.0])
+    v = rng.uniform(0.5, 1.0, (2, 5, 5, 6))
+    v[:, :, 4, :] = 5.0  # opening 10 up: the global best
+    v[:, :, 1, :] = v[:, :, 3, :] / flip_factor
+    dims = ("anisotropy_ratio", "closing_shape", "opening_shape", "A0")
+    ds = xr.Dataset({"scaled_efficiency": (dims, -v), "status": (dims, np.zeros(v.shape, int))},
+                    coords={"anisotropy_ratio": [0.015625, 64.0], "closing_shape": shapes, "opening_shape": shapes,
+                            "A0": np.linspace(0.1, 1.5, 6)})
+    return {"power_law": _store("power_law", ds)}, v
+
+
+def test_switched_is_the_best_motions_value_over_that_with_its_law_changed():
+    claim = Claim(id="t", figure="OptAllParamsMotions", claim="c", paper_value="> 3", expect={"min": 3.0},
+                  compute="switched", basis="printed: t",
+                  args={"scene": "power_law", "quantity": "scaled_efficiency",
+                        "at": {"anisotropy_ratio": 0.015625, "closing_shape": -10.0, "opening_shape": 3.0},
+                        "change": {"opening_shape": -3.0}})
+    stores, v = _shapes_store(4.0)
+    row = _row(claim, stores)
+    best = v[0, 0, 3].max()  # closing 10 down, opening 3 up: best over A0
+    assert row.verdict == "agrees" and row.measurement.value == pytest.approx(best / (best / 4.0))
+    assert "opening law = -3" in row.measurement.where
+    # negative control: the change reduces the efficiency by less than a factor of 3
+    stores, v = _shapes_store(1.5)
+    row = _row(claim, stores)
+    assert row.verdict == "differs" and row.measurement.value == pytest.approx(1.5)
+    # a change of a law the slice does not fix is refused
+    bad = Claim(**{**claim.__dict__, "args": {**claim.args, "change": {"closing_shape": 3.0}}})
+    bad = Claim(**{**bad.__dict__, "args": {**bad.args, "at": {"anisotropy_ratio": 0.015625, "opening_shape": 3.0}}})
+    assert _row(bad, stores).verdict == "not run"
