@@ -214,10 +214,10 @@ def motion_figure(m: Motion, p: float = 0.0, n_snapshots: int = 8):
     """Body snapshots through one period with force arrows (top); u(tau), phi(tau) and the path
     over three periods (bottom)."""
     fig = subplots(rows=2, cols=3, row_heights=[0.45, 0.55], horizontal_spacing=0.08, vertical_spacing=0.16,
-                        specs=[[{"colspan": 3}, None, None], [{}, {}, {}]],
-                        subplot_titles=("body at eight instants of one period, side by side (arrows: horizontal "
-                                        "force per unit length f<sub>x</sub>(s))", "u(τ)", "φ(τ)",
-                                        "positions over three periods"))
+                   specs=[[{"colspan": 3}, None, None], [{}, {}, {}]],
+                   subplot_titles=("body at eight instants of one period, side by side (arrows: horizontal "
+                                   "force per unit length f<sub>x</sub>(s))", "u(τ)", "φ(τ)",
+                                   "positions over three periods"))
     s = (np.arange(N_ARROWS) + 0.5) / (2 * N_ARROWS)
     scale = _force_scale(m, s)
     gap = 1.3  # horizontal spacing of the snapshots [body lengths]; each also moved by its own x_cm

@@ -138,7 +138,7 @@ def phi_figure(sd, ip: int):
     colors = _ratio_colors(spec.positions)
     tau = np.append(ds["tau"].values, 1.0)
     fig = subplots(rows=1, cols=len(kmax), shared_yaxes=True, horizontal_spacing=0.03,
-                        subplot_titles=[f"K<sub>max</sub> = {int(k)}" for k in kmax])
+                   subplot_titles=[f"K<sub>max</sub> = {int(k)}" for k in kmax])
     for ik in range(len(kmax)):
         for ir, color in enumerate(colors):
             phi = sd.array("optimum_phi")[ir, ik, ip, 0]

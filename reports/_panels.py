@@ -289,8 +289,8 @@ def quantity_maps(sd, name: str):
             titles.append(text)
     nr, nc = len(ri), len(ci)
     fig = subplots(rows=nr, cols=nc, subplot_titles=titles if (fx or fy) else None, shared_xaxes=True,
-                        shared_yaxes=True, horizontal_spacing=0.04 if nc > 1 else 0.1,
-                        vertical_spacing=min(0.1, 0.3 / max(nr, 1)) if nr > 1 else 0.1)
+                   shared_yaxes=True, horizontal_spacing=0.04 if nc > 1 else 0.1,
+                   vertical_spacing=min(0.1, 0.3 / max(nr, 1)) if nr > 1 else 0.1)
     finite = v[np.isfinite(v)]
     if signed:
         vmax = float(np.max(np.abs(finite))) if finite.size else 1.0
@@ -523,7 +523,7 @@ def _curves(sd, red: dict, arrays: dict, xdim: str, line_dim: str | None, col_di
                 t += f"<br>{param_label(col_dim, sd.p)} = {format_value(col_dim, float(sd.ds[col_dim].values[j]))}"
             titles.append(t)
     fig = subplots(rows=len(roles), cols=len(cols), shared_xaxes=True, subplot_titles=titles,
-                        vertical_spacing=min(0.08, 0.5 / len(roles)), horizontal_spacing=0.05)
+                   vertical_spacing=min(0.08, 0.5 / len(roles)), horizontal_spacing=0.05)
     has_polished = "polished" in arrays
     dense = xs.values.size > MAX_MARKERS
     traces = []
@@ -621,7 +621,7 @@ def _reduction_maps(sd, red: dict, arrays: dict, xd: str, yd: str):
     nr = len(roles)
     vgap = min(0.1, 0.35 / max(nr - 1, 1)) if nr > 1 else 0.1
     fig = subplots(rows=nr, cols=len(kinds), shared_yaxes=True, shared_xaxes=True, horizontal_spacing=0.05,
-                        vertical_spacing=vgap, subplot_titles=titles)
+                   vertical_spacing=vgap, subplot_titles=titles)
     gx, gy = np.meshgrid(xs.values, ys.values)
     # A fine plane is drawn by blocks: each block shows its cell of largest maximum (smallest
     # for a "min" reduction) with that cell's arg-max and companions, never a mix of cells.

@@ -219,7 +219,7 @@ def work_precision_figure(sd, quantity: str):
     rows = -(-n // cols)
     names = [point_label(sd, i) for i in range(n)]
     fig = subplots(rows=rows, cols=cols, subplot_titles=names, horizontal_spacing=0.07,
-                        vertical_spacing=0.3 / rows)
+                   vertical_spacing=0.3 / rows)
     methods, rtols = _labels(sd, "method"), _v(sd, "rtol")
     orders = accuracy_orders(sd, quantity)
     for i in range(n):
@@ -313,7 +313,7 @@ def _sweep_maps(sd, j: int):
     titles = [f"{rn}: {what}" for rn in row_names for what in ("status", "log10(true error / rtol)",
                                                                 "log10(seconds)")]
     fig = subplots(rows=len(row_names), cols=3, subplot_titles=titles, horizontal_spacing=0.08,
-                        vertical_spacing=0.25 / len(row_names))
+                   vertical_spacing=0.25 / len(row_names))
     xlab = [_value_label(parameter, v) for v in xs]
     ylab = [motions_all[m] for m in motion_idx]
     n_codes = len(STATUS_COLORS)
