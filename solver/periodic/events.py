@@ -2,8 +2,7 @@
 
 Detection (``first_crossing``: sign changes of the switching functions across the step's
 start, stages and end; for p = 0 the body entering the friction's band, or leaving it by an
-exit function) and location on the collocation polynomial (``periodic.switching``'s
-locators), combined into the earliest event of a step by ``find_event``; stop placement
+exit function) and location on the collocation polynomial (``periodic.switching.illinois_root``), combined into the earliest event of a step by ``find_event``; stop placement
 ahead of a step (``stop_reach``: where the slipping body's line reaches the band); and the
 exit functions' memo (``held_exits``).
 """
@@ -15,10 +14,11 @@ import numpy as np
 from numba import njit
 
 from ..model.kinematics import angle_and_rate
-from .options import CROSSING_BAND, EVENT_BAND, EVENT_NOISE, SIGN_ROUNDING
+from .options import (CROSSING_BAND, EVENT_BAND, EVENT_NOISE, EVENT_ROOT_ITERATIONS, EVENT_ROOT_SHARE,
+                      SIGN_ROUNDING)
 from .radau import C1, C2, runtime_int
-from .switching import (Bracket, N_STATE_FUNCTIONS, STOP, TANGENTIAL, exit_functions, locate_exit,
-                        locate_state_event, rate_slope, state_function)
+from .switching import (EXIT_ROOT, STATE_ROOT, Bracket, N_STATE_FUNCTIONS, STOP, TANGENTIAL,
+                        exit_functions, illinois_root, rate_slope, state_function)
 
 
 @njit(cache=True, error_model="numpy")
@@ -145,6 +145,17 @@ def held_exits(code, params, t, side, phys, band, memo):
 
 
 @njit(cache=True, error_model="numpy")
+def _locate_state_event(k, code, params, step, bracket, band):
+    """Zero of state function ``k`` (with the friction's ``band``) along the collocation
+    polynomial of ``step`` (a ``SolvedStep``) in its ``Bracket`` of theta (0 <= a < b <= 1),
+    by ``periodic.switching.illinois_root`` to EVENT_ROOT_SHARE of the step.  Returns theta."""
+    sol = step.sol
+    return illinois_root(runtime_int(STATE_ROOT), k, code, params, step.t0 + 0.5 * step.h,
+                         (step.t0, step.h, step.u_n, sol.U1, sol.U2, sol.U3, band), bracket,
+                         EVENT_ROOT_SHARE, EVENT_ROOT_ITERATIONS)
+
+
+@njit(cache=True, error_model="numpy")
 def find_event(code, params, phys, step, atol, first_cut, memo):
     """theta in (0, 1] of the earliest event in a solved step (a ``SolvedStep``), or -1 where
     it holds none:
@@ -166,7 +177,7 @@ def find_event(code, params, phys, step, atol, first_cut, memo):
     theta = 2.0
     k, a, b, fa, fb = _first_crossing(step, atol, phys.dtau)
     if k >= 0:
-        theta = locate_state_event(k, code, params, step, Bracket(a, b, fa, fb), 0.0)
+        theta = _locate_state_event(k, code, params, step, Bracket(a, b, fa, fb), 0.0)
     band = EVENT_BAND * phys.dtau
     if phys.p == 0.0 and band > 0.0:
         g0 = state_function(runtime_int(TANGENTIAL), u_n, S0, om0, 0.0)
@@ -182,8 +193,8 @@ def find_event(code, params, phys, step, atol, first_cut, memo):
                     th_a, f_a, th_b, f_b = C1, abs(g1) - band, C2, abs(g2) - band
                 else:
                     th_b, f_b = C1, abs(g1) - band
-                stop = locate_state_event(runtime_int(STOP), code, params, step,
-                                          Bracket(th_a, th_b, f_a, f_b), band)
+                stop = _locate_state_event(runtime_int(STOP), code, params, step,
+                                           Bracket(th_a, th_b, f_a, f_b), band)
                 if first_cut:
                     phi, om = angle_and_rate(code, params, t0, t0 + 0.5 * h)
                     reach = stop_reach(phys, u_n, f0, band, math.sin(phi), math.cos(phi), om,
@@ -195,12 +206,17 @@ def find_event(code, params, phys, step, atol, first_cut, memo):
             side = t0 + 0.5 * h
             up0, down0 = held_exits(code, params, t0, side, phys, band, memo)
             up1, down1 = held_exits(code, params, t0 + h, side, phys, band, memo)
+            data = (phys.kappa, phys.mu_n, phys.mu_s, phys.p, phys.dtau, band, 0.0)
             if up0 <= 0.0 < up1:
-                theta = min(theta, (locate_exit(runtime_int(0), code, params,
-                                                Bracket(t0, t0 + h, up0, up1), side, phys,
-                                                band) - t0) / h)
+                theta = min(theta, (illinois_root(runtime_int(EXIT_ROOT), runtime_int(0), code,
+                                                  params, side, data,
+                                                  Bracket(t0, t0 + h, up0, up1),
+                                                  EVENT_ROOT_SHARE, EVENT_ROOT_ITERATIONS)
+                                    - t0) / h)
             if down0 <= 0.0 < down1:
-                theta = min(theta, (locate_exit(runtime_int(1), code, params,
-                                                Bracket(t0, t0 + h, down0, down1), side, phys,
-                                                band) - t0) / h)
+                theta = min(theta, (illinois_root(runtime_int(EXIT_ROOT), runtime_int(1), code,
+                                                  params, side, data,
+                                                  Bracket(t0, t0 + h, down0, down1),
+                                                  EVENT_ROOT_SHARE, EVENT_ROOT_ITERATIONS)
+                                    - t0) / h)
     return theta if theta <= 1.0 else -1.0

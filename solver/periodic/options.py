@@ -139,6 +139,16 @@ SIMPLE_SHARE = 0.5
 #: two stops closer than this are one
 STOP_GAP = 1e-12
 
+# ------------------------------------------ the root finder (``periodic.switching.illinois_root``)
+#: a kinematic stop is located to this share of tau (about two ulps: the stops are found once
+#: per point), in at most this many iterations
+KINEMATIC_ROOT_SHARE = 4e-16
+KINEMATIC_ROOT_ITERATIONS = 200
+#: a state event and a held body's exit are located to this share of their step (state
+#: events, theta in [0, 1]) or of tau (exits), in at most this many iterations
+EVENT_ROOT_SHARE = 1e-13
+EVENT_ROOT_ITERATIONS = 100
+
 # ------------------------------------ the global estimate's refinement (``periodic.global_error``)
 #: a refinement ceiling is at most this factor below its step (the next pass's own control
 #: and the trap caps may still shrink it further).  A share far above the tolerance says that
