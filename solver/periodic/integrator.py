@@ -39,7 +39,7 @@ from .estimators import weighted_error
 from .events import (END_D1, END_D2, END_D3, clear_exit_memo, find_event, new_exit_memo,
                      stop_reach, stop_reach_at)
 from .options import (ACCEPT_STEP, EVENT_BAND, EVENT_END_SHARE, EVENT_START_SHARE, FIT_DISTRUST,
-                      MAX_ATTEMPTS_PER_STEP, MAX_EVENT_CUTS, MIN_FACTOR, MIN_STEP, STRETCH)
+                      MAX_ATTEMPTS_PER_STEP, MAX_EVENT_CUTS, MIN_STEP, STRETCH)
 from .radau import C1, C2, dense_value, embedded_error, runtime_int
 from .record import (CORNER_STOP, KINEMATIC_STOP, ORDINARY, STATE_EVENT, close_period, end_kind,
                      grown, predicted_stages, record_step, recorded_error, recorded_kinematics,
@@ -140,7 +140,7 @@ def _model_at(model, t, k):
 
 
 @njit(cache=True, error_model="numpy")
-def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
+def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W, options):
     """Integrate one period from u(0) = u0 with step-size control; see the module docstring.
 
     Parameters
@@ -153,6 +153,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
         What the steps are judged by (target, norm, weight model, stage tolerance, step
         budget, events, sharp).
     W : workspace, grown as needed
+    options : EngineOptions (``periodic.options``): the controller's (``options.control``)
 
     Returns
     -------
@@ -160,6 +161,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
     """
     target, scale_u, scale_p, model = aim.target, aim.scale_u, aim.scale_p, aim.model
     atol, max_steps, events, sharp = aim.atol, aim.max_steps, aim.events, aim.sharp
+    control = options.control
     stops, stop_is_corner = point_stops.times, point_stops.is_corner
     stop_is_turning, n_stops = point_stops.is_turning, point_stops.count
     t = 0.0
@@ -285,8 +287,8 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
         if not fits:  # the defect's model does not fit: its error is not trusted as it is
             ratio *= FIT_DISTRUST
         if not ratio <= 1.0 and not (h <= ACCEPT_STEP and math.isfinite(ratio)):
-            h *= max(MIN_FACTOR, predict_factor(h, h_old, ratio, ratio_old)) \
-                if math.isfinite(ratio) else MIN_FACTOR
+            h *= max(control.min_factor, predict_factor(h, h_old, ratio, ratio_old, control)) \
+                if math.isfinite(ratio) else control.min_factor
             cuts = 0
             stretch = False
             continue
@@ -302,7 +304,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
         cuts = 0
         stretch = True
         # (never below ACCEPT_STEP: a step accepted there whatever its error would shrink on)
-        h_next = max(h * predict_factor(h, h_old, ratio, ratio_old), ACCEPT_STEP)
+        h_next = max(h * predict_factor(h, h_old, ratio, ratio_old, control), ACCEPT_STEP)
         h_old = h
         ratio_old = ratio
         t_new = t + h

@@ -6,12 +6,17 @@ The Radau IIA tableau (``periodic.radau``), the step record's layout (``periodic
 and the codes of stops, events and statuses keep their own modules; the tolerances that
 derive from rtol are in ``periodic.tolerances``.
 
-numba reads module globals as compile-time constants, so these are fixed when the kernels
-compile: changing one means editing it here (which also starts a fresh kernel cache,
-``solver._cache``), not passing it at run time.  ``engine_options()`` lists them, for
-provenance.
+numba reads module globals as compile-time constants, so most of these are fixed when the
+kernels compile: changing one means editing it here (which also starts a fresh kernel cache,
+``solver._cache``).  Those of the roles in ``EngineOptions`` (so far the step-size
+controller's) are passed through the kernels at run time instead: the constants here are
+their defaults, and ``solve_periodic(..., options=EngineOptions(...))`` changes them
+without recompiling (one compiled signature for every value).  ``engine_options()`` lists
+the constants, for provenance.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 
 def engine_options() -> dict:
@@ -205,3 +210,63 @@ IN_LINE_SHARE = 1e-9
 #: this many steps: it is a guess (bench, rtol 1e-4: 64 steps cost 18.7 ms per 2,000 points
 #: and the loose shooting 605 evaluations per solve, 8 steps 2.8 ms and 604, u = 0 571)
 GUESS_STEPS = 8
+
+
+# ------------------------------------------------------------------ options passed at run time
+class ControlOptions(NamedTuple):
+    """The step-size controller's settings (``periodic.control.predict_factor``): the factor
+    is multiplied by ``safety`` and clipped to [``min_factor``, ``max_factor``]; defaults
+    SAFETY, MIN_FACTOR, MAX_FACTOR (documented above)."""
+
+    safety: float = SAFETY
+    min_factor: float = MIN_FACTOR
+    max_factor: float = MAX_FACTOR
+
+
+class EngineOptions(NamedTuple):
+    """The engine's options passed through its kernels, by role (a numba NamedTuple of
+    NamedTuples of floats: every value compiles to one signature).  ``EngineOptions()`` is
+    the defaults; ``EngineOptions(control=ControlOptions(max_factor=2.0))`` changes one.
+    Checked and normalised by ``checked_options`` before the kernels see it."""
+
+    control: ControlOptions = ControlOptions()
+
+
+#: the defaults
+DEFAULT_OPTIONS = EngineOptions()
+
+#: each option's domain: (low, high, low included, high included)
+_DOMAINS = {
+    ("control", "safety"): (0.0, 1.0, False, True),
+    ("control", "min_factor"): (0.0, 1.0, False, True),
+    ("control", "max_factor"): (1.0, float("inf"), True, False),
+}
+
+
+def checked_options(options) -> EngineOptions:
+    """``options`` (an EngineOptions, or None for the defaults) with every field a float in
+    its domain, so that the kernels compile once for every value (an int field would be
+    another numba type, another compile).  Raises ValueError naming the option."""
+    if options is None:
+        return DEFAULT_OPTIONS
+    if not isinstance(options, EngineOptions):
+        raise ValueError(f"options: expected an EngineOptions, got {type(options).__name__}")
+    roles = {}
+    for role, group in zip(EngineOptions._fields, options):
+        default = getattr(DEFAULT_OPTIONS, role)
+        if not isinstance(group, type(default)):
+            raise ValueError(f"options.{role}: expected a {type(default).__name__}, "
+                             f"got {type(group).__name__}")
+        values = {}
+        for name, value in zip(group._fields, group):
+            try:
+                x = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"options.{role}.{name}: expected a number, got {value!r}") from None
+            lo, hi, lo_in, hi_in = _DOMAINS[(role, name)]
+            if not ((lo < x or (lo_in and x == lo)) and (x < hi or (hi_in and x == hi))):
+                raise ValueError(f"options.{role}.{name}: must lie in {'[' if lo_in else '('}{lo:g}, "
+                                 f"{hi:g}{']' if hi_in else ')'}, got {value!r}")
+            values[name] = x
+        roles[role] = type(default)(**values)
+    return EngineOptions(**roles)

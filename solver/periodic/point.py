@@ -49,7 +49,7 @@ from .estimators import estimate_pass, event_split_errors
 from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
 from .integrator import Stops, PassAim, WeightModel, adaptive_pass, frozen_pass
 from .options import (FIRST_STEP, MAX_LOOSE_PASSES, MAX_ROUNDS, MIN_STEP, RESIDUAL_WEIGHT,
-                      WARM_ATOL_SLACK)
+                      WARM_ATOL_SLACK, EngineOptions)
 from .radau import ERROR_ORDER
 from .record import (CORNER_STOP, end_kind, new_workspace, node_columns, node_weight,
                      set_step_span, set_step_start, stage_kinematics_into, step_span)
@@ -118,7 +118,8 @@ class PointProblem(NamedTuple):
     encoding ``code``, ``params`` (one row, ``model.kinematics``); ``phys`` (PointPhysics);
     ``stops`` (its kinematic ``Stops``); ``vscale`` = V; ``tols``, the ``Tolerances`` of
     rtol (``periodic.tolerances``); ``max_steps`` (steps per period before
-    STEP_BUDGET_EXCEEDED) and ``bound`` (u(0) is bracketed in +-bound)."""
+    STEP_BUDGET_EXCEEDED), ``bound`` (u(0) is bracketed in +-bound) and ``options``
+    (``periodic.options.EngineOptions``)."""
 
     code: int
     params: np.ndarray
@@ -128,6 +129,7 @@ class PointProblem(NamedTuple):
     tols: Tolerances
     max_steps: int
     bound: float
+    options: EngineOptions
 
 
 class RoundStart(NamedTuple):
@@ -246,7 +248,8 @@ def _rounds(problem, start, W, evals, passes, start_kind):
     for _ in range(MAX_ROUNDS):
         aim = PassAim(tols.target, scale_u, scale_p, model, atol, problem.max_steps,
                        True, True)
-        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, h_first, aim, W)
+        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, h_first, aim, W,
+                                    problem.options)
         W, N, status = period_pass.W, period_pass.N, period_pass.status
         passes += 1
         evals[COST_ADAPTIVE] += period_pass.evaluations
@@ -338,7 +341,8 @@ def _cold_start(problem, u_guess, W, evals):
     for _ in range(MAX_LOOSE_PASSES):
         aim = PassAim(tols.loose_target, vscale, math.inf, model,
                        stage_atol(loose, vscale, phys), problem.max_steps, True, False)
-        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, FIRST_STEP, aim, W)
+        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, FIRST_STEP, aim, W,
+                                    problem.options)
         W, N, status = period_pass.W, period_pass.N, period_pass.status
         passes += 1
         evals[COST_LOOSE] += period_pass.evaluations
@@ -388,7 +392,7 @@ def warm_start(W, orbit, problem):
 
 
 @njit(cache=True, error_model="numpy")
-def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit):
+def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit, options):
     """The periodic solution of one point; see the module docstring.
 
     Parameters
@@ -404,6 +408,8 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit)
     W : workspace (``periodic.record.new_workspace``); with a warm start it holds ``orbit``.
     orbit : Orbit
         A neighbour's converged orbit to start from (``no_orbit()``: start cold).
+    options : EngineOptions
+        The options passed through the kernels (``periodic.options.checked_options``).
 
     Returns
     -------
@@ -417,7 +423,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit)
         return W, PointSolution(0.0, 0.0, 0.0, NO_MOTION, 0, 0, 0.0, evals, vscale,
                                 START_COLD), no_orbit()
     problem = PointProblem(code, params, phys, point_stops, vscale, tolerances(rtol, vscale),
-                           max_steps, u0_bound(vscale, u_guess))
+                           max_steps, u0_bound(vscale, u_guess), options)
     verdict = START_COLD
     if orbit.N > 0:
         # warm: the rounds of steps 3-4 from the neighbour's orbit (``warm_start``)

@@ -1,0 +1,80 @@
+"""The engine's options passed at run time (``solve_periodic(..., options=EngineOptions(...))``,
+``periodic.options``; issue 37): the defaults give the same bits as no options, another
+value reaches the kernels (the steps change) on the same compiled kernels, and bad options
+are refused by name.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import solver
+from solver.periodic import driver
+from solver.tools.bench import draw_points, solution_error
+
+RTOL = 1e-4
+
+
+@pytest.fixture(scope="module")
+def points():
+    kin, phys, _ = draw_points(40, np.random.default_rng(3))
+    return kin, phys
+
+
+def _fields(res):
+    return [np.asarray(getattr(res, f)) for f in ("U", "P", "status", "error_estimate", "n_tau",
+                                                    "iterations", "force_evaluations")]
+
+
+def test_the_default_options_are_the_defaults_bit_for_bit(points):
+    kin, phys = points
+    none = solver.solve_periodic(kin, phys, rtol=RTOL)
+    given = solver.solve_periodic(kin, phys, rtol=RTOL, options=solver.EngineOptions())
+    for a, b in zip(_fields(none), _fields(given)):
+        assert np.array_equal(a, b, equal_nan=True)
+
+
+def test_another_controller_reaches_the_steps_on_the_same_kernels(points):
+    """A smaller largest step growth (max_factor 1.5, default 3) changes the step sequences
+    (so the option is read by the kernels, not the module constant), keeps the results
+    within 10 rtol of the default solve's (both judged by the same estimate), and compiles
+    nothing new: ``solve_lane`` keeps one signature for both values."""
+    kin, phys = points
+    default = solver.solve_periodic(kin, phys, rtol=RTOL)
+    slow = solver.solve_periodic(kin, phys, rtol=RTOL, options=solver.EngineOptions(
+        control=solver.ControlOptions(max_factor=1.5)))
+    assert default.converged.all() and slow.converged.all()
+    assert not np.array_equal(default.n_tau, slow.n_tau)
+    assert slow.force_evaluations.sum() > default.force_evaluations.sum()  # more steps
+    error = solution_error(slow.U, slow.P, default.U, default.P, phys.period,
+                           solver.kinematic_speed(kin))
+    assert np.nanmax(error) <= 10 * RTOL
+    # an int is normalised to a float: the same type, the same kernels
+    solver.solve_periodic(kin, phys, rtol=RTOL, options=solver.EngineOptions(
+        control=solver.ControlOptions(max_factor=2)))
+    assert len(driver.solve_lane.signatures) == 1
+
+
+@pytest.mark.parametrize("options,words", [
+    (solver.EngineOptions(control=solver.ControlOptions(max_factor=0.5)),
+     "options.control.max_factor: must lie in [1"),
+    (solver.EngineOptions(control=solver.ControlOptions(safety=0.0)),
+     "options.control.safety: must lie in (0"),
+    (solver.EngineOptions(control=solver.ControlOptions(min_factor="x")),
+     "options.control.min_factor: expected a number"),
+    (solver.EngineOptions(control=(0.9, 0.2, 3.0)), "options.control: expected a ControlOptions"),
+    ({"control": {}}, "options: expected an EngineOptions"),
+])
+def test_bad_options_are_refused_by_name(points, options, words):
+    kin, phys = points
+    with pytest.raises(ValueError) as info:
+        solver.solve_periodic(kin.take(np.arange(1)), phys.take(np.arange(1)), rtol=RTOL,
+                              options=options)
+    assert words in str(info.value), str(info.value)
+
+
+def test_options_are_for_the_periodic_engine_only(points):
+    kin, phys = points
+    with pytest.raises(ValueError, match="options: the engine's options are for method 'periodic'"):
+        solver.solve_periodic(kin.take(np.arange(1)), phys.take(np.arange(1)), rtol=RTOL,
+                              method="march", options=solver.EngineOptions())
