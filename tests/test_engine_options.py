@@ -78,3 +78,22 @@ def test_options_are_for_the_periodic_engine_only(points):
     with pytest.raises(ValueError, match="options: the engine's options are for method 'periodic'"):
         solver.solve_periodic(kin.take(np.arange(1)), phys.take(np.arange(1)), rtol=RTOL,
                               method="march", options=solver.EngineOptions())
+
+
+def test_a_point_option_reaches_the_solve(points):
+    """``PointOptions.first_step`` (default 1/16) starts the loose shooting: 1/4 changes the
+    loose passes' steps and so the evaluations, within 10 rtol of the default results; an
+    integral float is taken for an int option (max_rounds 4.0), a fraction is refused."""
+    kin, phys = points
+    default = solver.solve_periodic(kin, phys, rtol=RTOL)
+    other = solver.solve_periodic(kin, phys, rtol=RTOL, options=solver.EngineOptions(
+        point=solver.PointOptions(first_step=0.25, max_rounds=4.0)))
+    assert other.converged.all()
+    assert not np.array_equal(default.force_evaluations, other.force_evaluations)
+    error = solution_error(other.U, other.P, default.U, default.P, phys.period,
+                           solver.kinematic_speed(kin))
+    assert np.nanmax(error) <= 10 * RTOL
+    assert len(driver.solve_lane.signatures) == 1
+    with pytest.raises(ValueError, match="options.point.max_rounds: expected an integer"):
+        solver.periodic.checked_options(solver.EngineOptions(point=solver.PointOptions(
+            max_rounds=1.5)))

@@ -2,8 +2,9 @@
 
 Detection (``first_crossing``: sign changes of the switching functions across the step's
 start, stages and end; for p = 0 the body entering the friction's band, or leaving it by an
-exit function) and location on the collocation polynomial (``periodic.switching.illinois_root``), combined into the earliest event of a step by ``find_event``; stop placement
-ahead of a step (``stop_reach``: where the slipping body's line reaches the band); and the
+exit function) and location on the collocation polynomial (the root finder
+``periodic.switching.illinois_root``), combined into the earliest event of a step by
+``find_event``; stop placement ahead of a step (``stop_reach``: where the slipping body's line reaches the band); and the
 exit functions' memo (``held_exits``).
 """
 from __future__ import annotations
@@ -14,8 +15,8 @@ import numpy as np
 from numba import njit
 
 from ..model.kinematics import angle_and_rate
-from .options import (CROSSING_BAND, EVENT_BAND, EVENT_NOISE, EVENT_ROOT_ITERATIONS, EVENT_ROOT_SHARE,
-                      SIGN_ROUNDING)
+from .options import (CROSSING_BAND, EVENT_BAND, EVENT_NOISE, EVENT_ROOT_ITERATIONS,
+                      EVENT_ROOT_SHARE, SIGN_ROUNDING)
 from .radau import C1, C2, runtime_int
 from .switching import (EXIT_ROOT, STATE_ROOT, Bracket, N_STATE_FUNCTIONS, STOP, TANGENTIAL,
                         exit_functions, illinois_root, rate_slope, state_function)

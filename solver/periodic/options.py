@@ -9,10 +9,11 @@ derive from rtol are in ``periodic.tolerances``.
 numba reads module globals as compile-time constants, so most of these are fixed when the
 kernels compile: changing one means editing it here (which also starts a fresh kernel cache,
 ``solver._cache``).  Those of the roles in ``EngineOptions`` (so far the step-size
-controller's) are passed through the kernels at run time instead: the constants here are
-their defaults, and ``solve_periodic(..., options=EngineOptions(...))`` changes them
-without recompiling (one compiled signature for every value).  ``engine_options()`` lists
-the constants, for provenance.
+controller's, ``ControlOptions``, and one point's solve's, ``PointOptions``) are passed
+through the kernels at run time instead: the constants here are their defaults, and
+``solve_periodic(..., options=EngineOptions(...))`` changes them without recompiling (one
+compiled signature for every value).  ``engine_options()`` lists the constants, for
+provenance.
 """
 from __future__ import annotations
 
@@ -223,6 +224,20 @@ class ControlOptions(NamedTuple):
     max_factor: float = MAX_FACTOR
 
 
+class PointOptions(NamedTuple):
+    """One point's solve (``periodic.point``): at most ``max_loose_passes`` loose passes and
+    ``max_rounds`` rounds, a kept shooting residual counted ``residual_weight`` times, the
+    first pass's first step ``first_step``, and a warm start kept where its stage tolerance
+    is at most ``warm_atol_slack`` times the point's own; defaults MAX_LOOSE_PASSES,
+    MAX_ROUNDS, RESIDUAL_WEIGHT, FIRST_STEP, WARM_ATOL_SLACK (documented above)."""
+
+    max_loose_passes: int = MAX_LOOSE_PASSES
+    max_rounds: int = MAX_ROUNDS
+    residual_weight: float = RESIDUAL_WEIGHT
+    first_step: float = FIRST_STEP
+    warm_atol_slack: float = WARM_ATOL_SLACK
+
+
 class EngineOptions(NamedTuple):
     """The engine's options passed through its kernels, by role (a numba NamedTuple of
     NamedTuples of floats: every value compiles to one signature).  ``EngineOptions()`` is
@@ -230,23 +245,30 @@ class EngineOptions(NamedTuple):
     Checked and normalised by ``checked_options`` before the kernels see it."""
 
     control: ControlOptions = ControlOptions()
+    point: PointOptions = PointOptions()
 
 
 #: the defaults
 DEFAULT_OPTIONS = EngineOptions()
 
-#: each option's domain: (low, high, low included, high included)
+#: each option's type and domain: (type, low, high, low included, high included)
 _DOMAINS = {
-    ("control", "safety"): (0.0, 1.0, False, True),
-    ("control", "min_factor"): (0.0, 1.0, False, True),
-    ("control", "max_factor"): (1.0, float("inf"), True, False),
+    ("control", "safety"): (float, 0.0, 1.0, False, True),
+    ("control", "min_factor"): (float, 0.0, 1.0, False, True),
+    ("control", "max_factor"): (float, 1.0, float("inf"), True, False),
+    ("point", "max_loose_passes"): (int, 1, 10 ** 6, True, True),
+    ("point", "max_rounds"): (int, 1, 10 ** 6, True, True),
+    ("point", "residual_weight"): (float, 0.0, float("inf"), True, False),
+    ("point", "first_step"): (float, 0.0, 1.0, False, True),
+    ("point", "warm_atol_slack"): (float, 1.0, float("inf"), True, False),
 }
 
 
 def checked_options(options) -> EngineOptions:
-    """``options`` (an EngineOptions, or None for the defaults) with every field a float in
-    its domain, so that the kernels compile once for every value (an int field would be
-    another numba type, another compile).  Raises ValueError naming the option."""
+    """``options`` (an EngineOptions, or None for the defaults) with every field of its
+    type (float or int) and in its domain, so that the kernels compile once for every value
+    (an int where a float belongs would be another numba type, another compile).  Raises
+    ValueError naming the option."""
     if options is None:
         return DEFAULT_OPTIONS
     if not isinstance(options, EngineOptions):
@@ -259,14 +281,19 @@ def checked_options(options) -> EngineOptions:
                              f"got {type(group).__name__}")
         values = {}
         for name, value in zip(group._fields, group):
+            kind, lo, hi, lo_in, hi_in = _DOMAINS[(role, name)]
             try:
                 x = float(value)
-            except (TypeError, ValueError):
-                raise ValueError(f"options.{role}.{name}: expected a number, got {value!r}") from None
-            lo, hi, lo_in, hi_in = _DOMAINS[(role, name)]
+                if kind is int:
+                    if isinstance(value, bool) or x != int(x):
+                        raise ValueError
+                    x = int(x)
+            except (TypeError, ValueError, OverflowError):
+                what = "an integer" if kind is int else "a number"
+                raise ValueError(f"options.{role}.{name}: expected {what}, got {value!r}") from None
             if not ((lo < x or (lo_in and x == lo)) and (x < hi or (hi_in and x == hi))):
-                raise ValueError(f"options.{role}.{name}: must lie in {'[' if lo_in else '('}{lo:g}, "
-                                 f"{hi:g}{']' if hi_in else ')'}, got {value!r}")
+                span = f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
+                raise ValueError(f"options.{role}.{name}: must lie in {span}, got {value!r}")
             values[name] = x
         roles[role] = type(default)(**values)
     return EngineOptions(**roles)

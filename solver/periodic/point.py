@@ -48,8 +48,7 @@ from ..status import CONVERGED, NON_FINITE, NOT_PERIODIC, NO_MOTION, TOLERANCE_N
 from .estimators import estimate_pass, event_split_errors
 from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
 from .integrator import Stops, PassAim, WeightModel, adaptive_pass, frozen_pass
-from .options import (FIRST_STEP, MAX_LOOSE_PASSES, MAX_ROUNDS, MIN_STEP, RESIDUAL_WEIGHT,
-                      WARM_ATOL_SLACK, EngineOptions)
+from .options import MIN_STEP, EngineOptions
 from .radau import ERROR_ORDER
 from .record import (CORNER_STOP, end_kind, new_workspace, node_columns, node_weight,
                      set_step_span, set_step_start, stage_kinematics_into, step_span)
@@ -188,7 +187,8 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     where an event sits inside a step the step split there), the node weights, the global
     estimate, and the trap check of the steps next to turning points.  ``residual``: a
     shooting residual kept unshifted (``solve_point``'s frozen map that jumps over its
-    fixed point), counted RESIDUAL_WEIGHT times by its first-order effect."""
+    fixed point), counted ``options.point.residual_weight`` times (RESIDUAL_WEIGHT) by its
+    first-order effect."""
     code, params, phys = problem.code, problem.params, problem.phys
     corner_nodes = np.zeros(N, dtype=np.bool_)
     for n in range(N - 1):
@@ -204,8 +204,9 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     # a kept shooting residual g is a jump of u at node 0: it moves int u by lambda_0 g
     # and int Pi by mu_0 g to first order (the node weights' meaning), counted twice
     lam0, mu0 = node_weight(W, 0)
-    e_u += RESIDUAL_WEIGHT * abs(lam0 * residual)
-    e_p += RESIDUAL_WEIGHT * abs(mu0 * residual)
+    weight = problem.options.point.residual_weight
+    e_u += weight * abs(lam0 * residual)
+    e_p += weight * abs(mu0 * residual)
     estimate = combine(e_u, e_p, scale_u, scale_p)
     # the steps next to turning points judged again by the converged u (``trapped_steps``)
     trap_caps = np.full(N, math.inf)
@@ -234,8 +235,8 @@ def _refinement_model(W, N, judged, tols):
 
 @njit(cache=True, error_model="numpy")
 def _rounds(problem, start, W, evals, passes, start_kind):
-    """Steps 3-4 of the module docstring, at most MAX_ROUNDS times from ``start``
-    (RoundStart).  Returns (W, PointSolution)."""
+    """Steps 3-4 of the module docstring, at most ``options.point.max_rounds`` times from
+    ``start`` (RoundStart).  Returns (W, PointSolution)."""
     code, params, phys = problem.code, problem.params, problem.phys
     tols, vscale = problem.tols, problem.vscale
     rtol = tols.rtol
@@ -245,7 +246,7 @@ def _rounds(problem, start, W, evals, passes, start_kind):
     estimate = math.inf
     N = 0
     failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
-    for _ in range(MAX_ROUNDS):
+    for _ in range(problem.options.point.max_rounds):
         aim = PassAim(tols.target, scale_u, scale_p, model, atol, problem.max_steps,
                        True, True)
         period_pass = adaptive_pass(code, params, phys, problem.stops, u0, h_first, aim, W,
@@ -338,11 +339,11 @@ def _cold_start(problem, u_guess, W, evals):
     # 1e-3 V of U's norm would make it a thousand times too strict)
     lo, hi = -problem.bound, problem.bound
     scale_u = scale_p = 1.0
-    for _ in range(MAX_LOOSE_PASSES):
+    for _ in range(problem.options.point.max_loose_passes):
         aim = PassAim(tols.loose_target, vscale, math.inf, model,
                        stage_atol(loose, vscale, phys), problem.max_steps, True, False)
-        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, FIRST_STEP, aim, W,
-                                    problem.options)
+        period_pass = adaptive_pass(code, params, phys, problem.stops, u0,
+                                    problem.options.point.first_step, aim, W, problem.options)
         W, N, status = period_pass.W, period_pass.N, period_pass.status
         passes += 1
         evals[COST_LOOSE] += period_pass.evaluations
@@ -432,7 +433,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit,
         if sol.status == CONVERGED:
             own = _orbit_of(W, sol, problem)
             own_atol = target_stage_atol(rtol, own.scale_u, phys, own.largest_weight)
-            if start.atol <= WARM_ATOL_SLACK * own_atol:
+            if start.atol <= options.point.warm_atol_slack * own_atol:
                 return W, sol, own
             # the neighbour's norm and node weights set a stage tolerance too loose for this
             # point's (``_largest_weight``): the rounds again with the point's own
