@@ -220,8 +220,9 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         every point cold.
     options : EngineOptions, optional
         The engine's options passed at run time (``periodic`` only; ``periodic.options``:
-        so far the step-size controller's, ``ControlOptions``, and one point's solve's,
-        ``PointOptions``), e.g.
+        so far the step-size controller's, ``ControlOptions``, one point's solve's,
+        ``PointOptions``, the turning-point traps', ``TrapOptions``, and the kinematic
+        stops', ``StopOptions``), e.g.
         ``EngineOptions(control=ControlOptions(max_factor=2.0))``.  Default: the documented
         defaults.  Any values run on the same compiled kernels.
 

@@ -19,6 +19,9 @@ from solver.model.physics import PointPhysics
 from solver.tools.bench import solution_error
 from test_solver_methods import ORDER_CASES
 
+#: the kinematic stops' default options (``periodic.options.StopOptions``)
+STOPS = options.DEFAULT_OPTIONS.stops
+
 
 def _error(res, ref, kin, physics):
     """The first point's error of ``res`` against ``ref`` in the solver's norm (the quantity
@@ -154,7 +157,7 @@ def test_kinematic_stops_are_the_zeros_of_the_kinematic_functions():
     kin = solver.Fourier([[0.3, 1.1, 0.0, 0.2]], [[0.0, -0.1, 0.05]])
     code, params = kin.kernel_encoding()
     out = np.empty(switching.MAX_STOPS)
-    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out, STOPS)
     stops = out[:count]
     tau = np.linspace(0.0, 1.0, 200001)
     phi = kin.angle(tau)[0]
@@ -175,7 +178,7 @@ def test_a_corner_next_to_a_zero_stays_a_stop():
                           [True])
     code, params = kin.kernel_encoding()
     out = np.empty(switching.MAX_STOPS)
-    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out, STOPS)
     stops = out[:count]
     assert 0.5 in stops, stops
     near = stops[np.abs(stops - 0.5) <= options.STOP_GAP]
@@ -420,7 +423,7 @@ def test_a_near_tangency_on_a_sample_is_a_stop():
                          [[0.8814484713883943, 0.0, -0.29377653802312464, 0.0]])
     code, params = kin.kernel_encoding()
     stops = np.empty(switching.MAX_STOPS)
-    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops, STOPS)
     assert np.any(np.abs(stops[:count] - 0.5) < 1e-12), stops[:count]
 
 
@@ -500,7 +503,7 @@ def test_a_linear_phase_has_no_turning_stops():
                           [1.0], [False])
     code, params = kin.kernel_encoding()
     stops = np.empty(switching.MAX_STOPS)
-    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops, STOPS)
     assert list(stops[:count]) == [0.0, 0.3], stops[:count]
     physics = solver.Physics.from_scaled(2.0 ** -6, 0.125, p=0.0, delta=1e-5)
     ref = reference(kin, physics)
@@ -635,8 +638,8 @@ def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
     code, params = kin.kernel_encoding()
     row = params[0].copy()
     stops = np.empty(switching.MAX_STOPS)
-    n_stops, omax = switching.kinematic_stops(code, row, kin.corners()[0].copy(), stops)
-    turning = switching.turning_stops(code, row, stops, n_stops, omax)
+    n_stops, omax = switching.kinematic_stops(code, row, kin.corners()[0].copy(), stops, STOPS)
+    turning = switching.turning_stops(code, row, stops, n_stops, omax, STOPS)
     point_stops = integrator.Stops(stops, np.zeros(n_stops, dtype=np.bool_), turning, n_stops)
     j = int(np.argmin(abs(stops[:n_stops] - 0.025553882)))
     assert turning[j] == turning[j + 1] == switching.TURNING  # not simple: no TRAP_FLOOR
@@ -647,11 +650,13 @@ def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
     W[record.U, :N + 1] = 1e-2
     W[record.U, j] = -9e-8
     ceilings = np.full(N, np.inf)
-    count, _ = traps.trapped_steps(code, row, _point_physics(phys), point_stops, W, N, ceilings)
+    defaults = options.DEFAULT_OPTIONS.traps
+    count, _ = traps.trapped_steps(code, row, _point_physics(phys), point_stops, W, N, ceilings,
+                                   defaults)
     assert count >= 1
     h = W[record.T, j + 1] - W[record.T, j]
     cap = traps.trap_ceiling(code, row, _point_physics(phys), stops[j + 1], stops[j] + 0.5 * h,
-                             -9e-8)
+                             -9e-8, defaults)
     assert cap < 1e-8 and h > 1e-2
     assert ceilings[j] == h / options.TRAP_SPAN
     flagged = np.isfinite(ceilings)

@@ -97,3 +97,35 @@ def test_a_point_option_reaches_the_solve(points):
     with pytest.raises(ValueError, match="options.point.max_rounds: expected an integer"):
         solver.periodic.checked_options(solver.EngineOptions(point=solver.PointOptions(
             max_rounds=1.5)))
+
+
+def test_a_trap_option_reaches_the_steps_next_to_turning_points(points):
+    """``TrapOptions.share`` (default 0.1) caps the steps next to turning points of phi (the
+    bench's motions have them): a tenth of it adds steps there, within 10 rtol of the
+    default results, on the same kernels."""
+    kin, phys = points
+    default = solver.solve_periodic(kin, phys, rtol=RTOL)
+    tight = solver.solve_periodic(kin, phys, rtol=RTOL, options=solver.EngineOptions(
+        traps=solver.TrapOptions(share=0.01)))
+    assert tight.converged.all()
+    assert tight.n_tau.sum() > default.n_tau.sum()
+    error = solution_error(tight.U, tight.P, default.U, default.P, phys.period,
+                           solver.kinematic_speed(kin))
+    assert np.nanmax(error) <= 10 * RTOL
+    assert len(driver.solve_lane.signatures) == 1
+
+
+def test_a_stop_option_reaches_the_kinematic_stops(points):
+    """``StopOptions.tangency_share`` (default 0.1) decides which minima of |omega| are
+    near-tangencies (stops) and which stops are turning points: 0.3 makes more of both on
+    the bench's motions, so the steps change; results within 10 rtol of the default's."""
+    kin, phys = points
+    default = solver.solve_periodic(kin, phys, rtol=RTOL)
+    wide = solver.solve_periodic(kin, phys, rtol=RTOL, options=solver.EngineOptions(
+        stops=solver.StopOptions(tangency_share=0.3)))
+    assert wide.converged.all()
+    assert not np.array_equal(default.n_tau, wide.n_tau)
+    error = solution_error(wide.U, wide.P, default.U, default.P, phys.period,
+                           solver.kinematic_speed(kin))
+    assert np.nanmax(error) <= 10 * RTOL
+    assert len(driver.solve_lane.signatures) == 1

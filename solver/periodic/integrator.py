@@ -154,6 +154,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W, options)
         budget, events, sharp).
     W : workspace, grown as needed
     options : EngineOptions (``periodic.options``): the controller's (``options.control``)
+        and the traps' (``options.traps``)
 
     Returns
     -------
@@ -224,7 +225,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W, options)
                                   else -1)
         if turning >= 0.0:
             cap = trap_limit(code, params, phys, turning, j, stop_is_corner, stop_is_turning,
-                             t + 0.5 * h, u)
+                             t + 0.5 * h, u, options.traps)
             capped = trap_clip(h, cap)
             if capped < h:
                 h = capped

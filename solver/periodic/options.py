@@ -9,7 +9,8 @@ derive from rtol are in ``periodic.tolerances``.
 numba reads module globals as compile-time constants, so most of these are fixed when the
 kernels compile: changing one means editing it here (which also starts a fresh kernel cache,
 ``solver._cache``).  Those of the roles in ``EngineOptions`` (so far the step-size
-controller's, ``ControlOptions``, and one point's solve's, ``PointOptions``) are passed
+controller's, ``ControlOptions``, one point's solve's, ``PointOptions``, the
+turning-point traps', ``TrapOptions``, and the kinematic stops', ``StopOptions``) are passed
 through the kernels at run time instead: the constants here are their defaults, and
 ``solve_periodic(..., options=EngineOptions(...))`` changes them without recompiling (one
 compiled signature for every value).  ``engine_options()`` lists the constants, for
@@ -238,6 +239,36 @@ class PointOptions(NamedTuple):
     warm_atol_slack: float = WARM_ATOL_SLACK
 
 
+class TrapOptions(NamedTuple):
+    """The turning-point traps (``periodic.traps``): a step next to a turning point may
+    change u by friction at most ``share`` of u, never below ``floor`` at a simple one; a
+    converged step over ``slack`` times its ceiling is rejected, its new ceiling at least
+    the step over ``span``; defaults TRAP_SHARE, TRAP_FLOOR, TRAP_SLACK, TRAP_SPAN
+    (documented above)."""
+
+    share: float = TRAP_SHARE
+    floor: float = TRAP_FLOOR
+    slack: float = TRAP_SLACK
+    span: float = TRAP_SPAN
+
+
+class StopOptions(NamedTuple):
+    """The kinematic stops (``periodic.switching.kinematic_stops``, ``turning_stops``):
+    ``samples_per_wavenumber`` samples per wavenumber in the search for zeros, a minimum of
+    |omega| below ``tangency_share`` of max |omega| a near-tangency, a turning point simple
+    where |omega'| >= ``simple_share`` 2 pi max |omega|, stops closer than ``gap`` one, a
+    stop located to ``root_share`` of tau in at most ``root_iterations``; defaults
+    SAMPLES_PER_WAVENUMBER, TANGENCY_SHARE, SIMPLE_SHARE, STOP_GAP, KINEMATIC_ROOT_SHARE,
+    KINEMATIC_ROOT_ITERATIONS (documented above)."""
+
+    samples_per_wavenumber: int = SAMPLES_PER_WAVENUMBER
+    tangency_share: float = TANGENCY_SHARE
+    simple_share: float = SIMPLE_SHARE
+    gap: float = STOP_GAP
+    root_share: float = KINEMATIC_ROOT_SHARE
+    root_iterations: int = KINEMATIC_ROOT_ITERATIONS
+
+
 class EngineOptions(NamedTuple):
     """The engine's options passed through its kernels, by role (a numba NamedTuple of
     NamedTuples of floats: every value compiles to one signature).  ``EngineOptions()`` is
@@ -246,6 +277,8 @@ class EngineOptions(NamedTuple):
 
     control: ControlOptions = ControlOptions()
     point: PointOptions = PointOptions()
+    traps: TrapOptions = TrapOptions()
+    stops: StopOptions = StopOptions()
 
 
 #: the defaults
@@ -261,6 +294,16 @@ _DOMAINS = {
     ("point", "residual_weight"): (float, 0.0, float("inf"), True, False),
     ("point", "first_step"): (float, 0.0, 1.0, False, True),
     ("point", "warm_atol_slack"): (float, 1.0, float("inf"), True, False),
+    ("traps", "share"): (float, 0.0, float("inf"), False, False),
+    ("traps", "floor"): (float, 0.0, 1.0, True, True),
+    ("traps", "slack"): (float, 1.0, float("inf"), True, False),
+    ("traps", "span"): (float, 1.0, float("inf"), True, False),
+    ("stops", "samples_per_wavenumber"): (int, 4, 10 ** 5, True, True),
+    ("stops", "tangency_share"): (float, 0.0, 1.0, True, True),
+    ("stops", "simple_share"): (float, 0.0, float("inf"), True, False),
+    ("stops", "gap"): (float, 0.0, 1e-3, True, True),
+    ("stops", "root_share"): (float, 0.0, 1e-3, False, True),
+    ("stops", "root_iterations"): (int, 1, 10 ** 4, True, True),
 }
 
 

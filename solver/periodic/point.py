@@ -210,7 +210,8 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     estimate = combine(e_u, e_p, scale_u, scale_p)
     # the steps next to turning points judged again by the converged u (``trapped_steps``)
     trap_caps = np.full(N, math.inf)
-    trapped, e = trapped_steps(code, params, phys, problem.stops, W, N, trap_caps)
+    trapped, e = trapped_steps(code, params, phys, problem.stops, W, N, trap_caps,
+                               problem.options.traps)
     return Judged(int_u, int_p, scale_u, scale_p, estimate, shares, trap_caps, trapped,
                   evaluations + e)
 
@@ -309,17 +310,18 @@ def _rounds(problem, start, W, evals, passes, start_kind):
 
 
 @njit(cache=True, error_model="numpy")
-def _point_stops(code, params, corners):
-    """The point's kinematic ``Stops`` and V (``periodic.switching.stop_speed``)."""
+def _point_stops(code, params, corners, options):
+    """The point's kinematic ``Stops`` and V (``periodic.switching.stop_speed``);
+    ``options``: ``periodic.options.StopOptions``."""
     stops = np.empty(MAX_STOPS)
-    n_stops, omax = kinematic_stops(code, params, corners, stops)
+    n_stops, omax = kinematic_stops(code, params, corners, stops, options)
     vscale = stop_speed(code, params, stops, n_stops)
     stop_is_corner = np.zeros(n_stops, dtype=np.bool_)
     for j in range(n_stops):
         for c in corners:
             if stops[j] == c:
                 stop_is_corner[j] = True
-    stop_is_turning = turning_stops(code, params, stops, n_stops, omax)
+    stop_is_turning = turning_stops(code, params, stops, n_stops, omax, options)
     return Stops(stops, stop_is_corner, stop_is_turning, n_stops), vscale
 
 
@@ -418,7 +420,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit,
     orbit for the next point of a sweep (``no_orbit()`` unless CONVERGED).  Where phi is
     constant (V = 0) nothing is solved: status NO_MOTION, the integrals 0.
     """
-    point_stops, vscale = _point_stops(code, params, corners)
+    point_stops, vscale = _point_stops(code, params, corners, options.stops)
     evals = np.zeros(N_COSTS, dtype=np.int64)
     if vscale == 0.0:
         return W, PointSolution(0.0, 0.0, 0.0, NO_MOTION, 0, 0, 0.0, evals, vscale,

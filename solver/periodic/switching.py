@@ -34,8 +34,6 @@ from numba import njit
 
 from ..model.force import force_slope_power_sc
 from ..model.kinematics import FOURIER, angle_and_rate, rate_slope
-from .options import (KINEMATIC_ROOT_ITERATIONS, KINEMATIC_ROOT_SHARE, SAMPLES_PER_WAVENUMBER,
-                      SIMPLE_SHARE, STOP_GAP, TANGENCY_SHARE)
 from .radau import StageKinematics, StepSolution, dense_value, runtime_int
 
 #: ``turning_stops``' codes
@@ -157,17 +155,19 @@ def stop_speed(code, params, stops, n_stops):
 
 
 @njit(cache=True, error_model="numpy")
-def kinematic_stops(code, params, corners, out):
+def kinematic_stops(code, params, corners, out, options):
     """The step ends every pass of a point keeps: 0, the corners of phi, the zeros of sin phi,
-    cos phi and omega, and the near-tangencies (minima of |omega| below TANGENCY_SHARE of
-    its maximum).  Writes them sorted into ``out`` (0 first, all in [0, 1)); returns their
-    count and max |omega| over the samples (for ``turning_stops``).
+    cos phi and omega, and the near-tangencies (minima of |omega| below
+    ``options.tangency_share`` of its maximum).  Writes them sorted into ``out`` (0 first,
+    all in [0, 1)); returns their count and max |omega| over the samples (for
+    ``turning_stops``).  ``options``: ``periodic.options.StopOptions``.
 
     The phases between corners are searched separately (each side of a corner with its own
-    phi'), on SAMPLES_PER_WAVENUMBER K samples per period, K the Fourier wavenumber (the
-    power law's phases are monotone: 64 samples per phase)."""
+    phi'), on ``options.samples_per_wavenumber`` K samples per period, K the Fourier
+    wavenumber (the power law's phases are monotone: 64 samples per phase by default)."""
+    tangency = options.tangency_share
     K = max(int(params[0]), 1) if code == FOURIER else 1
-    n_samples = SAMPLES_PER_WAVENUMBER * K
+    n_samples = options.samples_per_wavenumber * K
     ends = np.empty(corners.size + 2)
     ends[0] = 0.0
     m = 1
@@ -211,12 +211,12 @@ def kinematic_stops(code, params, corners, out):
                 if f0 * f1 < 0.0 and count < out.size:
                     root = illinois_root(runtime_int(KINEMATIC_ROOT), k, code, params, side,
                                          (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
-                                         Bracket(t0, t1, f0, f1), KINEMATIC_ROOT_SHARE,
-                                         KINEMATIC_ROOT_ITERATIONS)
+                                         Bracket(t0, t1, f0, f1), options.root_share,
+                                         options.root_iterations)
                     keep = True
                     if k == 3:  # an extremum of omega: a stop only where |omega| is small
                         om = angle_and_rate(code, params, root, side)[1]
-                        keep = abs(om) < TANGENCY_SHARE * omax
+                        keep = abs(om) < tangency * omax
                     if keep:
                         out[count] = root
                         count += 1
@@ -231,7 +231,7 @@ def kinematic_stops(code, params, corners, out):
                     # (``test_a_linear_phase_has_no_turning_stops``)
                     if k < 3 or (values[j, k, i - 1] * values[j, k, i + 1] < 0.0
                                  and abs(angle_and_rate(code, params, t1, side)[1])
-                                 < TANGENCY_SHARE * omax):
+                                 < tangency * omax):
                         out[count] = t1
                         count += 1
                 t0, f0 = t1, f1
@@ -242,9 +242,9 @@ def kinematic_stops(code, params, corners, out):
     kept = 0
     for i in range(count):
         t = stops[i]
-        if t >= 1.0 - STOP_GAP or t < 0.0:
+        if t >= 1.0 - options.gap or t < 0.0:
             continue
-        if kept > 0 and t - out[kept - 1] <= STOP_GAP:
+        if kept > 0 and t - out[kept - 1] <= options.gap:
             if _is_corner(t, ends, m) and not _is_corner(out[kept - 1], ends, m):
                 out[kept - 1] = t
             continue
@@ -321,22 +321,24 @@ def illinois_root(kind, k, code, params, side, data, bracket, tol, max_iteration
 
 
 @njit(cache=True, error_model="numpy")
-def turning_stops(code, params, stops, n_stops, omax):
+def turning_stops(code, params, stops, n_stops, omax, options):
     """Which of the stops are turning points of phi, (n_stops,) int8: TURNING where |omega| on
-    one side of the stop is below TANGENCY_SHARE of ``omax``, max |omega|
+    one side of the stop is below ``options.tangency_share`` (``StopOptions``) of ``omax``, max |omega|
     (``kinematic_stops``' second output: the same threshold that keeps its near-tangencies;
     sampling it again on 1,025 points here had cost 26 us per solve): its zeros, the
     near-tangencies, flat inflections, and the power law's corners where a phase starts or
     ends with omega = 0; SIMPLE_TURNING where moreover |omega'| there is at least
-    SIMPLE_SHARE of 2 pi omax (a harmonic motion's turning points: omega' = 2 pi omax),
-    so that omega grows away from it like a simple zero (``periodic.traps.TRAP_FLOOR``); 0 else."""
+    ``options.simple_share`` of 2 pi omax (a harmonic motion's turning points: omega' =
+    2 pi omax), so that omega grows away from it like a simple zero
+    (``periodic.options.TrapOptions.floor``); 0 else."""
     out = np.zeros(n_stops, dtype=np.int8)
     for j in range(n_stops):
         t = stops[j]
         left = angle_and_rate(code, params, t, t - 1e-9 if t > 0.0 else 1.0 - 1e-9)[1]
         right = angle_and_rate(code, params, t, t + 1e-9)[1]
-        if min(abs(left), abs(right)) < TANGENCY_SHARE * omax:
+        if min(abs(left), abs(right)) < options.tangency_share * omax:
             out[j] = TURNING
-            if abs(rate_slope(code, params, t, t + 1e-9)) >= SIMPLE_SHARE * 2.0 * math.pi * omax:
+            if (abs(rate_slope(code, params, t, t + 1e-9))
+                    >= options.simple_share * 2.0 * math.pi * omax):
                 out[j] = SIMPLE_TURNING
     return out
