@@ -221,8 +221,9 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     options : EngineOptions, optional
         The engine's options passed at run time (``periodic`` only; ``periodic.options``:
         so far the step-size controller's, ``ControlOptions``, one point's solve's,
-        ``PointOptions``, the turning-point traps', ``TrapOptions``, and the kinematic
-        stops', ``StopOptions``), e.g.
+        ``PointOptions``, the turning-point traps', ``TrapOptions``, the kinematic stops',
+        ``StopOptions``, the state events', ``EventOptions``, and the step lengths',
+        ``StepOptions``), e.g.
         ``EngineOptions(control=ControlOptions(max_factor=2.0))``.  Default: the documented
         defaults.  Any values run on the same compiled kernels.
 

@@ -19,8 +19,9 @@ from solver.model.physics import PointPhysics
 from solver.tools.bench import solution_error
 from test_solver_methods import ORDER_CASES
 
-#: the kinematic stops' default options (``periodic.options.StopOptions``)
+#: the kinematic stops' and the state events' default options (``periodic.options``)
 STOPS = options.DEFAULT_OPTIONS.stops
+EVENTS = options.DEFAULT_OPTIONS.events
 
 
 def _error(res, ref, kin, physics):
@@ -136,13 +137,15 @@ def test_an_event_in_the_first_sixth_of_a_step_is_found():
     phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
     f0 = steps.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)[0]
     solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
-    theta = events.find_event(code, params, phys, solved, 1e-14, True, events.new_exit_memo())
+    theta = events.find_event(code, params, phys, solved, 1e-14, True, events.new_exit_memo(),
+                             EVENTS)
     assert abs(theta - 0.1) < 1e-2, theta
     h = theta * h
     kin3 = steps.stage_kinematics(code, params, t0, h)
     step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
     solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
-    cut = events.find_event(code, params, phys, solved, 1e-14, False, events.new_exit_memo())
+    cut = events.find_event(code, params, phys, solved, 1e-14, False, events.new_exit_memo(),
+                           EVENTS)
     true = (t_c - t0) / h
     assert abs(true - 1.0) < 0.05  # the cut step ends near the true crossing ...
     if cut > 0:                    # ... and any crossing left in it is located to 1e-6
@@ -325,7 +328,7 @@ def test_the_trap_clip_never_lengthens_a_step():
     accept = options.ACCEPT_STEP
     for h in (1e-14, 0.3 * accept, accept, 3.0 * accept, 1e-6, 0.1):
         for cap in (0.0, 1e-15, 0.5 * accept, 2.0 * accept, 1e-7, 1e-3, 1.0):
-            clipped = traps.trap_clip(h, cap)
+            clipped = traps.trap_clip(h, cap, options.ACCEPT_STEP)
             assert clipped <= h
             assert clipped >= min(h, accept)
             if accept <= cap < h:
@@ -485,7 +488,7 @@ def test_a_round_refines_a_step_at_most_max_refinement_times():
     target = 1e-4
     shares = np.array([0.5 * target * 0.25, 32.0 * target * 0.25, 3e291])
     ceilings = np.empty(3)
-    asked = refinement_ceiling(W, 3, shares, target, ceilings)
+    asked = refinement_ceiling(W, 3, shares, target, ceilings, options.DEFAULT_OPTIONS.steps)
     assert asked == 2
     assert ceilings[0] == math.inf
     assert ceilings[1] == pytest.approx(0.125, rel=1e-12)
@@ -652,7 +655,7 @@ def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
     ceilings = np.full(N, np.inf)
     defaults = options.DEFAULT_OPTIONS.traps
     count, _ = traps.trapped_steps(code, row, _point_physics(phys), point_stops, W, N, ceilings,
-                                   defaults)
+                                   defaults, options.ACCEPT_STEP)
     assert count >= 1
     h = W[record.T, j + 1] - W[record.T, j]
     cap = traps.trap_ceiling(code, row, _point_physics(phys), stops[j + 1], stops[j] + 0.5 * h,

@@ -129,3 +129,35 @@ def test_a_stop_option_reaches_the_kinematic_stops(points):
                            solver.kinematic_speed(kin))
     assert np.nanmax(error) <= 10 * RTOL
     assert len(driver.solve_lane.signatures) == 1
+
+
+def test_an_event_option_reaches_the_cuts(points):
+    """``EventOptions.max_cuts`` (default 4): 0 never cuts a step at a state event (each
+    is then judged by the error estimate inside its step), so the steps change; results
+    within 10 rtol of the default's, on the same kernels."""
+    kin, phys = points
+    default = solver.solve_periodic(kin, phys, rtol=RTOL)
+    uncut = solver.solve_periodic(kin, phys, rtol=RTOL, options=solver.EngineOptions(
+        events=solver.EventOptions(max_cuts=0)))
+    assert uncut.converged.all()
+    assert not np.array_equal(default.n_tau, uncut.n_tau)
+    error = solution_error(uncut.U, uncut.P, default.U, default.P, phys.period,
+                           solver.kinematic_speed(kin))
+    assert np.nanmax(error) <= 10 * RTOL
+    assert len(driver.solve_lane.signatures) == 1
+
+
+def test_a_step_option_reaches_the_pass(points):
+    """``StepOptions.stretch`` (default 1.25): 1 never stretches a proposed step to a stop
+    just past it, so the steps change; results within 10 rtol of the default's, on the same
+    kernels."""
+    kin, phys = points
+    default = solver.solve_periodic(kin, phys, rtol=RTOL)
+    unstretched = solver.solve_periodic(kin, phys, rtol=RTOL, options=solver.EngineOptions(
+        steps=solver.StepOptions(stretch=1.0)))
+    assert unstretched.converged.all()
+    assert not np.array_equal(default.n_tau, unstretched.n_tau)
+    error = solution_error(unstretched.U, unstretched.P, default.U, default.P, phys.period,
+                           solver.kinematic_speed(kin))
+    assert np.nanmax(error) <= 10 * RTOL
+    assert len(driver.solve_lane.signatures) == 1

@@ -10,7 +10,8 @@ numba reads module globals as compile-time constants, so most of these are fixed
 kernels compile: changing one means editing it here (which also starts a fresh kernel cache,
 ``solver._cache``).  Those of the roles in ``EngineOptions`` (so far the step-size
 controller's, ``ControlOptions``, one point's solve's, ``PointOptions``, the
-turning-point traps', ``TrapOptions``, and the kinematic stops', ``StopOptions``) are passed
+turning-point traps', ``TrapOptions``, the kinematic stops', ``StopOptions``, the state
+events', ``EventOptions``, and the step lengths', ``StepOptions``) are passed
 through the kernels at run time instead: the constants here are their defaults, and
 ``solve_periodic(..., options=EngineOptions(...))`` changes them without recompiling (one
 compiled signature for every value).  ``engine_options()`` lists the constants, for
@@ -269,6 +270,48 @@ class StopOptions(NamedTuple):
     root_iterations: int = KINEMATIC_ROOT_ITERATIONS
 
 
+class EventOptions(NamedTuple):
+    """State events (``periodic.events``, the integrator's cuts, ``periodic.estimators``'
+    splits): a located event within ``end_share`` of its step of the step's end is on it,
+    within ``start_share`` of the previous step of the start not cut; switching functions
+    within ``sign_rounding`` of their terms have no sign, nor within ``noise`` stage
+    tolerances; a sign change is an event beyond ``crossing_band`` delta_tau; the friction's
+    band is ``band`` delta_tau; at most ``max_cuts`` cuts in a row; an event within
+    ``split_share`` of a recorded step's end is on it; located to ``root_share`` of the step
+    in at most ``root_iterations``.  Defaults EVENT_END_SHARE, EVENT_START_SHARE,
+    SIGN_ROUNDING, EVENT_NOISE, CROSSING_BAND, EVENT_BAND, MAX_EVENT_CUTS, SPLIT_SHARE,
+    EVENT_ROOT_SHARE, EVENT_ROOT_ITERATIONS (documented above)."""
+
+    end_share: float = EVENT_END_SHARE
+    start_share: float = EVENT_START_SHARE
+    sign_rounding: float = SIGN_ROUNDING
+    noise: float = EVENT_NOISE
+    crossing_band: float = CROSSING_BAND
+    band: float = EVENT_BAND
+    max_cuts: int = MAX_EVENT_CUTS
+    split_share: float = SPLIT_SHARE
+    root_share: float = EVENT_ROOT_SHARE
+    root_iterations: int = EVENT_ROOT_ITERATIONS
+
+
+class StepOptions(NamedTuple):
+    """Step lengths in a pass (``periodic.integrator``, ``periodic.traps``,
+    ``periodic.global_error``, ``periodic.point``): below ``min_step`` a pass fails, a step
+    of ``accept_step`` or less is accepted whatever its error, a step whose defect model
+    does not fit is judged by ``fit_distrust`` times its estimate, a step is stretched to a
+    stop within ``stretch`` of it, a pass gives up after ``max_attempts_per_step`` attempts
+    per accepted step (+ 16), a refinement ceiling is at most ``max_refinement`` below its
+    step; defaults MIN_STEP, ACCEPT_STEP, FIT_DISTRUST, STRETCH, MAX_ATTEMPTS_PER_STEP,
+    MAX_REFINEMENT (documented above)."""
+
+    min_step: float = MIN_STEP
+    accept_step: float = ACCEPT_STEP
+    fit_distrust: float = FIT_DISTRUST
+    stretch: float = STRETCH
+    max_attempts_per_step: int = MAX_ATTEMPTS_PER_STEP
+    max_refinement: float = MAX_REFINEMENT
+
+
 class EngineOptions(NamedTuple):
     """The engine's options passed through its kernels, by role (a numba NamedTuple of
     NamedTuples of floats: every value compiles to one signature).  ``EngineOptions()`` is
@@ -279,6 +322,8 @@ class EngineOptions(NamedTuple):
     point: PointOptions = PointOptions()
     traps: TrapOptions = TrapOptions()
     stops: StopOptions = StopOptions()
+    events: EventOptions = EventOptions()
+    steps: StepOptions = StepOptions()
 
 
 #: the defaults
@@ -304,6 +349,22 @@ _DOMAINS = {
     ("stops", "gap"): (float, 0.0, 1e-3, True, True),
     ("stops", "root_share"): (float, 0.0, 1e-3, False, True),
     ("stops", "root_iterations"): (int, 1, 10 ** 4, True, True),
+    ("events", "end_share"): (float, 0.0, 0.5, True, False),
+    ("events", "start_share"): (float, 0.0, 0.5, True, False),
+    ("events", "sign_rounding"): (float, 0.0, 1e-3, True, True),
+    ("events", "noise"): (float, 0.0, float("inf"), True, False),
+    ("events", "crossing_band"): (float, 0.0, float("inf"), True, False),
+    ("events", "band"): (float, 0.0, float("inf"), True, False),
+    ("events", "max_cuts"): (int, 0, 10 ** 4, True, True),
+    ("events", "split_share"): (float, 0.0, 0.5, True, False),
+    ("events", "root_share"): (float, 0.0, 1e-3, False, True),
+    ("events", "root_iterations"): (int, 1, 10 ** 4, True, True),
+    ("steps", "min_step"): (float, 0.0, 1e-3, False, True),
+    ("steps", "accept_step"): (float, 0.0, 1e-3, False, True),
+    ("steps", "fit_distrust"): (float, 1.0, float("inf"), True, False),
+    ("steps", "stretch"): (float, 1.0, 2.0, True, True),
+    ("steps", "max_attempts_per_step"): (int, 1, 10 ** 6, True, True),
+    ("steps", "max_refinement"): (float, 1.0, float("inf"), False, False),
 }
 
 

@@ -48,7 +48,7 @@ from ..status import CONVERGED, NON_FINITE, NOT_PERIODIC, NO_MOTION, TOLERANCE_N
 from .estimators import estimate_pass, event_split_errors
 from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
 from .integrator import Stops, PassAim, WeightModel, adaptive_pass, frozen_pass
-from .options import MIN_STEP, EngineOptions
+from .options import EngineOptions
 from .radau import ERROR_ORDER
 from .record import (CORNER_STOP, end_kind, new_workspace, node_columns, node_weight,
                      set_step_span, set_step_start, stage_kinematics_into, step_span)
@@ -195,7 +195,8 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
         corner_nodes[n + 1] = end_kind(W, n) == CORNER_STOP
     evaluations = estimate_pass(code, params, phys, corner_nodes, atol, W, N)[1]
     split = np.zeros(N, dtype=np.bool_)
-    evaluations += event_split_errors(code, params, phys, atol, W, N, split)[1]
+    evaluations += event_split_errors(code, params, phys, atol, W, N, split,
+                                      problem.options.events)[1]
     node_weights(W, N, one_minus_M)
     int_u, int_p = period_integrals(W, N)
     scale_u, scale_p = norm_scales(int_u, int_p, problem.vscale)
@@ -211,20 +212,20 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     # the steps next to turning points judged again by the converged u (``trapped_steps``)
     trap_caps = np.full(N, math.inf)
     trapped, e = trapped_steps(code, params, phys, problem.stops, W, N, trap_caps,
-                               problem.options.traps)
+                               problem.options.traps, problem.options.steps.accept_step)
     return Judged(int_u, int_p, scale_u, scale_p, estimate, shares, trap_caps, trapped,
                   evaluations + e)
 
 
 @njit(cache=True, error_model="numpy")
-def _refinement_model(W, N, judged, tols):
+def _refinement_model(W, N, judged, tols, steps):
     """The weight model of the next round: the converged pass's node weights, and ceilings
     on the steps that asked for refinement (or all steps shrunk evenly where none asked
-    alone) and on the trapped ones."""
+    alone) and on the trapped ones; ``steps``: the ``StepOptions``."""
     rtol = tols.rtol
     ceilings = np.full(N, math.inf)
     if judged.estimate > rtol:
-        asked = refinement_ceiling(W, N, judged.shares, tols.target, ceilings)
+        asked = refinement_ceiling(W, N, judged.shares, tols.target, ceilings, steps)
         if asked == 0:
             shrink = 0.9 * (rtol / judged.estimate) ** (1.0 / ERROR_ORDER)
             for n in range(N):
@@ -303,7 +304,7 @@ def _rounds(problem, start, W, evals, passes, start_kind):
             return W, PointSolution(judged.int_u, judged.int_p, u0, CONVERGED, N, passes,
                                     estimate, evals, vscale, start_kind)
         failure = TOLERANCE_NOT_REACHED
-        model = _refinement_model(W, N, judged, tols)
+        model = _refinement_model(W, N, judged, tols, problem.options.steps)
         h_first = min(h_first, step_span(W, 0)[1])
     return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals, vscale,
                             start_kind)
@@ -365,7 +366,8 @@ def _cold_start(problem, u_guess, W, evals):
             break
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
     atol = target_stage_atol(rtol, scale_u, phys, _largest_weight(model, scale_u, scale_p))
-    h_first = max((step_span(W, 0)[1]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
+    h_first = max((step_span(W, 0)[1]) * (rtol / loose) ** (1.0 / ERROR_ORDER),
+                  64.0 * problem.options.steps.min_step)
     return W, RoundStart(u0, h_first, model, atol, scale_u, scale_p), CONVERGED, N, passes
 
 

@@ -11,7 +11,6 @@ import math
 
 from numba import njit
 
-from .options import ACCEPT_STEP
 from .record import node_time, node_value, step_span
 from .steps import start_values
 from .switching import SIMPLE_TURNING
@@ -62,16 +61,17 @@ def trap_limit(code, params, phys, turning, i, stop_is_corner, stop_is_turning, 
 
 
 @njit(cache=True, error_model="numpy")
-def trap_clip(h, cap):
+def trap_clip(h, cap, accept_step):
     """The proposed step h clipped to a turning point's trap ceiling ``cap``: at least
-    ACCEPT_STEP, but never longer than h.  (Clipped to max(cap, ACCEPT_STEP) instead, a step
-    4e-12 short of a power law's corner was taken 1.5e-11 long, across the corner, with its
-    stages on the other side's formula; and steps below ACCEPT_STEP were lengthened.)"""
-    return min(h, max(cap, ACCEPT_STEP))
+    ``accept_step`` (``StepOptions``, ACCEPT_STEP), but never longer than h.  (Clipped to
+    max(cap, ACCEPT_STEP) instead, a step 4e-12 short of a power law's corner was taken
+    1.5e-11 long, across the corner, with its stages on the other side's formula; and steps
+    below ACCEPT_STEP were lengthened.)"""
+    return min(h, max(cap, accept_step))
 
 
 @njit(cache=True, error_model="numpy")
-def trapped_steps(code, params, phys, point_stops, W, N, ceilings, traps):
+def trapped_steps(code, params, phys, point_stops, W, N, ceilings, traps, accept_step):
     """The ``trap_ceiling`` of ``adaptive_pass`` checked again on the converged solution of
     ``W``: the pass judged the steps next to a turning point by its own u, and the frozen
     Newton can move u there into the friction's band, where the ceiling is far smaller.  A
@@ -104,7 +104,7 @@ def trapped_steps(code, params, phys, point_stops, W, N, ceilings, traps):
         if turning < 0.0 or stop_is_corner[i]:
             continue
         cap = max(trap_limit(code, params, phys, turning, i, stop_is_corner, stop_is_turning,
-                             t + 0.5 * h, node_value(W, n), traps), ACCEPT_STEP)
+                             t + 0.5 * h, node_value(W, n), traps), accept_step)
         evaluations += 1
         if h > traps.slack * cap:
             ceilings[n] = min(ceilings[n], max(cap, h / traps.span))
