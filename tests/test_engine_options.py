@@ -161,3 +161,39 @@ def test_a_step_option_reaches_the_pass(points):
                            solver.kinematic_speed(kin))
     assert np.nanmax(error) <= 10 * RTOL
     assert len(driver.solve_lane.signatures) == 1
+
+
+def _option_constants() -> set[str]:
+    """The module constants of ``periodic/options.py`` that are an EngineOptions field's
+    default (``name: type = CONSTANT`` in a role's NamedTuple)."""
+    import ast
+    from pathlib import Path
+
+    tree = ast.parse((Path(solver.__file__).parent / "periodic" / "options.py").read_text())
+    return {node.value.id for cls in tree.body if isinstance(cls, ast.ClassDef)
+            for node in cls.body if isinstance(node, ast.AnnAssign)
+            and isinstance(node.value, ast.Name)}
+
+
+def _imported_from_options(source: str) -> set[str]:
+    import ast
+
+    return {a.name for node in ast.walk(ast.parse(source)) if isinstance(node, ast.ImportFrom)
+            and node.module == "options" and node.level == 1 for a in node.names}
+
+
+def test_no_kernel_reads_a_run_time_option_as_a_global():
+    """A constant that is an EngineOptions default must reach the kernels through the
+    options only: no engine module but ``options`` imports it (it would be frozen at
+    compile time, and a caller's value silently ignored)."""
+    from pathlib import Path
+
+    passed = _option_constants()
+    assert {"MAX_FACTOR", "TRAP_SHARE", "EVENT_BAND", "MIN_STEP", "TANGENCY_SHARE"} <= passed
+    folder = Path(solver.__file__).parent / "periodic"
+    leaks = {p.stem: _imported_from_options(p.read_text()) & passed
+             for p in folder.glob("*.py") if p.stem != "options"}
+    assert {k: v for k, v in leaks.items() if v} == {}
+    # negative control: the controller's import before the options were passed through
+    old = "from .options import MAX_FACTOR, MIN_FACTOR, SAFETY\n"
+    assert _imported_from_options(old) & passed == {"MAX_FACTOR", "MIN_FACTOR", "SAFETY"}
