@@ -1,4 +1,4 @@
-"""Sweep pipeline: scenes (TOML) fanned out with dask into resumable Zarr stores, with reductions.
+"""The pipeline: scenes (TOML) fanned out with dask into resumable Zarr stores, with reductions.
 
 Public API::
 

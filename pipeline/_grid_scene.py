@@ -5,7 +5,7 @@ A grid scene sweeps a family's parameters over the axes of a grid (:class:`Scene
 solver's quantities and diagnostics at every point, u(tau) at a few points (:class:`Series`) and
 reductions of the stored grid (:class:`Reduction`, optionally over :class:`Subsets`).  What every
 kind shares (errors, value checks, axes, hashing) is ``_scene``; the chunk layout and the solves
-are ``_grid``, the chunk task and steps ``_sweep``, the reductions ``_reduce``.
+are ``_grid``, the chunk task and steps ``_grid_kind``, the reductions ``_reduce``.
 
 Every error is a :class:`~pipeline._scene.SceneError` whose message names the file, the key and
 the reason, on one line.

@@ -12,7 +12,7 @@ from ._kind import SceneKind
 from ._optima import OPTIMA
 from ._scene import ParseContext, read_scene_file, read_toml
 from ._study import STUDY
-from ._sweep import GRID
+from ._grid_kind import GRID
 
 __all__ = ["KINDS", "kind_of", "load_scene", "parse_scene"]
 

@@ -5,7 +5,7 @@ task, ``pipeline_state/chunk_done`` markers, the ``pipeline`` attributes written
 only; ``pipeline.kind`` names the study kind)::
 
     point, method, rtol [, n_steps, baseline_tol]       coordinates (method: labels in attrs)
-    motion, sweep, sweep_value, <parameters>, period,   per point, written with the skeleton
+    motion, scan, scan_value, <parameters>, period,     per point, written with the skeleton
       kinematic_speed, phi_min, phi_max
     U_ref, P_ref, ref_*, check_*                       (point,) fine reference and its cross-check
     status, U, P, error_estimate, iterations, n_tau,   (point, method, rtol) one timed solve each
@@ -165,9 +165,9 @@ def point_parameters(scene: StudyScene) -> dict[str, tuple[np.ndarray, dict]]:
     return {
         "motion": (np.array([p.motion for p in pts], dtype=np.int32),
                    {"long_name": "motion (case) index", "labels": [m.name for m in scene.motions]}),
-        "sweep": (np.array([p.sweep for p in pts], dtype=np.int32),
-                  {"long_name": "sweep index (-1: none)", "labels": [s.parameter for s in scene.sweeps]}),
-        "sweep_value": (np.array([p.sweep_value for p in pts]), {"long_name": "value of the swept parameter"}),
+        "scan": (np.array([p.scan for p in pts], dtype=np.int32),
+                 {"long_name": "scan index (-1: none)", "labels": [s.parameter for s in scene.scans]}),
+        "scan_value": (np.array([p.scan_value for p in pts]), {"long_name": "value of the scanned parameter"}),
         "family": (np.array([families.index(p.case.family) for p in pts], dtype=np.int32),
                    {"long_name": "kinematic family", "labels": families}),
         "anisotropy_ratio": (np.array([p.case.anisotropy_ratio for p in pts]), {"long_name": "mu_n/mu_s"}),

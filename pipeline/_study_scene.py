@@ -6,7 +6,7 @@ physics each), solved by every method at every tolerance and compared with a fin
 * ``accuracy`` (work-precision): the points are the ``[[cases]]``; every method is also run on
   fixed grids (observed order) and harmonic cases also by the scipy LSODA baseline of
   ``solver.tools.bench``;
-* ``stiffness``: the points are every ``[[motions]]`` entry crossed with every ``[[sweeps]]``
+* ``stiffness``: the points are every ``[[motions]]`` entry crossed with every ``[[scans]]``
   entry (one parameter varied at a time from the ``[base]`` physics); a method that fails may
   be replaced by another method's converged answer (``fallback``, recorded per point).
 
@@ -24,7 +24,7 @@ import numpy as np
 
 from ._scene import Execution, ParseContext, parse_shape, type_name, scene_hash
 
-__all__ = ["STUDY_KINDS", "StudyCase", "StudyPoint", "StudyScene", "Sweep", "parse_study",
+__all__ = ["STUDY_KINDS", "StudyCase", "StudyPoint", "StudyScene", "Scan", "parse_study",
            "parse_study_scene"]
 
 STUDY_KINDS = ("accuracy", "stiffness")
@@ -32,8 +32,8 @@ FAMILIES = ("harmonic", "powerlaw", "fourier")
 METHOD_NAMES = ("periodic", "march")
 FALLBACKS = ("none", "periodic", "march")
 CHECKS = ("march", "fixed")
-#: Parameters a ``[[sweeps]]`` entry may vary, and the families it applies to.
-SWEEP_PARAMETERS = {
+#: Parameters a ``[[scans]]`` entry may vary, and the families it applies to.
+SCAN_PARAMETERS = {
     "delta": FAMILIES, "scaled_period": FAMILIES, "anisotropy_ratio": FAMILIES, "p": FAMILIES,
     "exponent": ("powerlaw",), "duty_cycle": ("powerlaw",),
 }
@@ -114,16 +114,20 @@ class StudyCase:
 
 @dataclass(frozen=True)
 class StudyPoint:
-    """One point of a study: a case, and which sweep (index into ``sweeps``, -1 none) put it there."""
+    """One point of a study: a case, and which scan (index into ``scans``, -1 none) put it there
+    with which value of its parameter."""
 
     case: StudyCase
     motion: int
-    sweep: int = -1
-    sweep_value: float = math.nan
+    scan: int = -1
+    scan_value: float = math.nan
 
 
 @dataclass(frozen=True)
-class Sweep:
+class Scan:
+    """A ``[[scans]]`` entry of a stiffness scene: one parameter varied over ``values`` (sorted)
+    from the ``[base]`` physics, for every motion of a family it applies to."""
+
     parameter: str
     values: tuple[float, ...]
 
@@ -144,7 +148,7 @@ class StudyScene:
     figure: str
     kind: str
     motions: tuple[StudyCase, ...]
-    sweeps: tuple[Sweep, ...]
+    scans: tuple[Scan, ...]
     points: tuple[StudyPoint, ...]
     methods: tuple[str, ...]
     rtols: tuple[float, ...]
@@ -292,10 +296,10 @@ def _values(ctx: ParseContext, obj, key: str, kind: str) -> tuple[float, ...]:
     return tuple(float(base ** v) if base else float(v) for v in x)
 
 
-def _parse_sweep(ctx: ParseContext, obj, key: str) -> Sweep:
+def _parse_scan(ctx: ParseContext, obj, key: str) -> Scan:
     ctx.table(obj, key, {"parameter": "", "values": "", "log10_range": "", "log2_range": "", "range": "",
                          "step": ""}, required=("parameter",))
-    parameter = ctx.string(obj["parameter"], f"{key}.parameter", tuple(SWEEP_PARAMETERS))
+    parameter = ctx.string(obj["parameter"], f"{key}.parameter", tuple(SCAN_PARAMETERS))
     spec = obj["values"] if "values" in obj else {k: v for k, v in obj.items() if k != "parameter"}
     if "values" in obj and len(obj) > 2:
         raise ctx.err(key, "give values or a range with step, not both")
@@ -305,32 +309,34 @@ def _parse_sweep(ctx: ParseContext, obj, key: str) -> Sweep:
               "exponent": v >= 1, "duty_cycle": 0 < v < 1}[parameter]
         if not ok:
             raise ctx.err(f"{key}.values", f"value {v:g} outside the domain of {parameter}")
-    return Sweep(parameter, tuple(sorted(values)))
+    return Scan(parameter, tuple(sorted(values)))
 
 
-def _stiffness_points(ctx, motions, sweeps) -> tuple[StudyPoint, ...]:
+def _stiffness_points(ctx, motions, scans) -> tuple[StudyPoint, ...]:
     points = []
-    for j, sw in enumerate(sweeps):
-        applicable = [i for i, m in enumerate(motions) if m.family in SWEEP_PARAMETERS[sw.parameter]]
+    for j, sw in enumerate(scans):
+        applicable = [i for i, m in enumerate(motions) if m.family in SCAN_PARAMETERS[sw.parameter]]
         if not applicable:
-            raise ctx.err(f"sweeps[{j}].parameter", f"no motion of a family {sw.parameter!r} applies to "
-                                                    f"({', '.join(SWEEP_PARAMETERS[sw.parameter])})")
+            raise ctx.err(f"scans[{j}].parameter", f"no motion of a family {sw.parameter!r} applies to "
+                                                    f"({', '.join(SCAN_PARAMETERS[sw.parameter])})")
         for i in applicable:
             for v in sw.values:
                 case = motions[i].with_parameter(sw.parameter, v)
                 if case.p == 0 and case.delta == 0:
-                    raise ctx.err(f"sweeps[{j}].values", f"delta = 0 needs p > 0 (motion {motions[i].name!r})")
+                    raise ctx.err(f"scans[{j}].values", f"delta = 0 needs p > 0 (motion {motions[i].name!r})")
                 points.append(StudyPoint(case, i, j, float(v)))
     return tuple(points)
 
 
 _TOP = {"scene": "", "solver": "", "reference": "", "baseline": "", "base": "", "cases": "", "motions": "",
-        "sweeps": "", "execution": ""}
+        "scans": "", "execution": ""}
 
 
 def parse_study(doc: dict, text: str, file: str) -> StudyScene:
     """Validate the TOML document ``doc`` of a study scene (``[scene] kind`` accuracy or stiffness)."""
     ctx = ParseContext(file)
+    if "sweeps" in doc:  # the key's name before issue 37 ("sweep" is a warm-start chain of points)
+        raise ctx.err("sweeps", "renamed: write [[scans]] (a parameter scanned over values)")
     ctx.table(doc, "", _TOP, required=("scene", "solver"))
     head = ctx.table(doc["scene"], "scene", {"name": "", "title": "", "figure": "", "kind": ""},
                      required=("name", "kind"))
@@ -341,7 +347,7 @@ def parse_study(doc: dict, text: str, file: str) -> StudyScene:
     title = ctx.string(head.get("title", ""), "scene.title")
     figure = ctx.string(head.get("figure", ""), "scene.figure")
     accuracy = kind == "accuracy"
-    wrong = ("base", "motions", "sweeps") if accuracy else ("cases", "baseline")
+    wrong = ("base", "motions", "scans") if accuracy else ("cases", "baseline")
     for k in wrong:
         if k in doc:
             raise ctx.err(k, f"not used by a {kind!r} scene")
@@ -399,14 +405,14 @@ def parse_study(doc: dict, text: str, file: str) -> StudyScene:
         if n in names[:i]:
             raise ctx.err(f"{list_key}[{i}].name", f"{n!r} is used twice")
     if accuracy:
-        sweeps = ()
+        scans = ()
         points = tuple(StudyPoint(m, i) for i, m in enumerate(motions))
     else:
-        raw_sweeps = doc.get("sweeps")
-        if not isinstance(raw_sweeps, list) or not raw_sweeps:
-            raise ctx.err("sweeps", "a stiffness scene needs at least one [[sweeps]] table")
-        sweeps = tuple(_parse_sweep(ctx, s, f"sweeps[{i}]") for i, s in enumerate(raw_sweeps))
-        points = _stiffness_points(ctx, motions, sweeps)
+        raw_scans = doc.get("scans")
+        if not isinstance(raw_scans, list) or not raw_scans:
+            raise ctx.err("scans", "a stiffness scene needs at least one [[scans]] table")
+        scans = tuple(_parse_scan(ctx, s, f"scans[{i}]") for i, s in enumerate(raw_scans))
+        points = _stiffness_points(ctx, motions, scans)
 
     ex = ctx.table(doc.get("execution", {}), "execution",
                    {"points_per_task": "", "scheduler": "", "workers": "", "store": ""})
@@ -421,14 +427,14 @@ def parse_study(doc: dict, text: str, file: str) -> StudyScene:
     science = {
         "name": name, "kind": kind, "family": "study",
         "motions": [m.json() for m in motions],
-        "sweeps": [{"parameter": s.parameter, "values": list(s.values)} for s in sweeps],
+        "scans": [{"parameter": s.parameter, "values": list(s.values)} for s in scans],
         "solver": {"methods": list(methods), "rtols": list(rtols), "fixed_steps": list(fixed),
                    "fallback": fallback, "march_max_steps_per_period": mmax},
         "reference": {"rtol": factor * min(rtols), "rtol_factor": factor, "check": check,
                       "check_rtol": check_rtol, "check_steps": check_steps},
         "baseline": {"tolerances": list(btols), "cap_seconds": cap},
     }
-    return StudyScene(path=file, name=name, title=title, figure=figure, kind=kind, motions=motions, sweeps=sweeps,
+    return StudyScene(path=file, name=name, title=title, figure=figure, kind=kind, motions=motions, scans=scans,
                       points=points, methods=methods, rtols=rtols, fixed_steps=fixed,
                       march_max_steps_per_period=mmax, fallback=fallback, rtol_factor=factor, check=check,
                       check_rtol=check_rtol, check_steps=check_steps, baseline_tolerances=btols,

@@ -41,6 +41,12 @@ def _v(sd, name) -> np.ndarray:
     return sd.array(name)
 
 
+def _scan_names(sd) -> tuple[str, str]:
+    """The names of a stiffness store's scan index and value: ("scan", "scan_value"), or
+    ("sweep", "sweep_value") in a store written before issue 37 renamed them."""
+    return ("scan", "scan_value") if "scan" in sd.ds else ("sweep", "sweep_value")
+
+
 # ---------------------------------------------------------------------------
 # Reductions
 # ---------------------------------------------------------------------------
@@ -63,10 +69,11 @@ def fitted_order(x, error, floor=0.0) -> float:
 def point_label(sd, i: int) -> str:
     """'motion' or 'motion, parameter = value' of point ``i``."""
     motion = _labels(sd, "motion")[int(_v(sd, "motion")[i])]
-    sweep = int(_v(sd, "sweep")[i])
-    if sweep < 0:
+    scan, scan_value = _scan_names(sd)
+    j = int(_v(sd, scan)[i])
+    if j < 0:
         return motion
-    return f"{motion}, {_labels(sd, 'sweep')[sweep]} = {float(_v(sd, 'sweep_value')[i]):.4g}"
+    return f"{motion}, {_labels(sd, scan)[j]} = {float(_v(sd, scan_value)[i]):.4g}"
 
 
 def honesty_records(sd) -> list[dict]:
@@ -299,16 +306,16 @@ def _value_label(parameter: str, v: float) -> str:
     return f"{v:.3g}"
 
 
-def _sweep_maps(sd, j: int):
-    """Maps motion x swept value of status, log10(true error / rtol) and log10(seconds)."""
-    sweep = _v(sd, "sweep")
-    idx = np.flatnonzero(sweep == j)
+def _scan_maps(sd, j: int):
+    """Maps motion x scanned value of status, log10(true error / rtol) and log10(seconds)."""
+    scan, scan_value = _scan_names(sd)
+    idx = np.flatnonzero(_v(sd, scan) == j)
     motions_all = _labels(sd, "motion")
     motion_idx = sorted(set(int(m) for m in _v(sd, "motion")[idx]))
-    xs = sorted(set(float(v) for v in _v(sd, "sweep_value")[idx]))
+    xs = sorted(set(float(v) for v in _v(sd, scan_value)[idx]))
     methods, rtols = _labels(sd, "method"), _v(sd, "rtol")
     meanings = sd.ds["status"].attrs.get("flag_meanings", {})
-    parameter = _labels(sd, "sweep")[j]
+    parameter = _labels(sd, scan)[j]
     row_names = [f"{m}, rtol {r:.0e}" for m in methods for r in rtols]
     titles = [f"{rn}: {what}" for rn in row_names for what in ("status", "log10(true error / rtol)",
                                                                 "log10(seconds)")]
@@ -325,7 +332,7 @@ def _sweep_maps(sd, j: int):
             grids = {k: np.full((len(ylab), len(xlab)), np.nan) for k in ("status", "ratio", "time")}
             hover = [[""] * len(xlab) for _ in ylab]
             for i in idx:
-                y, x = motion_idx.index(int(_v(sd, "motion")[i])), xs.index(float(_v(sd, "sweep_value")[i]))
+                y, x = motion_idx.index(int(_v(sd, "motion")[i])), xs.index(float(_v(sd, scan_value)[i]))
                 code = int(_v(sd, "status")[i, a, b])
                 te = float(_v(sd, "true_error")[i, a, b])
                 grids["status"][y, x] = code
@@ -354,19 +361,19 @@ def _sweep_maps(sd, j: int):
     for c in (1, 2, 3):
         fig.update_xaxes(title_text=parameter, title_font={"size": 10}, row=len(row_names), col=c)
     fig.update_layout(height=260 * len(row_names) + 80, margin={"t": 80, "l": 130, "r": 40, "b": 40},
-                      title={"text": f"Sweep of {parameter}: status (0 green = converged), true error / rtol "
+                      title={"text": f"Scan of {parameter}: status (0 green = converged), true error / rtol "
                                      "(red above rtol) and time per solve", "font": {"size": 14}})
     fig.update_annotations(font_size=10)
     return fig
 
 
 def _delta_figure(sd):
-    """U and P of the reference against delta for every motion of the delta sweep."""
-    sweeps = _labels(sd, "sweep")
-    if "delta" not in sweeps:
+    """U and P of the reference against delta for every motion of the delta scan."""
+    scan = _scan_names(sd)[0]
+    scans = _labels(sd, scan)
+    if "delta" not in scans:
         return None
-    j = sweeps.index("delta")
-    idx = np.flatnonzero(_v(sd, "sweep") == j)
+    idx = np.flatnonzero(_v(sd, scan) == scans.index("delta"))
     fig = subplots(rows=1, cols=2, subplot_titles=["U (reference)", "P (reference)"])
     motions = _labels(sd, "motion")
     for k, m in enumerate(sorted(set(int(x) for x in _v(sd, "motion")[idx]))):
@@ -384,11 +391,11 @@ def _delta_figure(sd):
 
 
 def _delta_table(sd) -> str:
-    sweeps = _labels(sd, "sweep")
-    if "delta" not in sweeps:
+    scan = _scan_names(sd)[0]
+    scans = _labels(sd, scan)
+    if "delta" not in scans:
         return ""
-    j = sweeps.index("delta")
-    idx = np.flatnonzero(_v(sd, "sweep") == j)
+    idx = np.flatnonzero(_v(sd, scan) == scans.index("delta"))
     rows = ""
     for m in sorted(set(int(x) for x in _v(sd, "motion")[idx])):
         sel = idx[_v(sd, "motion")[idx] == m]
@@ -418,7 +425,7 @@ def _fallback_text(sd) -> str:
            + "; ".join(parts) + ".</p>"
 
 
-def _failures_by_sweep(sd) -> str:
+def _failed_solves(sd) -> str:
     st, methods = _v(sd, "status"), _labels(sd, "method")
     meanings = sd.ds["status"].attrs.get("flag_meanings", {})
     rows = ""
@@ -437,10 +444,10 @@ def _stiffness_body(site, sd) -> list[str]:
     parts = [_timing_note(sd), site.guarded(f"{sd.name} reference", lambda: _reference_table(sd)),
              "<h4>Status of every solve</h4>", site.guarded(f"{sd.name} status", lambda: _status_table(sd)),
              site.guarded(f"{sd.name} fallback", lambda: _fallback_text(sd)),
-             site.guarded(f"{sd.name} failures", lambda: _failures_by_sweep(sd))]
-    for j, parameter in enumerate(_labels(sd, "sweep")):
-        parts.append(f"<h4>Sweep of {esc(parameter)}</h4>")
-        parts.append(site.guarded(f"{sd.name} maps {parameter}", lambda j=j: site.figure(_sweep_maps(sd, j))))
+             site.guarded(f"{sd.name} failures", lambda: _failed_solves(sd))]
+    for j, parameter in enumerate(_labels(sd, _scan_names(sd)[0])):
+        parts.append(f"<h4>Scan of {esc(parameter)}</h4>")
+        parts.append(site.guarded(f"{sd.name} maps {parameter}", lambda j=j: site.figure(_scan_maps(sd, j))))
     parts.append("<h4>U and P against δ</h4>")
     parts.append(site.guarded(f"{sd.name} delta", lambda: site.maybe_figure(_delta_figure(sd)) + _delta_table(sd)))
     return parts
@@ -456,7 +463,7 @@ def _provenance(sd) -> str:
     sol = sc.get("solver", {})
     return provenance_table(sd, [
         ("points", f"{sd.ds.sizes['point']} ({len(sc.get('motions', []))} motions, "
-                   f"{len(sc.get('sweeps', []))} sweeps)"),
+                   f"{len(sc.get('scans', sc.get('sweeps', [])))} scans)"),
         ("solvers", f"{', '.join(sol.get('methods', []))} at rtol "
                     f"{', '.join(f'{r:.0e}' for r in sol.get('rtols', []))}"
                     + (f"; fixed grids {sol.get('fixed_steps')}" if sol.get("fixed_steps") else "")

@@ -189,7 +189,7 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
 
 
 def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_series=False,
-                   max_steps_per_period=None, sweeps=None):
+                   max_steps_per_period=None, sweeps=None, options=None):
     """Periodic steady state u(tau) of eq. (Newtonu) and its mean speed, power and efficiency.
 
     Parameters
@@ -218,6 +218,14 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         judged by the same error estimate as a cold solve; where the warm start fails the
         point is solved cold.  A sweep's results depend on its own points only.  Default:
         every point cold.
+    options : EngineOptions, optional
+        The engine's options passed at run time (``periodic`` only; ``periodic.options``:
+        so far the step-size controller's, ``ControlOptions``, one point's solve's,
+        ``PointOptions``, the turning-point traps', ``TrapOptions``, the kinematic stops',
+        ``StopOptions``, the state events', ``EventOptions``, and the step lengths',
+        ``StepOptions``), e.g.
+        ``EngineOptions(control=ControlOptions(max_factor=2.0))``.  Default: the documented
+        defaults.  Any values run on the same compiled kernels.
 
     Returns
     -------
@@ -234,10 +242,13 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         physics = physics.take(np.zeros(n, dtype=int))
     if sweeps is not None:
         sweeps = _checked_sweeps(sweeps, n, method)
+    if options is not None and method != "periodic":
+        raise ValueError(f"options: the engine's options are for method 'periodic', not {method!r}")
+    options = periodic.checked_options(options) if method == "periodic" else None
     start = time.perf_counter()
     max_steps = max_steps_per_period or MAX_STEPS_PER_PERIOD
     if method == "periodic":
-        out = periodic.solve(kinematics, physics, rtol, max_steps, return_series, sweeps)
+        out = periodic.solve(kinematics, physics, rtol, max_steps, return_series, sweeps, options)
     else:
         out = march_driver.solve(kinematics, physics, rtol, max_steps, return_series)
     return _result(out, physics, method, start)

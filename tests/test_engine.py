@@ -19,6 +19,10 @@ from solver.model.physics import PointPhysics
 from solver.tools.bench import solution_error
 from test_solver_methods import ORDER_CASES
 
+#: the kinematic stops' and the state events' default options (``periodic.options``)
+STOPS = options.DEFAULT_OPTIONS.stops
+EVENTS = options.DEFAULT_OPTIONS.events
+
 
 def _error(res, ref, kin, physics):
     """The first point's error of ``res`` against ``ref`` in the solver's norm (the quantity
@@ -133,13 +137,15 @@ def test_an_event_in_the_first_sixth_of_a_step_is_found():
     phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
     f0 = steps.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)[0]
     solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
-    theta = events.find_event(code, params, phys, solved, 1e-14, True, events.new_exit_memo())
+    theta = events.find_event(code, params, phys, solved, 1e-14, True, events.new_exit_memo(),
+                             EVENTS)
     assert abs(theta - 0.1) < 1e-2, theta
     h = theta * h
     kin3 = steps.stage_kinematics(code, params, t0, h)
     step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
     solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
-    cut = events.find_event(code, params, phys, solved, 1e-14, False, events.new_exit_memo())
+    cut = events.find_event(code, params, phys, solved, 1e-14, False, events.new_exit_memo(),
+                           EVENTS)
     true = (t_c - t0) / h
     assert abs(true - 1.0) < 0.05  # the cut step ends near the true crossing ...
     if cut > 0:                    # ... and any crossing left in it is located to 1e-6
@@ -154,7 +160,7 @@ def test_kinematic_stops_are_the_zeros_of_the_kinematic_functions():
     kin = solver.Fourier([[0.3, 1.1, 0.0, 0.2]], [[0.0, -0.1, 0.05]])
     code, params = kin.kernel_encoding()
     out = np.empty(switching.MAX_STOPS)
-    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out, STOPS)
     stops = out[:count]
     tau = np.linspace(0.0, 1.0, 200001)
     phi = kin.angle(tau)[0]
@@ -175,7 +181,7 @@ def test_a_corner_next_to_a_zero_stays_a_stop():
                           [True])
     code, params = kin.kernel_encoding()
     out = np.empty(switching.MAX_STOPS)
-    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], out, STOPS)
     stops = out[:count]
     assert 0.5 in stops, stops
     near = stops[np.abs(stops - 0.5) <= options.STOP_GAP]
@@ -322,7 +328,7 @@ def test_the_trap_clip_never_lengthens_a_step():
     accept = options.ACCEPT_STEP
     for h in (1e-14, 0.3 * accept, accept, 3.0 * accept, 1e-6, 0.1):
         for cap in (0.0, 1e-15, 0.5 * accept, 2.0 * accept, 1e-7, 1e-3, 1.0):
-            clipped = traps.trap_clip(h, cap)
+            clipped = traps.trap_clip(h, cap, options.ACCEPT_STEP)
             assert clipped <= h
             assert clipped >= min(h, accept)
             if accept <= cap < h:
@@ -420,7 +426,7 @@ def test_a_near_tangency_on_a_sample_is_a_stop():
                          [[0.8814484713883943, 0.0, -0.29377653802312464, 0.0]])
     code, params = kin.kernel_encoding()
     stops = np.empty(switching.MAX_STOPS)
-    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops, STOPS)
     assert np.any(np.abs(stops[:count] - 0.5) < 1e-12), stops[:count]
 
 
@@ -482,7 +488,7 @@ def test_a_round_refines_a_step_at_most_max_refinement_times():
     target = 1e-4
     shares = np.array([0.5 * target * 0.25, 32.0 * target * 0.25, 3e291])
     ceilings = np.empty(3)
-    asked = refinement_ceiling(W, 3, shares, target, ceilings)
+    asked = refinement_ceiling(W, 3, shares, target, ceilings, options.DEFAULT_OPTIONS.steps)
     assert asked == 2
     assert ceilings[0] == math.inf
     assert ceilings[1] == pytest.approx(0.125, rel=1e-12)
@@ -500,7 +506,7 @@ def test_a_linear_phase_has_no_turning_stops():
                           [1.0], [False])
     code, params = kin.kernel_encoding()
     stops = np.empty(switching.MAX_STOPS)
-    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops)
+    count, _ = switching.kinematic_stops(code, params[0], kin.corners()[0], stops, STOPS)
     assert list(stops[:count]) == [0.0, 0.3], stops[:count]
     physics = solver.Physics.from_scaled(2.0 ** -6, 0.125, p=0.0, delta=1e-5)
     ref = reference(kin, physics)
@@ -635,8 +641,8 @@ def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
     code, params = kin.kernel_encoding()
     row = params[0].copy()
     stops = np.empty(switching.MAX_STOPS)
-    n_stops, omax = switching.kinematic_stops(code, row, kin.corners()[0].copy(), stops)
-    turning = switching.turning_stops(code, row, stops, n_stops, omax)
+    n_stops, omax = switching.kinematic_stops(code, row, kin.corners()[0].copy(), stops, STOPS)
+    turning = switching.turning_stops(code, row, stops, n_stops, omax, STOPS)
     point_stops = integrator.Stops(stops, np.zeros(n_stops, dtype=np.bool_), turning, n_stops)
     j = int(np.argmin(abs(stops[:n_stops] - 0.025553882)))
     assert turning[j] == turning[j + 1] == switching.TURNING  # not simple: no TRAP_FLOOR
@@ -647,11 +653,13 @@ def test_a_trapped_step_is_split_into_at_most_trap_span_steps():
     W[record.U, :N + 1] = 1e-2
     W[record.U, j] = -9e-8
     ceilings = np.full(N, np.inf)
-    count, _ = traps.trapped_steps(code, row, _point_physics(phys), point_stops, W, N, ceilings)
+    defaults = options.DEFAULT_OPTIONS.traps
+    count, _ = traps.trapped_steps(code, row, _point_physics(phys), point_stops, W, N, ceilings,
+                                   defaults, options.ACCEPT_STEP)
     assert count >= 1
     h = W[record.T, j + 1] - W[record.T, j]
     cap = traps.trap_ceiling(code, row, _point_physics(phys), stops[j + 1], stops[j] + 0.5 * h,
-                             -9e-8)
+                             -9e-8, defaults)
     assert cap < 1e-8 and h > 1e-2
     assert ceilings[j] == h / options.TRAP_SPAN
     flagged = np.isfinite(ceilings)

@@ -331,10 +331,10 @@ def test_task_size_is_calibrated_by_a_probe(tmp_path):
 def test_stores_do_not_depend_on_the_task_grouping(tmp_path, monkeypatch):
     """Issue 29, issue 34: one scene run with one chunk per task and with four gives equal
     stores, every array (data and pipeline_state) included; the grouping comes from counts
-    (``_sweep.TASK_POINTS``, ``_kind.TASKS_PER_WORKER``), never from a timing probe."""
+    (``_grid_kind.TASK_POINTS``, ``_kind.TASKS_PER_WORKER``), never from a timing probe."""
     import pipeline._grid as grid
     import pipeline._kind as kind_module
-    import pipeline._sweep as sweep
+    import pipeline._grid_kind as grid_kind
     from pipeline._store import store_meta
 
     def no_probe(*args, **kwargs):
@@ -346,11 +346,11 @@ def test_stores_do_not_depend_on_the_task_grouping(tmp_path, monkeypatch):
     scene = load_scene(write_scene(tmp_path, text))
     stores, groupings = [], []
     for task_points in (4, 16):
-        monkeypatch.setattr(sweep, "TASK_POINTS", task_points)
+        monkeypatch.setattr(grid_kind, "TASK_POINTS", task_points)
         monkeypatch.setattr(kind_module, "TASKS_PER_WORKER", 1)
         with Scheduler("synchronous", None) as sched:
             ctx = RunContext(scene, tmp_path / "x.zarr", sched, 1, False, print)
-            groupings.append(sweep.GRID.chunks_per_task(ctx, (1, 1, 1, 4), [(0,)] * 16))
+            groupings.append(grid_kind.GRID.chunks_per_task(ctx, (1, 1, 1, 4), [(0,)] * 16))
         store = tmp_path / f"tasks{task_points}.zarr"
         summary = run_scene(scene, store, scheduler="synchronous", progress=False)
         assert summary.computed_chunks == summary.total_chunks == 16
@@ -365,7 +365,7 @@ def test_tasks_are_sized_by_counts():
     """Without ``points_per_task``: ``TASK_POINTS`` points per task, but at least
     ``TASKS_PER_WORKER`` tasks per worker where the chunks allow (harmonic_grid's 144 chunks of
     256 points: 4 chunks per task on 2 workers, 1 on 16); with it, as many chunks as fit."""
-    import pipeline._sweep as sweep
+    import pipeline._grid_kind as grid_kind
 
     scene = load_scene(REPO / "workflows" / "harmonic_grid.toml")
     chunks = (1, 1, 4, 64)
@@ -373,12 +373,12 @@ def test_tasks_are_sized_by_counts():
 
     def per_task(workers, s=scene):
         with Scheduler("synchronous", None) as sched:
-            return sweep.GRID.chunks_per_task(RunContext(s, Path("x.zarr"), sched, workers, False, print),
+            return grid_kind.GRID.chunks_per_task(RunContext(s, Path("x.zarr"), sched, workers, False, print),
                                               chunks, pending)
 
     from pipeline._kind import TASKS_PER_WORKER
 
-    assert sweep.TASK_POINTS // 256 == 4 and TASKS_PER_WORKER == 16
+    assert grid_kind.TASK_POINTS // 256 == 4 and TASKS_PER_WORKER == 16
     assert [per_task(w) for w in (1, 2, 4, 16)] == [4, 4, 2, 1]
     given = parse_scene(scene.text.replace("[solver]", "[execution]\npoints_per_task = 2048\n\n[solver]"), "g.toml")
     assert per_task(16, given) == 8

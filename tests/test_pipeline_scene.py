@@ -125,7 +125,7 @@ def test_a_swept_chunk_is_its_snake_ordered_sweeps(tmp_path):
     import solver
     from pipeline._grid import chunk_region, region_parameters, scene_chunks
     from pipeline._store import create_skeleton
-    from pipeline._sweep import compute_chunk
+    from pipeline._grid_kind import compute_chunk
     from pipeline_cases import read_store
 
     scene = parse_scene(small_scene_text().replace("points_per_chunk = 8", "points_per_chunk = 16"), "a.toml")

@@ -160,3 +160,34 @@ def test_the_adjoint_uses_the_engines_public_boundary():
 
 def test_the_march_needs_nothing_from_the_engine():
     assert _names_from_the_engine("march") == {}
+
+
+def _secant_functions(source: str) -> set[str]:
+    """Functions of ``source`` (module level) that take a regula falsi (secant) point of a
+    bracket, ``(a * fb - b * fa) / (fb - fa)`` in any names: a BinOp Div whose denominator
+    is a difference of two names and whose numerator is a difference of two products."""
+    found = set()
+    for fn in ast.parse(source).body:
+        if not isinstance(fn, ast.FunctionDef):
+            continue
+        for node in ast.walk(fn):
+            if (isinstance(node, ast.BinOp) and isinstance(node.op, ast.Div)
+                    and isinstance(node.right, ast.BinOp) and isinstance(node.right.op, ast.Sub)
+                    and all(isinstance(x, ast.Name) for x in (node.right.left, node.right.right))
+                    and isinstance(node.left, ast.BinOp) and isinstance(node.left.op, ast.Sub)
+                    and all(isinstance(x, ast.BinOp) and isinstance(x.op, ast.Mult)
+                            for x in (node.left.left, node.left.right))):
+                found.add(fn.name)
+    return found
+
+
+def test_the_engine_has_one_root_finder():
+    """Issue 37: the kinematic stops, the held body's exits and the state events are located
+    by one Illinois loop (``periodic.switching.illinois_root``), not three copies."""
+    found = {(p.stem, name) for p in (REPO / "solver" / "periodic").glob("*.py")
+             for name in _secant_functions(p.read_text(encoding="utf-8"))}
+    assert found == {("switching", "illinois_root")}
+    # negative control: the three loops before (one shown) are each found
+    old = ("def locate_exit(a, b, fa, fb):\n    c = (a * fb - b * fa) / (fb - fa)\n"
+           "def _refine_root(a, b, f_a, f_b):\n    c = (a * f_b - b * f_a) / (f_b - f_a)\n")
+    assert _secant_functions(old) == {"locate_exit", "_refine_root"}

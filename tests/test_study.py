@@ -23,7 +23,7 @@ from reports._study import fitted_order, honesty_records, honesty_summary
 
 WORKFLOWS = REPO / "workflows"
 
-#: Two cheap, non-stiff motions; a delta sweep of two values; both methods at two tolerances.
+#: Two cheap, non-stiff motions; a delta scan of two values; both methods at two tolerances.
 TINY = """
 [scene]
 kind = "stiffness"
@@ -56,11 +56,11 @@ duty_cycle = 0.8
 closing_shape = "down:10"
 opening_shape = "up:3"
 
-[[sweeps]]
+[[scans]]
 parameter = "delta"
 values = [1e-3, 1e-7]
 
-[[sweeps]]
+[[scans]]
 parameter = "exponent"
 values = [3.0]
 
@@ -91,7 +91,7 @@ def test_stiffness_points_are_every_applicable_motion_times_every_value():
     powerlaw_only = {"exponent", "duty_cycle"}
     families = [m["family"] for m in doc["motions"]]
     expected = 0
-    for sw in doc["sweeps"]:
+    for sw in doc["scans"]:
         if "values" in sw:
             n_values = len(sw["values"])
         else:
@@ -131,16 +131,16 @@ BAD = [
     pytest.param(("rtols = [1e-3, 1e-6]", "rtols = [1e-3, 0.5]"), "solver.rtols", "(0, 0.1]", id="rtol-range"),
     pytest.param(('fallback = "periodic"', 'fallback = "lsoda"'), "solver.fallback", "must be one of",
                  id="fallback"),
-    pytest.param(('parameter = "delta"', 'parameter = "colour"'), "sweeps[0].parameter", "must be one of",
-                 id="sweep-parameter"),
-    pytest.param(("values = [1e-3, 1e-7]", "values = [1e-3, -1.0]"), "sweeps[0].values", "outside the domain",
-                 id="sweep-domain"),
+    pytest.param(('parameter = "delta"', 'parameter = "colour"'), "scans[0].parameter", "must be one of",
+                 id="scan-parameter"),
+    pytest.param(("values = [1e-3, 1e-7]", "values = [1e-3, -1.0]"), "scans[0].values", "outside the domain",
+                 id="scan-domain"),
     pytest.param(('closing_shape = "down:10"', 'closing_shape = "sideways:10"'), "motions[1].closing_shape",
                  "up:g", id="shape"),
     pytest.param(("duty_cycle = 0.8", "duty_cycle = 1.5"), "motions[1].duty_cycle", "(0, 1)", id="duty"),
     pytest.param(("A1 = 0.5", "A1 = 0.5\nB = [0.1]"), "motions[0].B", "not a parameter of family", id="family-key"),
     pytest.param(('anisotropy_ratio = "2^-3"\n', ""), "motions[0].anisotropy_ratio", "missing", id="missing"),
-    pytest.param(("[[sweeps]]\nparameter = \"exponent\"\nvalues = [3.0]\n", "[cases]\nx = 1\n"), "cases",
+    pytest.param(("[[scans]]\nparameter = \"exponent\"\nvalues = [3.0]\n", "[cases]\nx = 1\n"), "cases",
                  "not used by a 'stiffness' scene", id="wrong-table"),
 ]
 
@@ -160,6 +160,23 @@ def test_bad_study_scene_exits_2_and_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "solver.fallback" in err[0]
     assert not store.exists()
+
+
+def test_a_study_with_the_old_sweeps_key_is_refused_naming_scans(tmp_path, capsys):
+    """Issue 37: a study's ``[[sweeps]]`` became ``[[scans]]`` ("sweep" is a warm-start chain of
+    points); a scene still using it gets one line naming the new key, exit 2, no store."""
+    old = TINY.replace("[[scans]]", "[[sweeps]]")
+    with pytest.raises(SceneError) as info:
+        parse_scene(old, "old.toml")
+    assert info.value.key == "sweeps" and "[[scans]]" in info.value.reason
+    path = write_scene(tmp_path, old, "old.toml")
+    store = tmp_path / "old.zarr"
+    assert main(["run", str(path), "--store", str(store), "--scheduler", "synchronous"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "sweeps" in err[0] and "[[scans]]" in err[0], err
+    assert not store.exists()
+    # negative control: the same scene with the new key parses
+    assert parse_scene(TINY, "new.toml").scans
 
 
 # ---------------------------------------------------------------------------
@@ -237,7 +254,7 @@ def test_tiny_study_store_is_labelled_and_complete(tiny):
     assert ds["method"].attrs["labels"] == ["periodic", "march"]
     np.testing.assert_allclose(ds["rtol"].values, [1e-3, 1e-6])
     assert (ds["status"].values >= 0).all() and (ds["ref_status"].values == 0).all()
-    np.testing.assert_allclose(sorted(set(ds["delta"].values[ds["sweep"].values == 0])), [1e-7, 1e-3])
+    np.testing.assert_allclose(sorted(set(ds["delta"].values[ds["scan"].values == 0])), [1e-7, 1e-3])
     # the stored true error is the brute-force max of the two solver-norm errors
     U, P = ds["U"].values, ds["P"].values
     T, V = ds["period"].values[:, None, None], ds["kinematic_speed"].values[:, None, None]
@@ -286,7 +303,7 @@ def test_tiny_study_report_has_its_sections(tiny, tmp_path):
     index = build_report([store], tmp_path / "report", list_unrun=False)
     text = index.read_text()
     assert "panel failed" not in text
-    for words in ("Sweep of delta", "U and P against δ", "Honest tolerances over every study", "log10(seconds)"):
+    for words in ("Scan of delta", "U and P against δ", "Honest tolerances over every study", "log10(seconds)"):
         assert words in text, words
 
 

@@ -14,22 +14,22 @@ import math
 
 from numba import njit
 
-from .options import MAX_FACTOR, MIN_FACTOR, SAFETY
 from .radau import ERROR_ORDER
 
 _EXPONENT = 1.0 / ERROR_ORDER
 
 
 @njit(cache=True, error_model="numpy")
-def predict_factor(h, h_old, ratio, ratio_old):
+def predict_factor(h, h_old, ratio, ratio_old, control):
     """The factor for the next step size from this step's error ``ratio`` (<= 1 accepted) and
     the previous accepted step's (``h_old``, ``ratio_old``; h_old <= 0 when there is none):
-    Gustafsson's predictive controller, SAFETY included, clipped to [MIN_FACTOR, MAX_FACTOR]."""
+    Gustafsson's predictive controller, times ``control.safety``, clipped to
+    [``control.min_factor``, ``control.max_factor``] (``periodic.options.ControlOptions``)."""
     if ratio <= 0.0:
-        return MAX_FACTOR
+        return control.max_factor
     if not math.isfinite(ratio):
-        return MIN_FACTOR
+        return control.min_factor
     factor = ratio ** -_EXPONENT
     if h_old > 0.0 and ratio_old > 0.0:
         factor *= min(1.0, h / h_old * (ratio_old / ratio) ** _EXPONENT)
-    return min(MAX_FACTOR, max(MIN_FACTOR, SAFETY * factor))
+    return min(control.max_factor, max(control.min_factor, control.safety * factor))

@@ -13,7 +13,7 @@ from numba import get_num_threads, njit
 
 from ..model.physics import PointPhysics
 from ..status import CONVERGED, NON_FINITE
-from .options import GUESS_STEPS, IN_LINE_SHARE, START_CAPACITY
+from .options import GUESS_STEPS, IN_LINE_SHARE, START_CAPACITY, checked_options
 from .point import N_COSTS, Orbit, fixed_grid_point, no_orbit, solve_point
 from .record import new_workspace, node_series
 
@@ -146,7 +146,7 @@ def _kept(buffer, size):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep_series):
+def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep_series, options):
     """The sweeps lane, lane + lanes, ... of ``solve_points`` on one workspace: each point
     of a sweep starts from its predecessor's orbit, the first cold.  Releases the GIL (the
     lanes run on Python threads: numba's parallel loops do not take NamedTuples).
@@ -168,7 +168,7 @@ def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep_series):
                 start = Orbit(orbit.N, predicted_u0(points, out, runs[r], i), orbit.scale_u,
                               orbit.scale_p, orbit.largest_weight)
             W, sol, orbit = solve_point(points.code, points.params[i], points.corners[i], phys,
-                                        rtol, points.u_guess[i], max_steps, W, start)
+                                        rtol, points.u_guess[i], max_steps, W, start, options)
             _store(out, i, sol)
             if keep_series:
                 N = sol.n_steps
@@ -181,24 +181,27 @@ def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep_series):
     return kept_tau[:kept], kept_u[:kept]
 
 
-def solve_points(points, rtol, max_steps, runs, threads, keep_series=False):
+def solve_points(points, rtol, max_steps, runs, threads, keep_series=False, options=None):
     """``solve_point`` over every point of ``points`` (Points), as the sweeps ``runs``:
     (n_runs + 1,) offsets from 0 to n, points runs[k] .. runs[k + 1] - 1 one sweep in that
     order (every point its own sweep: all cold).  Returns (``Outputs``, series): with
     ``keep_series`` the series is a list of each point's (u, tau) at its final nodes, else
     None.  The sweeps are dealt to 4 ``threads`` lanes in turn (sweep k to lane k mod
     lanes), so that each thread gets a share of the hard points; each lane keeps one
-    workspace.  A sweep's results depend on its points alone, not on the threads."""
+    workspace.  A sweep's results depend on its points alone, not on the threads.
+    ``options``: an ``EngineOptions`` (``periodic.options``; None: the defaults)."""
+    options = checked_options(options)
     out = _new_outputs(points.params.shape[0])
     lanes = max(min(runs.size - 1, 4 * threads), 1)
     keep = bool(keep_series)
     if threads <= 1 or lanes == 1:
-        kept = [solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep)
+        kept = [solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep, options)
                 for lane in range(lanes)]
     else:
         with ThreadPoolExecutor(threads) as pool:
             kept = list(pool.map(lambda lane: solve_lane(lane, lanes, points, rtol, max_steps,
-                                                         runs, out, keep), range(lanes)))
+                                                         runs, out, keep, options),
+                                 range(lanes)))
     if not keep:
         return out, None
     series = [None] * points.params.shape[0]
@@ -212,10 +215,11 @@ def solve_points(points, rtol, max_steps, runs, threads, keep_series=False):
     return out, series
 
 
-def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None):
+def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None, options=None):
     """Batched ``solve_point`` for ``solve.solve_periodic(method="periodic")``.
 
-    ``sweeps``: None (every point cold) or the offsets of ``solve_points``' runs.  Returns a
+    ``sweeps``: None (every point cold) or the offsets of ``solve_points``' runs; ``options``:
+    an ``EngineOptions`` (None: the defaults).  Returns a
     dict with int_u, int_pi, status, estimate, n_tau, iterations (passes over the period), still (phi
     constant: nothing solved), evaluations, start (``PointSolution.start``) and, with
     ``return_series``, per point (u nodes, tau nodes)."""
@@ -228,7 +232,7 @@ def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None):
                     physics.mu_s, physics.p, physics.delta_tau,
                     fast_limit_velocity(kinematics, physics, GUESS_STEPS))
     out, series = solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(),
-                               return_series)
+                               return_series, options)
     return dict(int_u=out.int_u, int_pi=out.int_pi, status=out.status, estimate=out.estimate,
                 n_tau=out.n_steps, iterations=out.passes, still=out.vscale == 0.0,
                 series=series, evaluations=out.evaluations, start=out.start)

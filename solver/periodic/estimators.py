@@ -15,7 +15,6 @@ from numba import njit
 from ..model.kinematics import angle_and_rate
 from .defect import defect_error, estimate_floor
 from .events import clear_exit_memo, find_event, new_exit_memo
-from .options import SPLIT_SHARE
 from .radau import C1, C2, StepError, dense_value, runtime_bool, step_integrals
 from .record import (CORNER_STOP, end_kind, end_kinematics, node_value, recorded_error,
                      recorded_integrals, recorded_kinematics, recorded_solution, recorded_stages,
@@ -74,9 +73,10 @@ def estimate_pass(code, params, phys, corner_nodes, atol, W, N):
 
 
 @njit(cache=True, error_model="numpy")
-def _interior_event(code, params, phys, atol, W, N, n, memo):
-    """theta of the first event (``find_event``) strictly inside recorded step n, or -1
-    (``memo``: the exit functions' ``held_exits`` memo, steps visited in order)."""
+def _interior_event(code, params, phys, atol, W, N, n, memo, options):
+    """theta of the first event (``find_event``) strictly inside recorded step n (farther
+    than ``options.split_share`` from its ends, ``EventOptions``), or -1 (``memo``: the exit
+    functions' ``held_exits`` memo, steps visited in order)."""
     t0, h = step_span(W, n)
     if n == 0 or end_kind(W, n - 1) == CORNER_STOP:  # (the step's side of a corner)
         phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
@@ -88,23 +88,24 @@ def _interior_event(code, params, phys, atol, W, N, n, memo):
     kin = recorded_kinematics(W, n)
     theta = find_event(code, params, phys, SolvedStep(t0, h, node_value(W, n), sol, kin, S0, om0,
                                                       0.0),
-                       atol, runtime_bool(False), memo)
-    return theta if SPLIT_SHARE < theta < 1.0 - SPLIT_SHARE else -1.0
+                       atol, runtime_bool(False), memo, options)
+    return theta if options.split_share < theta < 1.0 - options.split_share else -1.0
 
 
 @njit(cache=True, error_model="numpy")
-def event_split_errors(code, params, phys, atol, W, N, split):
+def event_split_errors(code, params, phys, atol, W, N, split, options):
     """The error of the recorded steps that hold a state event off their ends (the shooting
     moved it after the adaptive pass had put it on a node): each such step is solved again
     as two steps split at the event, and the change of its end value and integrals replaces
     its estimate where larger (the defect's samples need not see a corner between them).
-    ``split`` (N,) is set for those steps.  Returns (their count, evaluations of F)."""
+    ``split`` (N,) is set for those steps; ``options``: the ``EventOptions``.  Returns (their
+    count, evaluations of F)."""
     count = 0
     evaluations = 0
     memo = new_exit_memo()
     for n in range(N):
         split[n] = False
-        theta = _interior_event(code, params, phys, atol, W, N, n, memo)
+        theta = _interior_event(code, params, phys, atol, W, N, n, memo, options)
         if theta < 0.0:
             continue
         t0, h = step_span(W, n)

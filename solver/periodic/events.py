@@ -2,9 +2,9 @@
 
 Detection (``first_crossing``: sign changes of the switching functions across the step's
 start, stages and end; for p = 0 the body entering the friction's band, or leaving it by an
-exit function) and location on the collocation polynomial (``periodic.switching``'s
-locators), combined into the earliest event of a step by ``find_event``; stop placement
-ahead of a step (``stop_reach``: where the slipping body's line reaches the band); and the
+exit function) and location on the collocation polynomial (the root finder
+``periodic.switching.illinois_root``), combined into the earliest event of a step by
+``find_event``; stop placement ahead of a step (``stop_reach``: where the slipping body's line reaches the band); and the
 exit functions' memo (``held_exits``).
 """
 from __future__ import annotations
@@ -15,21 +15,21 @@ import numpy as np
 from numba import njit
 
 from ..model.kinematics import angle_and_rate
-from .options import CROSSING_BAND, EVENT_BAND, EVENT_NOISE, SIGN_ROUNDING
 from .radau import C1, C2, runtime_int
-from .switching import (Bracket, N_STATE_FUNCTIONS, STOP, TANGENTIAL, exit_functions, locate_exit,
-                        locate_state_event, rate_slope, state_function)
+from .switching import (EXIT_ROOT, STATE_ROOT, Bracket, N_STATE_FUNCTIONS, STOP, TANGENTIAL,
+                        exit_functions, illinois_root, rate_slope, state_function)
 
 
 @njit(cache=True, error_model="numpy")
-def _first_crossing(step, atol, dtau):
+def _first_crossing(step, atol, dtau, options):
     """The earliest sign change of a state switching function across the step, sampled at
     its start, its stages and its end along the solution: (k, theta_a, theta_b, f_a, f_b),
     or k = -1 where there is none.
 
-    A value has a sign only beyond the noise of the stage values (EVENT_NOISE times the
-    stage tolerance ``atol``, and rounding: a body at rest at tau = 0 has g = +-1e-17), and a
-    sign change is a crossing only where one side lies beyond EVENT_BAND delta_tau: inside
+    A value has a sign only beyond the noise of the stage values (``options.noise``, an
+    ``EventOptions``, times the stage tolerance ``atol``, and rounding, ``sign_rounding``: a
+    body at rest at tau = 0 has g = +-1e-17), and a sign change is a crossing only where one
+    side lies beyond ``crossing_band`` delta_tau: inside
     the friction's band F is smooth (a stuck g whose sign changes with the force it must
     hold is no corner; cut there, a pass at delta 1e-10 took 1e5 steps of 1e-11).  Not
     both sides beyond it: a step cut to an event located on a longer step's polynomial can
@@ -42,8 +42,9 @@ def _first_crossing(step, atol, dtau):
     best_b = 2.0
     best_fa = 0.0
     best_fb = 0.0
-    noise = EVENT_NOISE * atol
-    sharp = CROSSING_BAND * dtau
+    noise = options.noise * atol
+    sharp = options.crossing_band * dtau
+    rounding = options.sign_rounding
     for k in range(N_STATE_FUNCTIONS):
         f0 = state_function(k, u_n, S0, om0, 0.0)
         f1 = state_function(k, sol.U1, kin.S1, kin.om1, 0.0)
@@ -55,7 +56,7 @@ def _first_crossing(step, atol, dtau):
             continue
         f_prev = f0
         th_prev = 0.0
-        signed = abs(f_prev) > max(noise, SIGN_ROUNDING * (abs(u_n) + abs(om0)))
+        signed = abs(f_prev) > max(noise, rounding * (abs(u_n) + abs(om0)))
         for i in range(3):
             if i == 0:
                 th, u, om, f = C1, sol.U1, kin.om1, f1
@@ -63,7 +64,7 @@ def _first_crossing(step, atol, dtau):
                 th, u, om, f = C2, sol.U2, kin.om2, f2
             else:
                 th, u, om, f = 1.0, sol.U3, kin.om3, f3
-            if abs(f) <= max(noise, SIGN_ROUNDING * (abs(u) + abs(om))):
+            if abs(f) <= max(noise, rounding * (abs(u) + abs(om))):
                 continue
             if signed and f_prev * f < 0.0:
                 if th_prev < best_a:
@@ -145,15 +146,27 @@ def held_exits(code, params, t, side, phys, band, memo):
 
 
 @njit(cache=True, error_model="numpy")
-def find_event(code, params, phys, step, atol, first_cut, memo):
+def _locate_state_event(k, code, params, step, bracket, band, options):
+    """Zero of state function ``k`` (with the friction's ``band``) along the collocation
+    polynomial of ``step`` (a ``SolvedStep``) in its ``Bracket`` of theta (0 <= a < b <= 1),
+    by ``periodic.switching.illinois_root`` to ``options.root_share`` (``EventOptions``) of
+    the step.  Returns theta."""
+    sol = step.sol
+    return illinois_root(runtime_int(STATE_ROOT), k, code, params, step.t0 + 0.5 * step.h,
+                         (step.t0, step.h, step.u_n, sol.U1, sol.U2, sol.U3, band), bracket,
+                         options.root_share, options.root_iterations)
+
+
+@njit(cache=True, error_model="numpy")
+def find_event(code, params, phys, step, atol, first_cut, memo, options):
     """theta in (0, 1] of the earliest event in a solved step (a ``SolvedStep``), or -1 where
     it holds none:
 
     - a sign change of g or of the outer end's velocity (``_first_crossing``), located on
       the collocation polynomial;
-    - for p = 0, a stop: g enters the friction's band (|g| <= EVENT_BAND delta_tau) from
-      outside and stays in it (no sign change need occur: the body stops and sticks), located
-      where |g| reaches the band's edge.  A stage can stick early on a spurious root of the
+    - for p = 0, a stop: g enters the friction's band (|g| <= ``options.band`` delta_tau)
+      from outside and stays in it (no sign change need occur: the body stops and sticks),
+      located where |g| reaches the band's edge.  A stage can stick early on a spurious root of the
       stage equations where h kappa mu > |u_n| (the polynomial then stops too early: 2.3
       steps early measured at mu_n/mu_s 3,020), so on a step's first cut (``first_cut``) the
       stop is not put before the line of g from the step's start, whose slope kappa F(u_n)
@@ -161,13 +174,15 @@ def find_event(code, params, phys, step, atol, first_cut, memo):
     - for p = 0, an exit: a step that starts in the band, where one of the exit functions
       (``periodic.switching.exit_functions``) turns positive; their values at the step's ends come
       from ``memo`` (``held_exits``) where it has them.
+
+    ``options``: the ``periodic.options.EventOptions``.
     """
     t0, h, u_n, sol, kin, S0, om0, f0 = step
     theta = 2.0
-    k, a, b, fa, fb = _first_crossing(step, atol, phys.dtau)
+    k, a, b, fa, fb = _first_crossing(step, atol, phys.dtau, options)
     if k >= 0:
-        theta = locate_state_event(k, code, params, step, Bracket(a, b, fa, fb), 0.0)
-    band = EVENT_BAND * phys.dtau
+        theta = _locate_state_event(k, code, params, step, Bracket(a, b, fa, fb), 0.0, options)
+    band = options.band * phys.dtau
     if phys.p == 0.0 and band > 0.0:
         g0 = state_function(runtime_int(TANGENTIAL), u_n, S0, om0, 0.0)
         if abs(g0) > band:
@@ -182,8 +197,8 @@ def find_event(code, params, phys, step, atol, first_cut, memo):
                     th_a, f_a, th_b, f_b = C1, abs(g1) - band, C2, abs(g2) - band
                 else:
                     th_b, f_b = C1, abs(g1) - band
-                stop = locate_state_event(runtime_int(STOP), code, params, step,
-                                          Bracket(th_a, th_b, f_a, f_b), band)
+                stop = _locate_state_event(runtime_int(STOP), code, params, step,
+                                           Bracket(th_a, th_b, f_a, f_b), band, options)
                 if first_cut:
                     phi, om = angle_and_rate(code, params, t0, t0 + 0.5 * h)
                     reach = stop_reach(phys, u_n, f0, band, math.sin(phi), math.cos(phi), om,
@@ -195,12 +210,17 @@ def find_event(code, params, phys, step, atol, first_cut, memo):
             side = t0 + 0.5 * h
             up0, down0 = held_exits(code, params, t0, side, phys, band, memo)
             up1, down1 = held_exits(code, params, t0 + h, side, phys, band, memo)
+            data = (phys.kappa, phys.mu_n, phys.mu_s, phys.p, phys.dtau, band, 0.0)
             if up0 <= 0.0 < up1:
-                theta = min(theta, (locate_exit(runtime_int(0), code, params,
-                                                Bracket(t0, t0 + h, up0, up1), side, phys,
-                                                band) - t0) / h)
+                theta = min(theta, (illinois_root(runtime_int(EXIT_ROOT), runtime_int(0), code,
+                                                  params, side, data,
+                                                  Bracket(t0, t0 + h, up0, up1),
+                                                  options.root_share, options.root_iterations)
+                                    - t0) / h)
             if down0 <= 0.0 < down1:
-                theta = min(theta, (locate_exit(runtime_int(1), code, params,
-                                                Bracket(t0, t0 + h, down0, down1), side, phys,
-                                                band) - t0) / h)
+                theta = min(theta, (illinois_root(runtime_int(EXIT_ROOT), runtime_int(1), code,
+                                                  params, side, data,
+                                                  Bracket(t0, t0 + h, down0, down1),
+                                                  options.root_share, options.root_iterations)
+                                    - t0) / h)
     return theta if theta <= 1.0 else -1.0

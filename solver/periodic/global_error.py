@@ -29,7 +29,6 @@ import math
 from numba import njit
 
 from .estimators import floored_errors
-from .options import ACCEPT_STEP, MAX_REFINEMENT
 from .radau import ERROR_ORDER
 from .record import (error_floor, integral_sensitivity, largest_power_slope, monodromy_minus_1,
                      node_weight, recorded_error, set_node_weight, step_span)
@@ -84,21 +83,22 @@ def combine(error_u, error_p, scale_u, scale_p):
 
 
 @njit(cache=True, error_model="numpy")
-def refinement_ceiling(W, N, shares, target, ceilings):
+def refinement_ceiling(W, N, shares, target, ceilings, steps):
     """Per step, the largest step the next adaptive pass may take inside it: inf where the
     step's share is within ``target`` times its length, else its length times
-    (target h / share)^(1 / ERROR_ORDER) but at least 1 / MAX_REFINEMENT, and at least
-    ``periodic.steps.ACCEPT_STEP``.  Returns how many steps ask for refinement."""
+    (target h / share)^(1 / ERROR_ORDER) but at least 1 / ``steps.max_refinement``, and at
+    least ``steps.accept_step`` (``periodic.options.StepOptions``).  Returns how many steps
+    ask for refinement."""
     asked = 0
     for n in range(N):
         h = step_span(W, n)[1]
         ratio = shares[n] / (target * h)
         if ratio > 1.0:
             shrink = ratio ** (-1.0 / ERROR_ORDER) if math.isfinite(ratio) else 0.0
-            ceilings[n] = h * max(shrink, 1.0 / MAX_REFINEMENT)
+            ceilings[n] = h * max(shrink, 1.0 / steps.max_refinement)
             # (not below ACCEPT_STEP, which the pass takes whatever its error: a step of 1e-13
             # cut to a state event asked for 1.2e-13, below MIN_STEP, and the pass failed)
-            ceilings[n] = max(ceilings[n], ACCEPT_STEP)
+            ceilings[n] = max(ceilings[n], steps.accept_step)
             asked += 1
         else:
             ceilings[n] = math.inf

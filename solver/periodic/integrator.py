@@ -38,8 +38,6 @@ from .defect import defect_error, estimate_floor
 from .estimators import weighted_error
 from .events import (END_D1, END_D2, END_D3, clear_exit_memo, find_event, new_exit_memo,
                      stop_reach, stop_reach_at)
-from .options import (ACCEPT_STEP, EVENT_BAND, EVENT_END_SHARE, EVENT_START_SHARE, FIT_DISTRUST,
-                      MAX_ATTEMPTS_PER_STEP, MAX_EVENT_CUTS, MIN_FACTOR, MIN_STEP, STRETCH)
 from .radau import C1, C2, dense_value, embedded_error, runtime_int
 from .record import (CORNER_STOP, KINEMATIC_STOP, ORDINARY, STATE_EVENT, close_period, end_kind,
                      grown, predicted_stages, record_step, recorded_error, recorded_kinematics,
@@ -140,7 +138,7 @@ def _model_at(model, t, k):
 
 
 @njit(cache=True, error_model="numpy")
-def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
+def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W, options):
     """Integrate one period from u(0) = u0 with step-size control; see the module docstring.
 
     Parameters
@@ -153,6 +151,9 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
         What the steps are judged by (target, norm, weight model, stage tolerance, step
         budget, events, sharp).
     W : workspace, grown as needed
+    options : EngineOptions (``periodic.options``): the controller's (``options.control``)
+        the traps' (``options.traps``), the events' (``options.events``) and the step
+        lengths' (``options.steps``)
 
     Returns
     -------
@@ -160,6 +161,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
     """
     target, scale_u, scale_p, model = aim.target, aim.scale_u, aim.scale_p, aim.model
     atol, max_steps, events, sharp = aim.atol, aim.max_steps, aim.events, aim.sharp
+    control = options.control
     stops, stop_is_corner = point_stops.times, point_stops.is_corner
     stop_is_turning, n_stops = point_stops.is_turning, point_stops.count
     t = 0.0
@@ -183,7 +185,10 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
     attempts = 0
     stretch = True  # the proposal may be stretched to a stop (not after a rejection)
     evaluations = 1
-    band = EVENT_BAND * phys.dtau
+    event_options = options.events
+    step_options = options.steps
+    min_step, accept_step = step_options.min_step, step_options.accept_step
+    band = event_options.band * phys.dtau
     reach = stop_reach_at(code, params, phys, t, u, f0, band)
     memo = new_exit_memo()
     # Newton's quadratic constant, carried from step to step (``radau5_step``), in the loose
@@ -207,7 +212,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
         reach_clip = False
         if event_cut:
             event_cut = False
-        elif h >= room / (STRETCH if stretch else 1.0):
+        elif h >= room / (step_options.stretch if stretch else 1.0):
             h = room
             at_stop = True
             end_kind = KINEMATIC_STOP
@@ -222,13 +227,13 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
                                   else -1)
         if turning >= 0.0:
             cap = trap_limit(code, params, phys, turning, j, stop_is_corner, stop_is_turning,
-                             t + 0.5 * h, u)
-            capped = trap_clip(h, cap)
+                             t + 0.5 * h, u, options.traps)
+            capped = trap_clip(h, cap, accept_step)
             if capped < h:
                 h = capped
                 at_stop = False
                 end_kind = ORDINARY
-        if 64.0 * MIN_STEP < reach < h and not event_cut:
+        if 64.0 * min_step < reach < h and not event_cut:
             # the slipping body reaches the band within the step: end the step there before
             # solving it (the stage Newton across a stop took up to 356 evaluations of the
             # stages, measured at delta 1e-10; ending at the stop, a few)
@@ -237,7 +242,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
             at_stop = False
             end_kind = ORDINARY
         attempts += 1
-        if not h >= MIN_STEP or attempts > MAX_ATTEMPTS_PER_STEP * (n + 16):
+        if not h >= min_step or attempts > step_options.max_attempts_per_step * (n + 16):
             return PeriodPass(W, n, TOLERANCE_NOT_REACHED, h, evaluations)
         kin = stage_kinematics(code, params, t, h)
         if have_previous:  # the last step's collocation polynomial, extrapolated
@@ -259,12 +264,13 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
             continue
         # events first: a step whose stages straddle a corner of F has a large error, and
         # shrinking it by the controller would only approach the corner step by step
-        if events and cuts < MAX_EVENT_CUTS:
+        if events and cuts < event_options.max_cuts:
             theta = find_event(code, params, phys, SolvedStep(t, h, u, sol, kin, S0, om0, f0),
-                               atol, cuts == 0, memo)
+                               atol, cuts == 0, memo, event_options)
             if theta > 0.0:
-                at_start = have_previous and theta * h <= EVENT_START_SHARE * prev_h
-                if theta < 1.0 - EVENT_END_SHARE and theta * h >= MIN_STEP and not at_start:
+                at_start = have_previous and theta * h <= event_options.start_share * prev_h
+                if (theta < 1.0 - event_options.end_share and theta * h >= min_step
+                        and not at_start):
                     h *= theta
                     cuts += 1
                     event_cut = True
@@ -283,14 +289,14 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
                                estimate_floor(u, sol, atol), h,
                                max(abs(sol.Pu1), abs(sol.Pu2), abs(sol.Pu3))) / (target * h)
         if not fits:  # the defect's model does not fit: its error is not trusted as it is
-            ratio *= FIT_DISTRUST
-        if not ratio <= 1.0 and not (h <= ACCEPT_STEP and math.isfinite(ratio)):
-            h *= max(MIN_FACTOR, predict_factor(h, h_old, ratio, ratio_old)) \
-                if math.isfinite(ratio) else MIN_FACTOR
+            ratio *= step_options.fit_distrust
+        if not ratio <= 1.0 and not (h <= accept_step and math.isfinite(ratio)):
+            h *= max(control.min_factor, predict_factor(h, h_old, ratio, ratio_old, control)) \
+                if math.isfinite(ratio) else control.min_factor
             cuts = 0
             stretch = False
             continue
-        if not at_stop and t_stop - (t + h) <= 4.0 * MIN_STEP:
+        if not at_stop and t_stop - (t + h) <= 4.0 * min_step:
             at_stop = True  # (a cut to an event that close to the stop leaves no room after it)
             h = t_stop - t
             if next_stop < n_stops and stop_is_corner[next_stop]:
@@ -302,7 +308,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W):
         cuts = 0
         stretch = True
         # (never below ACCEPT_STEP: a step accepted there whatever its error would shrink on)
-        h_next = max(h * predict_factor(h, h_old, ratio, ratio_old), ACCEPT_STEP)
+        h_next = max(h * predict_factor(h, h_old, ratio, ratio_old, control), accept_step)
         h_old = h
         ratio_old = ratio
         t_new = t + h

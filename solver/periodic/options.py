@@ -6,12 +6,20 @@ The Radau IIA tableau (``periodic.radau``), the step record's layout (``periodic
 and the codes of stops, events and statuses keep their own modules; the tolerances that
 derive from rtol are in ``periodic.tolerances``.
 
-numba reads module globals as compile-time constants, so these are fixed when the kernels
-compile: changing one means editing it here (which also starts a fresh kernel cache,
-``solver._cache``), not passing it at run time.  ``engine_options()`` lists them, for
+numba reads module globals as compile-time constants, so most of these are fixed when the
+kernels compile: changing one means editing it here (which also starts a fresh kernel cache,
+``solver._cache``).  Those of the roles in ``EngineOptions`` (so far the step-size
+controller's, ``ControlOptions``, one point's solve's, ``PointOptions``, the
+turning-point traps', ``TrapOptions``, the kinematic stops', ``StopOptions``, the state
+events', ``EventOptions``, and the step lengths', ``StepOptions``) are passed
+through the kernels at run time instead: the constants here are their defaults, and
+``solve_periodic(..., options=EngineOptions(...))`` changes them without recompiling (one
+compiled signature for every value).  ``engine_options()`` lists the constants, for
 provenance.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 
 def engine_options() -> dict:
@@ -139,6 +147,16 @@ SIMPLE_SHARE = 0.5
 #: two stops closer than this are one
 STOP_GAP = 1e-12
 
+# ------------------------------------------ the root finder (``periodic.switching.illinois_root``)
+#: a kinematic stop is located to this share of tau (about two ulps: the stops are found once
+#: per point), in at most this many iterations
+KINEMATIC_ROOT_SHARE = 4e-16
+KINEMATIC_ROOT_ITERATIONS = 200
+#: a state event and a held body's exit are located to this share of their step (state
+#: events, theta in [0, 1]) or of tau (exits), in at most this many iterations
+EVENT_ROOT_SHARE = 1e-13
+EVENT_ROOT_ITERATIONS = 100
+
 # ------------------------------------ the global estimate's refinement (``periodic.global_error``)
 #: a refinement ceiling is at most this factor below its step (the next pass's own control
 #: and the trap caps may still shrink it further).  A share far above the tolerance says that
@@ -195,3 +213,191 @@ IN_LINE_SHARE = 1e-9
 #: this many steps: it is a guess (bench, rtol 1e-4: 64 steps cost 18.7 ms per 2,000 points
 #: and the loose shooting 605 evaluations per solve, 8 steps 2.8 ms and 604, u = 0 571)
 GUESS_STEPS = 8
+
+
+# ------------------------------------------------------------------ options passed at run time
+class ControlOptions(NamedTuple):
+    """The step-size controller's settings (``periodic.control.predict_factor``): the factor
+    is multiplied by ``safety`` and clipped to [``min_factor``, ``max_factor``]; defaults
+    SAFETY, MIN_FACTOR, MAX_FACTOR (documented above)."""
+
+    safety: float = SAFETY
+    min_factor: float = MIN_FACTOR
+    max_factor: float = MAX_FACTOR
+
+
+class PointOptions(NamedTuple):
+    """One point's solve (``periodic.point``): at most ``max_loose_passes`` loose passes and
+    ``max_rounds`` rounds, a kept shooting residual counted ``residual_weight`` times, the
+    first pass's first step ``first_step``, and a warm start kept where its stage tolerance
+    is at most ``warm_atol_slack`` times the point's own; defaults MAX_LOOSE_PASSES,
+    MAX_ROUNDS, RESIDUAL_WEIGHT, FIRST_STEP, WARM_ATOL_SLACK (documented above)."""
+
+    max_loose_passes: int = MAX_LOOSE_PASSES
+    max_rounds: int = MAX_ROUNDS
+    residual_weight: float = RESIDUAL_WEIGHT
+    first_step: float = FIRST_STEP
+    warm_atol_slack: float = WARM_ATOL_SLACK
+
+
+class TrapOptions(NamedTuple):
+    """The turning-point traps (``periodic.traps``): a step next to a turning point may
+    change u by friction at most ``share`` of u, never below ``floor`` at a simple one; a
+    converged step over ``slack`` times its ceiling is rejected, its new ceiling at least
+    the step over ``span``; defaults TRAP_SHARE, TRAP_FLOOR, TRAP_SLACK, TRAP_SPAN
+    (documented above)."""
+
+    share: float = TRAP_SHARE
+    floor: float = TRAP_FLOOR
+    slack: float = TRAP_SLACK
+    span: float = TRAP_SPAN
+
+
+class StopOptions(NamedTuple):
+    """The kinematic stops (``periodic.switching.kinematic_stops``, ``turning_stops``):
+    ``samples_per_wavenumber`` samples per wavenumber in the search for zeros, a minimum of
+    |omega| below ``tangency_share`` of max |omega| a near-tangency, a turning point simple
+    where |omega'| >= ``simple_share`` 2 pi max |omega|, stops closer than ``gap`` one, a
+    stop located to ``root_share`` of tau in at most ``root_iterations``; defaults
+    SAMPLES_PER_WAVENUMBER, TANGENCY_SHARE, SIMPLE_SHARE, STOP_GAP, KINEMATIC_ROOT_SHARE,
+    KINEMATIC_ROOT_ITERATIONS (documented above)."""
+
+    samples_per_wavenumber: int = SAMPLES_PER_WAVENUMBER
+    tangency_share: float = TANGENCY_SHARE
+    simple_share: float = SIMPLE_SHARE
+    gap: float = STOP_GAP
+    root_share: float = KINEMATIC_ROOT_SHARE
+    root_iterations: int = KINEMATIC_ROOT_ITERATIONS
+
+
+class EventOptions(NamedTuple):
+    """State events (``periodic.events``, the integrator's cuts, ``periodic.estimators``'
+    splits): a located event within ``end_share`` of its step of the step's end is on it,
+    within ``start_share`` of the previous step of the start not cut; switching functions
+    within ``sign_rounding`` of their terms have no sign, nor within ``noise`` stage
+    tolerances; a sign change is an event beyond ``crossing_band`` delta_tau; the friction's
+    band is ``band`` delta_tau; at most ``max_cuts`` cuts in a row; an event within
+    ``split_share`` of a recorded step's end is on it; located to ``root_share`` of the step
+    in at most ``root_iterations``.  Defaults EVENT_END_SHARE, EVENT_START_SHARE,
+    SIGN_ROUNDING, EVENT_NOISE, CROSSING_BAND, EVENT_BAND, MAX_EVENT_CUTS, SPLIT_SHARE,
+    EVENT_ROOT_SHARE, EVENT_ROOT_ITERATIONS (documented above)."""
+
+    end_share: float = EVENT_END_SHARE
+    start_share: float = EVENT_START_SHARE
+    sign_rounding: float = SIGN_ROUNDING
+    noise: float = EVENT_NOISE
+    crossing_band: float = CROSSING_BAND
+    band: float = EVENT_BAND
+    max_cuts: int = MAX_EVENT_CUTS
+    split_share: float = SPLIT_SHARE
+    root_share: float = EVENT_ROOT_SHARE
+    root_iterations: int = EVENT_ROOT_ITERATIONS
+
+
+class StepOptions(NamedTuple):
+    """Step lengths in a pass (``periodic.integrator``, ``periodic.traps``,
+    ``periodic.global_error``, ``periodic.point``): below ``min_step`` a pass fails, a step
+    of ``accept_step`` or less is accepted whatever its error, a step whose defect model
+    does not fit is judged by ``fit_distrust`` times its estimate, a step is stretched to a
+    stop within ``stretch`` of it, a pass gives up after ``max_attempts_per_step`` attempts
+    per accepted step (+ 16), a refinement ceiling is at most ``max_refinement`` below its
+    step; defaults MIN_STEP, ACCEPT_STEP, FIT_DISTRUST, STRETCH, MAX_ATTEMPTS_PER_STEP,
+    MAX_REFINEMENT (documented above)."""
+
+    min_step: float = MIN_STEP
+    accept_step: float = ACCEPT_STEP
+    fit_distrust: float = FIT_DISTRUST
+    stretch: float = STRETCH
+    max_attempts_per_step: int = MAX_ATTEMPTS_PER_STEP
+    max_refinement: float = MAX_REFINEMENT
+
+
+class EngineOptions(NamedTuple):
+    """The engine's options passed through its kernels, by role (a numba NamedTuple of
+    NamedTuples of floats: every value compiles to one signature).  ``EngineOptions()`` is
+    the defaults; ``EngineOptions(control=ControlOptions(max_factor=2.0))`` changes one.
+    Checked and normalised by ``checked_options`` before the kernels see it."""
+
+    control: ControlOptions = ControlOptions()
+    point: PointOptions = PointOptions()
+    traps: TrapOptions = TrapOptions()
+    stops: StopOptions = StopOptions()
+    events: EventOptions = EventOptions()
+    steps: StepOptions = StepOptions()
+
+
+#: the defaults
+DEFAULT_OPTIONS = EngineOptions()
+
+#: each option's type and domain: (type, low, high, low included, high included)
+_DOMAINS = {
+    ("control", "safety"): (float, 0.0, 1.0, False, True),
+    ("control", "min_factor"): (float, 0.0, 1.0, False, True),
+    ("control", "max_factor"): (float, 1.0, float("inf"), True, False),
+    ("point", "max_loose_passes"): (int, 1, 10 ** 6, True, True),
+    ("point", "max_rounds"): (int, 1, 10 ** 6, True, True),
+    ("point", "residual_weight"): (float, 0.0, float("inf"), True, False),
+    ("point", "first_step"): (float, 0.0, 1.0, False, True),
+    ("point", "warm_atol_slack"): (float, 1.0, float("inf"), True, False),
+    ("traps", "share"): (float, 0.0, float("inf"), False, False),
+    ("traps", "floor"): (float, 0.0, 1.0, True, True),
+    ("traps", "slack"): (float, 1.0, float("inf"), True, False),
+    ("traps", "span"): (float, 1.0, float("inf"), True, False),
+    ("stops", "samples_per_wavenumber"): (int, 4, 10 ** 5, True, True),
+    ("stops", "tangency_share"): (float, 0.0, 1.0, True, True),
+    ("stops", "simple_share"): (float, 0.0, float("inf"), True, False),
+    ("stops", "gap"): (float, 0.0, 1e-3, True, True),
+    ("stops", "root_share"): (float, 0.0, 1e-3, False, True),
+    ("stops", "root_iterations"): (int, 1, 10 ** 4, True, True),
+    ("events", "end_share"): (float, 0.0, 0.5, True, False),
+    ("events", "start_share"): (float, 0.0, 0.5, True, False),
+    ("events", "sign_rounding"): (float, 0.0, 1e-3, True, True),
+    ("events", "noise"): (float, 0.0, float("inf"), True, False),
+    ("events", "crossing_band"): (float, 0.0, float("inf"), True, False),
+    ("events", "band"): (float, 0.0, float("inf"), True, False),
+    ("events", "max_cuts"): (int, 0, 10 ** 4, True, True),
+    ("events", "split_share"): (float, 0.0, 0.5, True, False),
+    ("events", "root_share"): (float, 0.0, 1e-3, False, True),
+    ("events", "root_iterations"): (int, 1, 10 ** 4, True, True),
+    ("steps", "min_step"): (float, 0.0, 1e-3, False, True),
+    ("steps", "accept_step"): (float, 0.0, 1e-3, False, True),
+    ("steps", "fit_distrust"): (float, 1.0, float("inf"), True, False),
+    ("steps", "stretch"): (float, 1.0, 2.0, True, True),
+    ("steps", "max_attempts_per_step"): (int, 1, 10 ** 6, True, True),
+    ("steps", "max_refinement"): (float, 1.0, float("inf"), False, False),
+}
+
+
+def checked_options(options) -> EngineOptions:
+    """``options`` (an EngineOptions, or None for the defaults) with every field of its
+    type (float or int) and in its domain, so that the kernels compile once for every value
+    (an int where a float belongs would be another numba type, another compile).  Raises
+    ValueError naming the option."""
+    if options is None:
+        return DEFAULT_OPTIONS
+    if not isinstance(options, EngineOptions):
+        raise ValueError(f"options: expected an EngineOptions, got {type(options).__name__}")
+    roles = {}
+    for role, group in zip(EngineOptions._fields, options):
+        default = getattr(DEFAULT_OPTIONS, role)
+        if not isinstance(group, type(default)):
+            raise ValueError(f"options.{role}: expected a {type(default).__name__}, "
+                             f"got {type(group).__name__}")
+        values = {}
+        for name, value in zip(group._fields, group):
+            kind, lo, hi, lo_in, hi_in = _DOMAINS[(role, name)]
+            try:
+                x = float(value)
+                if kind is int:
+                    if isinstance(value, bool) or x != int(x):
+                        raise ValueError
+                    x = int(x)
+            except (TypeError, ValueError, OverflowError):
+                what = "an integer" if kind is int else "a number"
+                raise ValueError(f"options.{role}.{name}: expected {what}, got {value!r}") from None
+            if not ((lo < x or (lo_in and x == lo)) and (x < hi or (hi_in and x == hi))):
+                span = f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
+                raise ValueError(f"options.{role}.{name}: must lie in {span}, got {value!r}")
+            values[name] = x
+        roles[role] = type(default)(**values)
+    return EngineOptions(**roles)

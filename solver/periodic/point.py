@@ -48,8 +48,7 @@ from ..status import CONVERGED, NON_FINITE, NOT_PERIODIC, NO_MOTION, TOLERANCE_N
 from .estimators import estimate_pass, event_split_errors
 from .global_error import combine, local_error_estimate, node_weights, refinement_ceiling
 from .integrator import Stops, PassAim, WeightModel, adaptive_pass, frozen_pass
-from .options import (FIRST_STEP, MAX_LOOSE_PASSES, MAX_ROUNDS, MIN_STEP, RESIDUAL_WEIGHT,
-                      WARM_ATOL_SLACK)
+from .options import EngineOptions
 from .radau import ERROR_ORDER
 from .record import (CORNER_STOP, end_kind, new_workspace, node_columns, node_weight,
                      set_step_span, set_step_start, stage_kinematics_into, step_span)
@@ -118,7 +117,8 @@ class PointProblem(NamedTuple):
     encoding ``code``, ``params`` (one row, ``model.kinematics``); ``phys`` (PointPhysics);
     ``stops`` (its kinematic ``Stops``); ``vscale`` = V; ``tols``, the ``Tolerances`` of
     rtol (``periodic.tolerances``); ``max_steps`` (steps per period before
-    STEP_BUDGET_EXCEEDED) and ``bound`` (u(0) is bracketed in +-bound)."""
+    STEP_BUDGET_EXCEEDED), ``bound`` (u(0) is bracketed in +-bound) and ``options``
+    (``periodic.options.EngineOptions``)."""
 
     code: int
     params: np.ndarray
@@ -128,6 +128,7 @@ class PointProblem(NamedTuple):
     tols: Tolerances
     max_steps: int
     bound: float
+    options: EngineOptions
 
 
 class RoundStart(NamedTuple):
@@ -186,14 +187,16 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     where an event sits inside a step the step split there), the node weights, the global
     estimate, and the trap check of the steps next to turning points.  ``residual``: a
     shooting residual kept unshifted (``solve_point``'s frozen map that jumps over its
-    fixed point), counted RESIDUAL_WEIGHT times by its first-order effect."""
+    fixed point), counted ``options.point.residual_weight`` times (RESIDUAL_WEIGHT) by its
+    first-order effect."""
     code, params, phys = problem.code, problem.params, problem.phys
     corner_nodes = np.zeros(N, dtype=np.bool_)
     for n in range(N - 1):
         corner_nodes[n + 1] = end_kind(W, n) == CORNER_STOP
     evaluations = estimate_pass(code, params, phys, corner_nodes, atol, W, N)[1]
     split = np.zeros(N, dtype=np.bool_)
-    evaluations += event_split_errors(code, params, phys, atol, W, N, split)[1]
+    evaluations += event_split_errors(code, params, phys, atol, W, N, split,
+                                      problem.options.events)[1]
     node_weights(W, N, one_minus_M)
     int_u, int_p = period_integrals(W, N)
     scale_u, scale_p = norm_scales(int_u, int_p, problem.vscale)
@@ -202,25 +205,27 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     # a kept shooting residual g is a jump of u at node 0: it moves int u by lambda_0 g
     # and int Pi by mu_0 g to first order (the node weights' meaning), counted twice
     lam0, mu0 = node_weight(W, 0)
-    e_u += RESIDUAL_WEIGHT * abs(lam0 * residual)
-    e_p += RESIDUAL_WEIGHT * abs(mu0 * residual)
+    weight = problem.options.point.residual_weight
+    e_u += weight * abs(lam0 * residual)
+    e_p += weight * abs(mu0 * residual)
     estimate = combine(e_u, e_p, scale_u, scale_p)
     # the steps next to turning points judged again by the converged u (``trapped_steps``)
     trap_caps = np.full(N, math.inf)
-    trapped, e = trapped_steps(code, params, phys, problem.stops, W, N, trap_caps)
+    trapped, e = trapped_steps(code, params, phys, problem.stops, W, N, trap_caps,
+                               problem.options.traps, problem.options.steps.accept_step)
     return Judged(int_u, int_p, scale_u, scale_p, estimate, shares, trap_caps, trapped,
                   evaluations + e)
 
 
 @njit(cache=True, error_model="numpy")
-def _refinement_model(W, N, judged, tols):
+def _refinement_model(W, N, judged, tols, steps):
     """The weight model of the next round: the converged pass's node weights, and ceilings
     on the steps that asked for refinement (or all steps shrunk evenly where none asked
-    alone) and on the trapped ones."""
+    alone) and on the trapped ones; ``steps``: the ``StepOptions``."""
     rtol = tols.rtol
     ceilings = np.full(N, math.inf)
     if judged.estimate > rtol:
-        asked = refinement_ceiling(W, N, judged.shares, tols.target, ceilings)
+        asked = refinement_ceiling(W, N, judged.shares, tols.target, ceilings, steps)
         if asked == 0:
             shrink = 0.9 * (rtol / judged.estimate) ** (1.0 / ERROR_ORDER)
             for n in range(N):
@@ -232,8 +237,8 @@ def _refinement_model(W, N, judged, tols):
 
 @njit(cache=True, error_model="numpy")
 def _rounds(problem, start, W, evals, passes, start_kind):
-    """Steps 3-4 of the module docstring, at most MAX_ROUNDS times from ``start``
-    (RoundStart).  Returns (W, PointSolution)."""
+    """Steps 3-4 of the module docstring, at most ``options.point.max_rounds`` times from
+    ``start`` (RoundStart).  Returns (W, PointSolution)."""
     code, params, phys = problem.code, problem.params, problem.phys
     tols, vscale = problem.tols, problem.vscale
     rtol = tols.rtol
@@ -243,10 +248,11 @@ def _rounds(problem, start, W, evals, passes, start_kind):
     estimate = math.inf
     N = 0
     failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
-    for _ in range(MAX_ROUNDS):
+    for _ in range(problem.options.point.max_rounds):
         aim = PassAim(tols.target, scale_u, scale_p, model, atol, problem.max_steps,
                        True, True)
-        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, h_first, aim, W)
+        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, h_first, aim, W,
+                                    problem.options)
         W, N, status = period_pass.W, period_pass.N, period_pass.status
         passes += 1
         evals[COST_ADAPTIVE] += period_pass.evaluations
@@ -298,24 +304,25 @@ def _rounds(problem, start, W, evals, passes, start_kind):
             return W, PointSolution(judged.int_u, judged.int_p, u0, CONVERGED, N, passes,
                                     estimate, evals, vscale, start_kind)
         failure = TOLERANCE_NOT_REACHED
-        model = _refinement_model(W, N, judged, tols)
+        model = _refinement_model(W, N, judged, tols, problem.options.steps)
         h_first = min(h_first, step_span(W, 0)[1])
     return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals, vscale,
                             start_kind)
 
 
 @njit(cache=True, error_model="numpy")
-def _point_stops(code, params, corners):
-    """The point's kinematic ``Stops`` and V (``periodic.switching.stop_speed``)."""
+def _point_stops(code, params, corners, options):
+    """The point's kinematic ``Stops`` and V (``periodic.switching.stop_speed``);
+    ``options``: ``periodic.options.StopOptions``."""
     stops = np.empty(MAX_STOPS)
-    n_stops, omax = kinematic_stops(code, params, corners, stops)
+    n_stops, omax = kinematic_stops(code, params, corners, stops, options)
     vscale = stop_speed(code, params, stops, n_stops)
     stop_is_corner = np.zeros(n_stops, dtype=np.bool_)
     for j in range(n_stops):
         for c in corners:
             if stops[j] == c:
                 stop_is_corner[j] = True
-    stop_is_turning = turning_stops(code, params, stops, n_stops, omax)
+    stop_is_turning = turning_stops(code, params, stops, n_stops, omax, options)
     return Stops(stops, stop_is_corner, stop_is_turning, n_stops), vscale
 
 
@@ -335,10 +342,11 @@ def _cold_start(problem, u_guess, W, evals):
     # 1e-3 V of U's norm would make it a thousand times too strict)
     lo, hi = -problem.bound, problem.bound
     scale_u = scale_p = 1.0
-    for _ in range(MAX_LOOSE_PASSES):
+    for _ in range(problem.options.point.max_loose_passes):
         aim = PassAim(tols.loose_target, vscale, math.inf, model,
                        stage_atol(loose, vscale, phys), problem.max_steps, True, False)
-        period_pass = adaptive_pass(code, params, phys, problem.stops, u0, FIRST_STEP, aim, W)
+        period_pass = adaptive_pass(code, params, phys, problem.stops, u0,
+                                    problem.options.point.first_step, aim, W, problem.options)
         W, N, status = period_pass.W, period_pass.N, period_pass.status
         passes += 1
         evals[COST_LOOSE] += period_pass.evaluations
@@ -358,7 +366,8 @@ def _cold_start(problem, u_guess, W, evals):
             break
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
     atol = target_stage_atol(rtol, scale_u, phys, _largest_weight(model, scale_u, scale_p))
-    h_first = max((step_span(W, 0)[1]) * (rtol / loose) ** (1.0 / ERROR_ORDER), 64.0 * MIN_STEP)
+    h_first = max((step_span(W, 0)[1]) * (rtol / loose) ** (1.0 / ERROR_ORDER),
+                  64.0 * problem.options.steps.min_step)
     return W, RoundStart(u0, h_first, model, atol, scale_u, scale_p), CONVERGED, N, passes
 
 
@@ -388,7 +397,7 @@ def warm_start(W, orbit, problem):
 
 
 @njit(cache=True, error_model="numpy")
-def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit):
+def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit, options):
     """The periodic solution of one point; see the module docstring.
 
     Parameters
@@ -404,6 +413,8 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit)
     W : workspace (``periodic.record.new_workspace``); with a warm start it holds ``orbit``.
     orbit : Orbit
         A neighbour's converged orbit to start from (``no_orbit()``: start cold).
+    options : EngineOptions
+        The options passed through the kernels (``periodic.options.checked_options``).
 
     Returns
     -------
@@ -411,13 +422,13 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit)
     orbit for the next point of a sweep (``no_orbit()`` unless CONVERGED).  Where phi is
     constant (V = 0) nothing is solved: status NO_MOTION, the integrals 0.
     """
-    point_stops, vscale = _point_stops(code, params, corners)
+    point_stops, vscale = _point_stops(code, params, corners, options.stops)
     evals = np.zeros(N_COSTS, dtype=np.int64)
     if vscale == 0.0:
         return W, PointSolution(0.0, 0.0, 0.0, NO_MOTION, 0, 0, 0.0, evals, vscale,
                                 START_COLD), no_orbit()
     problem = PointProblem(code, params, phys, point_stops, vscale, tolerances(rtol, vscale),
-                           max_steps, u0_bound(vscale, u_guess))
+                           max_steps, u0_bound(vscale, u_guess), options)
     verdict = START_COLD
     if orbit.N > 0:
         # warm: the rounds of steps 3-4 from the neighbour's orbit (``warm_start``)
@@ -426,7 +437,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit)
         if sol.status == CONVERGED:
             own = _orbit_of(W, sol, problem)
             own_atol = target_stage_atol(rtol, own.scale_u, phys, own.largest_weight)
-            if start.atol <= WARM_ATOL_SLACK * own_atol:
+            if start.atol <= options.point.warm_atol_slack * own_atol:
                 return W, sol, own
             # the neighbour's norm and node weights set a stage tolerance too loose for this
             # point's (``_largest_weight``): the rounds again with the point's own

@@ -1,7 +1,7 @@
 """One step as the passes take it: the kinematics at the stages and at the defect's
 samples, the start values (F, dF/du, Pi, dPi/du) at a node, and ``solve_step``, the Radau IIA
-stage solve (``periodic.radau.radau5_step``) with its fallbacks; and the step-size limits
-MIN_STEP and ACCEPT_STEP that every module judging a step's length shares.
+stage solve (``periodic.radau.radau5_step``) with its fallbacks.  (The step-size limits
+that every module judging a step's length shares are ``periodic.options.StepOptions``.)
 """
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ DifferentialEquations.jl ``tstops``):
   minimum: a near-tangency opens the same window without a zero) and the corners of phi
   are known before the pass: ``kinematic_stops`` finds their zeros once per point;
 - the functions of u (g and the outer end's velocity) are state events: a sign change
-  across a step is located on the step's collocation polynomial (``locate_state_event``,
+  across a step is located on the step's collocation polynomial (``illinois_root``,
   scipy ``ivp.py``'s ``solve_event_equation`` on the dense output) and the step is cut
   there.
 """
@@ -34,7 +34,6 @@ from numba import njit
 
 from ..model.force import force_slope_power_sc
 from ..model.kinematics import FOURIER, angle_and_rate, rate_slope
-from .options import SAMPLES_PER_WAVENUMBER, SIMPLE_SHARE, STOP_GAP, TANGENCY_SHARE
 from .radau import StageKinematics, StepSolution, dense_value, runtime_int
 
 #: ``turning_stops``' codes
@@ -49,6 +48,11 @@ TANGENTIAL = 0   # g = u + omega S / 4: the link's tangential velocity is C g, i
 OUTER_END = 1    # -S g + omega / 2: the normal velocity at the link's outer end
 STOP = 2         # |g| - band: the junction comes to rest (p = 0: the body sticks)
 N_STATE_FUNCTIONS = 2  # those that are located at their sign changes (not STOP)
+
+#: ``illinois_root``'s functions, by kind (``root_function``)
+KINEMATIC_ROOT = 0
+EXIT_ROOT = 1
+STATE_ROOT = 2
 
 
 class Bracket(NamedTuple):
@@ -102,33 +106,21 @@ def exit_functions(code, params, t, side, phys, band):
     band while both are negative and leaves it (upward, downward) where one turns positive:
     a transversal zero, where g itself leaves zero tangentially (its second derivative
     jumps there).  Functions of tau alone (u is u_s)."""
+    return _exit_pair(code, params, t, side, phys.kappa, phys.mu_n, phys.mu_s, phys.p,
+                      phys.dtau, band)
+
+
+@njit(cache=True, error_model="numpy")
+def _exit_pair(code, params, t, side, kappa, mu_n, mu_s, p, dtau, band):
+    """``exit_functions`` from the physics' fields (``root_function``'s EXIT_ROOT)."""
     phi, om = angle_and_rate(code, params, t, side)
     S = math.sin(phi)
     C = math.cos(phi)
     u_s = -0.25 * om * S
     rate = -0.25 * (rate_slope(code, params, t, side) * S + om * om * C)
-    F_up = force_slope_power_sc(u_s + band, S, C, om, phys.mu_n, phys.mu_s, phys.p,
-                                phys.dtau)[0]
-    F_down = force_slope_power_sc(u_s - band, S, C, om, phys.mu_n, phys.mu_s, phys.p,
-                                  phys.dtau)[0]
-    return phys.kappa * F_up - rate, rate - phys.kappa * F_down
-
-
-@njit(cache=True, error_model="numpy")
-def locate_exit(which, code, params, bracket, side, phys, band):
-    """Zero of exit function ``which`` (0 up, 1 down) in its ``Bracket`` of tau, Illinois."""
-    a, b, fa, fb = bracket
-    last = runtime_int(0)
-    c = a
-    for _ in range(100):
-        c = (a * fb - b * fa) / (fb - fa)
-        if b - a <= 1e-13 * max(1.0, abs(c)):
-            break
-        fc = exit_functions(code, params, c, side, phys, band)[which]
-        if fc == 0.0:
-            break
-        a, b, fa, fb, last = illinois_update(a, b, fa, fb, c, fc, last)
-    return c
+    F_up = force_slope_power_sc(u_s + band, S, C, om, mu_n, mu_s, p, dtau)[0]
+    F_down = force_slope_power_sc(u_s - band, S, C, om, mu_n, mu_s, p, dtau)[0]
+    return kappa * F_up - rate, rate - kappa * F_down
 
 
 @njit(cache=True, error_model="numpy")
@@ -148,22 +140,6 @@ def _kinematic_function(k, code, params, t, side):
 
 
 @njit(cache=True, error_model="numpy")
-def _refine_root(k, code, params, a, b, fa, fb, side):
-    """Zero of kinematic function k in [a, b] (fa fb < 0) by Illinois regula falsi."""
-    last = runtime_int(0)
-    c = a
-    for _ in range(200):
-        c = (a * fb - b * fa) / (fb - fa)
-        if b - a <= 4e-16 * max(1.0, abs(c)):
-            break
-        fc = _kinematic_function(k, code, params, c, side)
-        if fc == 0.0:
-            break
-        a, b, fa, fb, last = illinois_update(a, b, fa, fb, c, fc, last)
-    return c
-
-
-@njit(cache=True, error_model="numpy")
 def stop_speed(code, params, stops, n_stops):
     """V = (1/4) int_0^1 |dphi/dtau| dtau (``model.limits.kinematic_speed``) from phi at the
     ``kinematic_stops``: phi is monotone between them (they hold every zero of omega and
@@ -179,17 +155,19 @@ def stop_speed(code, params, stops, n_stops):
 
 
 @njit(cache=True, error_model="numpy")
-def kinematic_stops(code, params, corners, out):
+def kinematic_stops(code, params, corners, out, options):
     """The step ends every pass of a point keeps: 0, the corners of phi, the zeros of sin phi,
-    cos phi and omega, and the near-tangencies (minima of |omega| below TANGENCY_SHARE of
-    its maximum).  Writes them sorted into ``out`` (0 first, all in [0, 1)); returns their
-    count and max |omega| over the samples (for ``turning_stops``).
+    cos phi and omega, and the near-tangencies (minima of |omega| below
+    ``options.tangency_share`` of its maximum).  Writes them sorted into ``out`` (0 first,
+    all in [0, 1)); returns their count and max |omega| over the samples (for
+    ``turning_stops``).  ``options``: ``periodic.options.StopOptions``.
 
     The phases between corners are searched separately (each side of a corner with its own
-    phi'), on SAMPLES_PER_WAVENUMBER K samples per period, K the Fourier wavenumber (the
-    power law's phases are monotone: 64 samples per phase)."""
+    phi'), on ``options.samples_per_wavenumber`` K samples per period, K the Fourier
+    wavenumber (the power law's phases are monotone: 64 samples per phase by default)."""
+    tangency = options.tangency_share
     K = max(int(params[0]), 1) if code == FOURIER else 1
-    n_samples = SAMPLES_PER_WAVENUMBER * K
+    n_samples = options.samples_per_wavenumber * K
     ends = np.empty(corners.size + 2)
     ends[0] = 0.0
     m = 1
@@ -231,11 +209,14 @@ def kinematic_stops(code, params, corners, out):
                 t1 = a + (b - a) * i / n_samples
                 f1 = values[j, k, i]
                 if f0 * f1 < 0.0 and count < out.size:
-                    root = _refine_root(k, code, params, t0, t1, f0, f1, side)
+                    root = illinois_root(runtime_int(KINEMATIC_ROOT), k, code, params, side,
+                                         (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+                                         Bracket(t0, t1, f0, f1), options.root_share,
+                                         options.root_iterations)
                     keep = True
                     if k == 3:  # an extremum of omega: a stop only where |omega| is small
                         om = angle_and_rate(code, params, root, side)[1]
-                        keep = abs(om) < TANGENCY_SHARE * omax
+                        keep = abs(om) < tangency * omax
                     if keep:
                         out[count] = root
                         count += 1
@@ -250,7 +231,7 @@ def kinematic_stops(code, params, corners, out):
                     # (``test_a_linear_phase_has_no_turning_stops``)
                     if k < 3 or (values[j, k, i - 1] * values[j, k, i + 1] < 0.0
                                  and abs(angle_and_rate(code, params, t1, side)[1])
-                                 < TANGENCY_SHARE * omax):
+                                 < tangency * omax):
                         out[count] = t1
                         count += 1
                 t0, f0 = t1, f1
@@ -261,9 +242,9 @@ def kinematic_stops(code, params, corners, out):
     kept = 0
     for i in range(count):
         t = stops[i]
-        if t >= 1.0 - STOP_GAP or t < 0.0:
+        if t >= 1.0 - options.gap or t < 0.0:
             continue
-        if kept > 0 and t - out[kept - 1] <= STOP_GAP:
+        if kept > 0 and t - out[kept - 1] <= options.gap:
             if _is_corner(t, ends, m) and not _is_corner(out[kept - 1], ends, m):
                 out[kept - 1] = t
             continue
@@ -283,67 +264,81 @@ def _is_corner(t, ends, m):
 
 
 @njit(cache=True, error_model="numpy")
-def illinois_update(a, b, fa, fb, c, fc, last):
-    """One bracket update of Illinois regula falsi: the new point c (value fc) replaces the
-    end of [a, b] on its side, and the other end's value is halved when the same end was kept
-    twice running (``last``: -1 when b was replaced, 1 when a was, 0 at the start).
+def root_function(kind, k, x, code, params, side, data):
+    """The function whose zero ``illinois_root`` seeks, at x, chosen by ``kind``:
 
-    The three locators (``locate_exit``, ``locate_state_event``, ``_refine_root``) share
-    this update but keep their own short loops: one root finder taking the function as an
-    argument (numba's first-class functions) returned the same bits but made every kernel
-    that calls it uncacheable ("dynamic globals": each process recompiled the engine),
-    measured in issue 37.
+    - KINEMATIC_ROOT: kinematic function ``k`` (``_kinematic_function``) at tau = x;
+    - EXIT_ROOT: exit function ``k`` (0 up, 1 down; ``exit_functions``) at tau = x, with
+      ``data`` = (kappa, mu_n, mu_s, p, dtau, band, -);
+    - STATE_ROOT: state function ``k`` (``state_function``) along a solved step's
+      collocation polynomial at theta = x, with ``data`` = (t0, h, u_n, U1, U2, U3, band).
 
-    Returns (a, b, fa, fb, last)."""
-    if fc * fa < 0.0:
-        if last == -1:
-            fa *= 0.5
-        return a, c, fa, fc, -1
-    if last == 1:
-        fb *= 0.5
-    return c, b, fc, fb, 1
+    ``data`` is one float 7-tuple for every kind (one compiled signature), ``side`` the side
+    of phi's corners the kinematics take (``model.kinematics.angle_and_rate``)."""
+    if kind == KINEMATIC_ROOT:
+        return _kinematic_function(k, code, params, x, side)
+    if kind == EXIT_ROOT:
+        return _exit_pair(code, params, x, side, data[0], data[1], data[2], data[3],
+                          data[4], data[5])[k]
+    t0, h, u_n, U1, U2, U3, band = data
+    phi, om = angle_and_rate(code, params, t0 + x * h, side)
+    return state_function(k, dense_value(x, u_n, U1, U2, U3), math.sin(phi), om, band)
 
 
 @njit(cache=True, error_model="numpy")
-def locate_state_event(k, code, params, step, bracket, band):
-    """Zero of state function ``k`` (with the friction's ``band``) along the collocation
-    polynomial of ``step`` (a ``SolvedStep``) in its ``Bracket`` of theta, [a, b] with
-    0 <= a < b <= 1: Illinois regula falsi to 1e-13 of the step.  Returns theta."""
-    t0, h, u_n = step.t0, step.h, step.u_n
-    U1, U2, U3 = step.sol.U1, step.sol.U2, step.sol.U3
-    a, b, f_a, f_b = bracket
-    side = t0 + 0.5 * h
-    last = runtime_int(0)
+def illinois_root(kind, k, code, params, side, data, bracket, tol, max_iterations):
+    """Zero of ``root_function(kind, k, ., code, params, side, data)`` in its ``Bracket``
+    [a, b] (values of opposite signs) by Illinois regula falsi: the secant point c replaces
+    the end of the bracket on its side, and the other end's value is halved when the same
+    end was kept twice running.  Stops where the bracket is within tol max(1, |c|), where
+    the function vanishes at c, or after ``max_iterations``; returns c.
+
+    The engine's one root finder: kinematic stops (``kinematic_stops``, tau), a held body's
+    exits and state events on a step's polynomial (``periodic.events.find_event``, tau and
+    theta).  The function is chosen by the integer ``kind``, not passed: a root finder
+    taking the function as an argument (numba's first-class functions) returned the same
+    bits but made every kernel that calls it uncacheable ("dynamic globals": each process
+    recompiled the engine), measured in issue 37."""
+    a, b, fa, fb = bracket
+    last = 0  # -1 where b was replaced last, 1 where a was, 0 at the start
     c = a
-    for _ in range(100):
-        c = (a * f_b - b * f_a) / (f_b - f_a)
-        if b - a <= 1e-13:
+    for _ in range(max_iterations):
+        c = (a * fb - b * fa) / (fb - fa)
+        if b - a <= tol * max(1.0, abs(c)):
             break
-        phi, om = angle_and_rate(code, params, t0 + c * h, side)
-        fc = state_function(k, dense_value(c, u_n, U1, U2, U3), math.sin(phi), om, band)
+        fc = root_function(kind, k, c, code, params, side, data)
         if fc == 0.0:
             break
-        a, b, f_a, f_b, last = illinois_update(a, b, f_a, f_b, c, fc, last)
+        if fc * fa < 0.0:
+            if last == -1:
+                fa *= 0.5
+            b, fb, last = c, fc, -1
+        else:
+            if last == 1:
+                fb *= 0.5
+            a, fa, last = c, fc, 1
     return c
 
 
 @njit(cache=True, error_model="numpy")
-def turning_stops(code, params, stops, n_stops, omax):
+def turning_stops(code, params, stops, n_stops, omax, options):
     """Which of the stops are turning points of phi, (n_stops,) int8: TURNING where |omega| on
-    one side of the stop is below TANGENCY_SHARE of ``omax``, max |omega|
+    one side of the stop is below ``options.tangency_share`` (``StopOptions``) of ``omax``, max |omega|
     (``kinematic_stops``' second output: the same threshold that keeps its near-tangencies;
     sampling it again on 1,025 points here had cost 26 us per solve): its zeros, the
     near-tangencies, flat inflections, and the power law's corners where a phase starts or
     ends with omega = 0; SIMPLE_TURNING where moreover |omega'| there is at least
-    SIMPLE_SHARE of 2 pi omax (a harmonic motion's turning points: omega' = 2 pi omax),
-    so that omega grows away from it like a simple zero (``periodic.traps.TRAP_FLOOR``); 0 else."""
+    ``options.simple_share`` of 2 pi omax (a harmonic motion's turning points: omega' =
+    2 pi omax), so that omega grows away from it like a simple zero
+    (``periodic.options.TrapOptions.floor``); 0 else."""
     out = np.zeros(n_stops, dtype=np.int8)
     for j in range(n_stops):
         t = stops[j]
         left = angle_and_rate(code, params, t, t - 1e-9 if t > 0.0 else 1.0 - 1e-9)[1]
         right = angle_and_rate(code, params, t, t + 1e-9)[1]
-        if min(abs(left), abs(right)) < TANGENCY_SHARE * omax:
+        if min(abs(left), abs(right)) < options.tangency_share * omax:
             out[j] = TURNING
-            if abs(rate_slope(code, params, t, t + 1e-9)) >= SIMPLE_SHARE * 2.0 * math.pi * omax:
+            if (abs(rate_slope(code, params, t, t + 1e-9))
+                    >= options.simple_share * 2.0 * math.pi * omax):
                 out[j] = SIMPLE_TURNING
     return out

@@ -1,4 +1,4 @@
-"""Scene kind "grid" (the default): a parameter sweep, its series and its reductions.
+"""Scene kind "grid" (the default): a grid of parameter points, its series and its reductions.
 
 Tasks receive only picklable arguments (paths, the frozen scene, indices) and open the store
 themselves, so they run unchanged on the local schedulers and on a dask.distributed cluster
