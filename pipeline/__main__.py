@@ -65,7 +65,7 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--scheduler", type=_scheduler, default=None,
                        help="processes (default), threads, synchronous, or tcp://host:port of a dask cluster")
         p.add_argument("--workers", type=int, default=None, help="local worker count (default: all cores)")
-        p.add_argument("--overwrite", action="store_true", help="replace a store built from a different scene")
+        p.add_argument("--overwrite", action="store_true", help="replace a store that would be refused (another scene, engine or chunk layout); a store of this scene resumes")
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return ap
 

@@ -136,12 +136,14 @@ def start_workers(run: RunContext, kind: SceneKind, echo) -> None:
     warm_up_kernels(kind.kernel_sets(run.scene), echo)
 
 
-def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool) -> dict:
-    """The store's ``pipeline`` attributes, after refusing a store of a different scene
-    (unless ``overwrite``), creating the skeleton of a new or replaced store, or removing the
-    debris of interrupted writes from one being resumed."""
+def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool, replace: bool = False) -> dict:
+    """The store's ``pipeline`` attributes, after refusing a store of a different scene or
+    engine (replaced instead where ``overwrite``), creating the skeleton of a new or replaced
+    store (``replace``: replaced whatever it holds), or removing the debris of interrupted
+    writes from one being resumed. A store of this scene and engine is resumed, ``overwrite``
+    or not (``paper --overwrite`` recomputes only the scenes whose stores would be refused)."""
     scene, store = run.scene, run.store
-    meta = open_existing(store)
+    meta = None if replace else open_existing(store)
     if meta is not None:
         old = meta["provenance"]["scene_hash"]
         engines, ours = meta["provenance"].get("engines"), engine_versions()
@@ -158,8 +160,8 @@ def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool) -> dict:
                 f"{store}: built from a different scene ({meta['provenance']['scene_file']}, hash "
                 f"{old[:12]}) than {scene.path} (hash {scene.hash[:12]}); rerun with --overwrite to "
                 "replace it, or choose another --store")
-        if overwrite:
-            meta = None
+        if engines != ours or old != scene.hash:
+            meta = None  # overwrite: start over
     if meta is None:
         kind.create_skeleton(run)
         return open_existing(store)
@@ -367,7 +369,13 @@ def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None =
             run.scheduler.start()  # the workers start while this process prepares the store
         meta = prepare_store(run, kind, overwrite)
         pending = kind.pending_chunks(run.store)
-        check_layout(run, kind, meta, pending)
+        try:
+            check_layout(run, kind, meta, pending)
+        except StoreMismatch:
+            if not overwrite:
+                raise
+            meta = prepare_store(run, kind, overwrite, replace=True)
+            pending = kind.pending_chunks(run.store)
         clock.lap("setup")
         if pending or not is_complete(meta["state"]):
             start_workers(run, kind, echo)

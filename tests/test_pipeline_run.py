@@ -199,6 +199,17 @@ def test_overwrite_replaces_store(tmp_path):
     assert store_meta(store)["provenance"]["scene_hash"] == load_scene(other).hash
 
 
+def test_overwrite_resumes_a_store_of_the_same_scene(reference):
+    """--overwrite replaces only a store that would be refused: a complete store of the same
+    scene and engine is left as it is (``paper --overwrite`` after a change to one scene
+    recomputes that scene only). The control, a different scene, is test_overwrite_replaces_store."""
+    scene, store, _ = reference
+    before = {p: p.stat().st_mtime_ns for p in store.rglob("*") if p.is_file()}
+    summary = run_scene(scene, store, scheduler="synchronous", overwrite=True, progress=False)
+    assert summary.computed_chunks == 0 and summary.computed_points == 0
+    assert {p: p.stat().st_mtime_ns for p in store.rglob("*") if p.is_file()} == before
+
+
 def test_not_a_zarr_store_is_refused(tmp_path):
     path = write_scene(tmp_path, small_scene_text())
     victim = tmp_path / "precious"
@@ -409,6 +420,12 @@ def test_store_of_another_chunk_layout_is_refused_until_complete(reference, tmp_
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--overwrite" in err and "chunk layout" in err
     assert (read_store(store)["status"] == -1).all()  # untouched
+    # --overwrite starts that store over in the scene's layout (same scene: replaced, not resumed)
+    summary = run_scene(load_scene(path), store, scheduler="synchronous", overwrite=True, progress=False)
+    assert summary.computed_chunks == summary.total_chunks
+    from pipeline._store import store_meta
+
+    assert tuple(store_meta(store)["layout"]["chunks"]) == (1, 1, 2, 4)
     # The layout of a scene without sweeps changed under a complete store (points_per_chunk is
     # then not hashed): nothing is left to compute in the old layout, so the store is accepted
     # as it is.  (With sweeps the layout is hashed: such a store is another scene's.)
