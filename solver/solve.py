@@ -32,7 +32,7 @@ from .march import driver as march_driver
 from . import periodic
 from .model.kinematics import period_grid
 from .model.limits import fast_limit_velocity, kinematic_speed
-from .status import CONVERGED, NO_MOTION, OUT_OF_RANGE
+from .status import CONVERGED, NO_MOTION, OUT_OF_RANGE, TOLERANCE_NOT_REACHED
 
 #: the public methods of ``solve_periodic``: the engine, and the march, its independent check
 METHODS = ("periodic", "march")
@@ -189,7 +189,8 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
 
 
 def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_series=False,
-                   max_steps_per_period=None, sweeps=None, options=None):
+                   max_steps_per_period=None, sweeps=None, options=None,
+                   keep_unconverged=False):
     """Periodic steady state u(tau) of eq. (Newtonu) and its mean speed, power and efficiency.
 
     Parameters
@@ -226,6 +227,12 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         ``StepOptions``), e.g.
         ``EngineOptions(control=ControlOptions(max_factor=2.0))``.  Default: the documented
         defaults.  Any values run on the same compiled kernels.
+    keep_unconverged : bool
+        ``march`` only.  Where the finest grid allowed marched to a periodic state but its
+        error estimate stayed above rtol (status TOLERANCE_NOT_REACHED), return that grid's
+        U, P and efficiency instead of NaN, keeping the status and ``error_estimate`` (the
+        estimate of those values, in the norm above).  Default False: every point that is
+        not converged is NaN, so that reductions (maxima, contours) cannot pick it up.
 
     Returns
     -------
@@ -245,13 +252,16 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     if options is not None and method != "periodic":
         raise ValueError(f"options: the engine's options are for method 'periodic', not {method!r}")
     options = periodic.checked_options(options) if method == "periodic" else None
+    if keep_unconverged and method != "march":
+        raise ValueError(f"keep_unconverged: only method 'march' returns the values of its "
+                         f"finest grid, not {method!r}")
     start = time.perf_counter()
     max_steps = max_steps_per_period or MAX_STEPS_PER_PERIOD
     if method == "periodic":
         out = periodic.solve(kinematics, physics, rtol, max_steps, return_series, sweeps, options)
     else:
         out = march_driver.solve(kinematics, physics, rtol, max_steps, return_series)
-    return _result(out, physics, method, start)
+    return _result(out, physics, method, start, keep_unconverged)
 
 
 #: points of one sweep where a caller cuts a batch into sweeps (``sweep_runs``): the
@@ -303,16 +313,21 @@ def _checked_sweeps(sweeps, n, method):
     return offsets.astype(np.int64)
 
 
-def _result(out, physics, method, start):
+def _result(out, physics, method, start, keep_unconverged=False):
     """The ``SolveResult`` of a driver's output dict (``periodic.solve``,
     ``march.driver.solve``: int_u, int_pi, status, estimate, n_tau, iterations, still,
     series, evaluations): the physical outputs, NaN where not converged, phi constant as
-    NO_MOTION with U = P = 0, and U or P beyond the float range as OUT_OF_RANGE."""
+    NO_MOTION with U = P = 0, and U or P beyond the float range as OUT_OF_RANGE; with
+    ``keep_unconverged`` the driver's ``unconverged`` values where it has them."""
     status = out["status"]
     still = out["still"]
     status[still] = NO_MOTION
     int_u = np.where(status == CONVERGED, out["int_u"], np.nan)
     int_pi = np.where(status == CONVERGED, out["int_pi"], np.nan)
+    if keep_unconverged:
+        kept = (status == TOLERANCE_NOT_REACHED) & np.isfinite(out["unconverged"][:, 0])
+        int_u = np.where(kept, out["unconverged"][:, 0], int_u)
+        int_pi = np.where(kept, out["unconverged"][:, 1], int_pi)
     int_u[still] = 0.0
     int_pi[still] = 0.0
     estimate = out["estimate"]

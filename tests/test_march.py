@@ -135,3 +135,39 @@ def test_honest_on_random_harmonic_points(rtol):
     assert ok.sum() >= 20, out["status"]
     assert (e <= 10 * rtol).all(), np.sort(e / rtol)[-5:]
     assert np.mean(e <= rtol) >= 0.95, np.sort(e / rtol)[-5:]
+
+
+#: the stiffness study's clapping motion (``workflows/stiffness.toml``, "fourier_through_0":
+#: phi passes through 0), whose march at rtol 1e-6 stops at 2^17 steps with its estimate above
+#: rtol at scaled periods 1/8 and 1/4 (docs/validation.md, issue 35 item 4)
+CLAPPING = solver.Fourier(A=[[0.3, 1.1, 0.0, 0.2]] * 2, B=[[0.0, -0.1, 0.05]] * 2)
+CLAPPING_PHYSICS = solver.Physics.from_scaled(2.0 ** -4, np.array([1 / 8, 1 / 4]), 0.0, 1e-5)
+
+
+def test_march_on_a_clapping_motion_returns_nan_or_values_with_their_estimate():
+    """Where the finest grid misses rtol the march says so: NaN by default, or with
+    ``keep_unconverged`` the finest grid's values, status TOLERANCE_NOT_REACHED and an
+    estimate that bounds their true error (against the engine at rtol 1e-10).  The values are
+    the finest grid's, not a converged coarser one's: their error exceeds what a converged
+    point may have (negative control of the status: a converged status would be a lie)."""
+    from solver.status import TOLERANCE_NOT_REACHED
+    rtol = 1e-6
+    plain = solver.solve_periodic(CLAPPING, CLAPPING_PHYSICS, method="march", rtol=rtol)
+    kept = solver.solve_periodic(CLAPPING, CLAPPING_PHYSICS, method="march", rtol=rtol,
+                                 keep_unconverged=True)
+    assert np.all(plain.status == TOLERANCE_NOT_REACHED) and np.all(np.isnan(plain.U))
+    assert np.all(np.isfinite(plain.error_estimate)) and np.all(plain.error_estimate > rtol)
+    assert np.array_equal(kept.status, plain.status)
+    assert np.array_equal(kept.error_estimate, plain.error_estimate)
+    assert np.all(np.isfinite(kept.U)) and np.all(np.isfinite(kept.efficiency))
+    assert np.all(kept.n_tau == MAX_STEPS)
+    ref_u, ref_pi = _reference(CLAPPING, CLAPPING_PHYSICS)
+    err = _norm_error(kept.mean_u, kept.P * CLAPPING_PHYSICS.period ** (CLAPPING_PHYSICS.p + 1.0), ref_u, ref_pi,
+                      solver.kinematic_speed(CLAPPING))
+    assert np.all(err <= kept.error_estimate), (err, kept.error_estimate)
+    assert np.any(err > rtol), err  # not converged in truth either, at one period at least
+
+
+def test_keep_unconverged_is_the_march_s():
+    with pytest.raises(ValueError, match="keep_unconverged"):
+        solver.solve_periodic(CLAPPING, CLAPPING_PHYSICS, keep_unconverged=True)

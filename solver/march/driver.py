@@ -169,6 +169,9 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
     dict with, each of shape (n_points,) unless noted:
         int_u, int_pi : int_0^1 u dtau and int_0^1 Pi dtau on the returned grid (2N steps:
             the finer of the last pair), NaN unless converged;
+        unconverged : (n_points, 2), int_u and int_pi of the finest grid marched where the
+            status is TOLERANCE_NOT_REACHED with a finite estimate (``estimate`` is their
+            error estimate), NaN elsewhere (``solve_periodic(keep_unconverged=True)``);
         status : int8 ``status`` code;
         estimate : e of the returned value (inf where none was formed);
         n_tau : steps per period of the returned (or last tried) grid;
@@ -241,5 +244,9 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
     failed = status != CONVERGED
     int_u[failed] = np.nan
     int_pi[failed] = np.nan
+    # the finest grid's values where only the tolerance was missed (its estimate is theirs)
+    short = (status == TOLERANCE_NOT_REACHED) & np.isfinite(estimate)
+    unconverged = np.where(short[:, None], last, np.nan)
     return dict(int_u=int_u, int_pi=int_pi, status=status, estimate=estimate, n_tau=n_tau,
-                iterations=iterations, still=still, series=series, evaluations=evaluations)
+                iterations=iterations, still=still, series=series, evaluations=evaluations,
+                unconverged=unconverged)
