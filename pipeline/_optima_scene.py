@@ -20,6 +20,11 @@ from ._scene import Execution, ParseContext, parse_axis, parse_value, scene_hash
 __all__ = ["DIMS", "KIND", "Keep", "OptimaScene", "Optimizer", "STOP_CODES", "parse_optima_scene"]
 
 KIND = "optima"
+#: version of the optima kind's array layout and of what its per-start values mean (checked
+#: by readers beside FORMAT_VERSION, and part of the scene's hash: a store of another version
+#: is never resumed).  2: U, P, efficiency, objective are the engine's at the final motion
+#: (``solver.OptimizeResult.engine_*``), the fixed grid's in grid_efficiency, with grid_error
+KIND_VERSION = 2
 DIMS = ("anisotropy_ratio", "max_wavenumber", "p", "start")
 #: optimiser stop reasons as the int8 ``status`` of a start; -1 not computed
 STOP_CODES = {"gradient_tolerance": 0, "max_iterations": 1, "line_search_failed": 2,
@@ -248,7 +253,7 @@ def _build(ctx: ParseContext, doc: dict, text: str) -> OptimaScene:
         store=ctx.string(ex["store"], "execution.store") if "store" in ex else None)
 
     science = {
-        "kind": KIND, "name": name, "family": family,
+        "kind": KIND, "kind_version": KIND_VERSION, "name": name, "family": family,
         "axes": {"anisotropy_ratio": list(ratios.values), "max_wavenumber": list(kmax),
                  "p": list(exponents)},
         "fixed": {"delta": delta},

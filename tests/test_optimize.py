@@ -242,3 +242,25 @@ def test_a_search_creeping_up_to_a_jump_stops_after_creep_limit_steps():
     on = _walk(free, 0)
     assert on.stop_reason == "line_search_failed"
     assert on.iteration > stopped.iteration + 10 and free.solves > 2 * limited.solves
+
+
+def test_the_optimum_is_solved_again_by_the_engine():
+    """``engine_*`` are the final motion's outputs by the engine (its own steps, rtol
+    ``CHECK_RTOL``) and ``grid_error`` the fixed grid's error against them.  On a grid re-adapted
+    at the optimum (grid_rtol 1e-6, rounds until the steps stop changing) that error is within
+    10 grid_rtol; on a coarse uniform fixed grid (24 steps: errors of ~1e-2 at this ratio, the
+    control that must say no) it is far above, and it is exactly the two values' difference."""
+    from solver.adjoint.optimize import CHECK_RTOL
+    physics = solver.Physics.from_scaled(4.0, 2.0, p=0.0, delta=1e-5)
+    start = solver.Fourier(np.array([[0.6, 0.4, 0.0, 0.0]]), np.zeros((1, 3)))
+    fine = optimize_motion(start, physics, direction=-1, grid_rtol=1e-6, grid_rounds=5)
+    coarse = optimize_motion(start, physics, direction=-1, grid=24)
+    for res in (fine, coarse):
+        assert res.converged
+        ref = solver.solve_periodic(res.kinematics, res.physics, rtol=CHECK_RTOL)
+        assert res.engine_efficiency == ref.efficiency[0] and res.engine_value == ref.efficiency[0]
+        assert res.engine_U == ref.U[0] and res.engine_P == ref.P[0]
+        assert res.grid_error == pytest.approx(
+            abs(res.value - res.engine_value) / abs(res.engine_value), rel=1e-12)
+    assert fine.grid_error <= 10 * 1e-6, fine.grid_error
+    assert coarse.grid_error > 1e-3, coarse.grid_error

@@ -78,6 +78,7 @@ from .gradient import (FixedGrid, adaptive_grid, discrete_solution, family_param
                         objective_gradient, speed_at_power, with_family_parameters,
                         with_period)
 from ..model.kinematics import Fourier, Harmonic, PowerLaw
+from ..solve import solve_periodic
 
 STOP_REASONS = {
     "gradient_tolerance": "projected gradient norm below gtol",
@@ -106,6 +107,9 @@ MIN_STEP_FRACTION = 2.0 ** -39
 #: a step accepted at below this fraction of its first trial creeps: the search stands at a
 #: jump of the discrete objective (``creep_steps``)
 CREEP_FRACTION = 1e-3
+#: rtol of the engine's solve of the final motion (``OptimizeResult.engine_value``): far
+#: below any grid_rtol, so that grid_error measures the fixed grid's error, not the engine's
+CHECK_RTOL = 1e-8
 
 
 @dataclass(frozen=True)
@@ -127,6 +131,13 @@ class OptimizeResult:
     ill_conditioned : bool; condition_number : of the last difference Hessian (nan if none)
     n_steps : steps of the final grid; grid_rounds : grids used; seconds : wall time
     at_bounds : names of the variables held at a bound at the end (e.g. "period" running off)
+    engine_value, engine_U, engine_P, engine_efficiency : the same outputs of the final motion
+        solved by the order-5 engine at rtol ``CHECK_RTOL`` (``solve_periodic``, its own
+        steps and error control): the motion's true outputs to that rtol, where ``value``
+        etc. are those of the final fixed grid, which the search may have exploited (it
+        maximises the discrete objective, steps made elsewhere); nan where the engine fails
+    grid_error : |value - engine_value| / |engine_value| (for "speed_at_power" the larger of
+        that and P's): the discretisation error of the reported optimum on its fixed grid
     """
 
     kinematics: object
@@ -151,6 +162,11 @@ class OptimizeResult:
     seconds: float
     at_bounds: tuple = ()
     solves: int = 0
+    engine_value: float = math.nan
+    engine_U: float = math.nan
+    engine_P: float = math.nan
+    engine_efficiency: float = math.nan
+    grid_error: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -740,6 +756,7 @@ def optimize_motion(family_template, physics_template, start=None, *, grid=None,
         # invariant under T): the paper's ill-conditioned regime, reported rather than chased
         ill = ill or "period" in bound_names
     value, U, P, efficiency, gradient = _outputs(res)
+    check = _engine_check(kin, phys, objective, value, P)
     return OptimizeResult(
         kinematics=kin, physics=phys, names=all_names, parameters=full, value=value,
         U=U, P=P, efficiency=efficiency, gradient=gradient, gradient_norm=gnorm,
@@ -747,4 +764,18 @@ def optimize_motion(family_template, physics_template, start=None, *, grid=None,
         gradient_evaluations=totals["gradient_evaluations"], stop_reason=reason,
         converged=reason == "gradient_tolerance", ill_conditioned=bool(ill),
         condition_number=cond, n_steps=grid.n_steps, grid_rounds=rounds,
-        seconds=time.perf_counter() - t_start, at_bounds=bound_names, solves=totals["solves"])
+        seconds=time.perf_counter() - t_start, at_bounds=bound_names, solves=totals["solves"],
+        **check)
+
+
+def _engine_check(kinematics, physics, objective, value, P):
+    """The final motion's outputs by the engine at ``CHECK_RTOL`` and the fixed grid's error
+    against them (``OptimizeResult``'s engine_* fields and grid_error)."""
+    r = solve_periodic(kinematics, physics, rtol=CHECK_RTOL)
+    U_e, P_e, lam_e = float(r.U[0]), float(r.P[0]), float(r.efficiency[0])
+    value_e = lam_e if objective == "efficiency" else U_e
+    error = abs(value - value_e) / abs(value_e)
+    if objective == "speed_at_power":
+        error = max(error, abs(P - P_e) / abs(P_e))
+    return dict(engine_value=value_e, engine_U=U_e, engine_P=P_e, engine_efficiency=lam_e,
+                grid_error=float(error) if math.isfinite(error) else math.nan)
