@@ -332,3 +332,23 @@ def test_long_period_power_law_with_singular_corners_converges():
                                       phys.period[0], phys.delta_tau[0], vscale, 1e-10, 60.0)
     assert bench.relative_u_error(res.U[0], U, phys.period[0], vscale) <= 2e-6, (res.U[0], U)
     assert abs(res.P[0] - P) <= 2e-6 * P
+
+
+def test_a_single_point_runs_the_parallel_kernels_on_one_thread():
+    """``solver._threads.serial_when_single``: one numba thread inside for one point (a parallel
+    launch for one point only waits on the pool), the caller's count for more and after;
+    the results are the same either way."""
+    import numba
+    from solver.model.limits import fast_limit_velocity
+    from solver._threads import serial_when_single
+    threads = numba.get_num_threads()
+    with serial_when_single(1):
+        assert numba.get_num_threads() == 1
+    with serial_when_single(2):
+        assert numba.get_num_threads() == threads
+    assert numba.get_num_threads() == threads
+    kin = solver.Fourier(np.array([[0.5, 0.4, 0.1, 0.05]] * 2), np.array([[0.0, 0.1, 0.02]] * 2))
+    physics = solver.Physics.from_scaled(2.0 ** -4, 2.0, p=0.0, delta=1e-5)
+    pair = fast_limit_velocity(kin, physics)
+    one = fast_limit_velocity(kin.take([0]), physics)
+    assert one[0] == pair[0] and numba.get_num_threads() == threads

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from .._threads import serial_when_single
+
 FOURIER = 0
 POWER_LAW = 1
 
@@ -58,7 +60,8 @@ class _Family:
         code, params = self.kernel_encoding()
         tau = np.asarray(tau, dtype=float)
         tau_grid = np.broadcast_to(tau, (params.shape[0],) + tau.shape[-1:]).copy()
-        return evaluate_grid(code, params, tau_grid, tau_grid)
+        with serial_when_single(params.shape[0]):
+            return evaluate_grid(code, params, tau_grid, tau_grid)
 
     def __len__(self):
         return self.kernel_encoding()[1].shape[0]

@@ -18,6 +18,7 @@ from numba import njit, prange
 
 from .force import force_and_slope
 from .kinematics import angle_and_rate, evaluate_grid, period_grid
+from .._threads import serial_when_single
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 GL4_NODES = 0.5 * (_GL_X + 1.0)
@@ -103,8 +104,9 @@ def fast_limit_velocity(kinematics, physics, n_steps=64):
     """
     code, params = kinematics.kernel_encoding()
     grids = period_grid(kinematics, n_steps)
-    return _fast_limit(code, params, grids, physics.mu_n, physics.mu_s, physics.p,
-                       physics.delta_tau, GL4_NODES, GL4_WEIGHTS)
+    with serial_when_single(params.shape[0]):
+        return _fast_limit(code, params, grids, physics.mu_n, physics.mu_s, physics.p,
+                           physics.delta_tau, GL4_NODES, GL4_WEIGHTS)
 
 
 def quasi_static_velocity(kinematics, physics, tau):
@@ -118,7 +120,9 @@ def quasi_static_velocity(kinematics, physics, tau):
     """
     code, params = kinematics.kernel_encoding()
     tau = np.broadcast_to(np.asarray(tau, dtype=float), (params.shape[0], np.size(tau))).copy()
-    return _quasi_static(code, params, tau, physics.mu_n, physics.mu_s, physics.p, physics.delta_tau)
+    with serial_when_single(params.shape[0]):
+        return _quasi_static(code, params, tau, physics.mu_n, physics.mu_s, physics.p,
+                             physics.delta_tau)
 
 
 def kinematic_speed(kinematics, n_samples=512):
@@ -133,5 +137,6 @@ def kinematic_speed(kinematics, n_samples=512):
     side = np.empty_like(grid)
     side[:, :-1] = 0.5 * (grid[:, 1:] + grid[:, :-1])
     side[:, -1] = side[:, -2]
-    phi, _ = evaluate_grid(code, params, grid, side)
+    with serial_when_single(params.shape[0]):
+        phi, _ = evaluate_grid(code, params, grid, side)
     return 0.25 * np.abs(np.diff(phi, axis=1)).sum(axis=1)
