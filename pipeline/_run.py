@@ -26,7 +26,7 @@ from ._kind import RunContext, SceneKind
 from ._registry import kind_of
 from ._scene import engine_versions
 from ._schedule import Progress, Scheduler, Session, Task, compute, take_start_seconds
-from ._store import (STATE_FLAGS, StoreMismatch, consolidate, is_complete, open_existing, record_run,
+from ._store import (FORMAT_VERSION, STATE_FLAGS, StoreMismatch, consolidate, is_complete, open_existing, record_run,
                      remove_partials, run_lock, set_state, store_chunk)
 
 __all__ = ["RunSummary", "Session", "default_store", "run_scene", "warm_up_kernels"]
@@ -137,13 +137,20 @@ def start_workers(run: RunContext, kind: SceneKind, echo) -> None:
 
 
 def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool, replace: bool = False) -> dict:
-    """The store's ``pipeline`` attributes, after refusing a store of a different scene or
-    engine (replaced instead where ``overwrite``), creating the skeleton of a new or replaced
+    """The store's ``pipeline`` record, after refusing a store of a different scene, engine or
+    store format version (replaced instead where ``overwrite``), creating the skeleton of a new or replaced
     store (``replace``: replaced whatever it holds), or removing the debris of interrupted
     writes from one being resumed. A store of this scene and engine is resumed, ``overwrite``
     or not (``paper --overwrite`` recomputes only the scenes whose stores would be refused)."""
     scene, store = run.scene, run.store
     meta = None if replace else open_existing(store)
+    if meta is not None and meta.get("format_version", 1) != FORMAT_VERSION:
+        if not overwrite:
+            raise StoreMismatch(
+                f"{store}: store format version {meta.get('format_version', 1)}, this pipeline writes version "
+                f"{FORMAT_VERSION} (attributes as netCDF takes them); rerun with --overwrite to rebuild it, or "
+                "choose another --store (the reports read it as it is)")
+        meta = None  # overwrite: start over
     if meta is not None:
         old = meta["provenance"]["scene_hash"]
         engines, ours = meta["provenance"].get("engines"), engine_versions()

@@ -2,14 +2,17 @@
 
 Layout (Zarr format 3, one group per scene)::
 
-    <store>/                      group; attrs["pipeline"] = provenance + layout + state
+    <store>/                      group; attrs["pipeline"] = provenance + layout + state (JSON text)
         <axis>                    1-D coordinate array per axis, dimension_names [axis]
         <output>                  one array per stored quantity/diagnostic, dims = scene axes
-        status                    int8, 0 converged, > 0 solver failure, -1 not computed
+        status                    int8, 0 converged, > 0 solver failure, -1 not computed (CF flags)
         <reduction arrays>        labelled by the kept axes (+ a subset dimension)
         pipeline_state/chunk_done uint8 per chunk, 1 once the chunk's outputs are all written
 
 Only the driver writes attributes; tasks write only their own chunks and then their marker.
+Every attribute goes through :mod:`pipeline._attrs` (:func:`create_array`, the record's
+functions here), so a store is netCDF- and CF-ready: ``xarray.open_zarr(store).to_netcdf(path)``
+works on it as it is (format 2, issue 34).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import zarr
 
+from ._attrs import ATTRS_KEY, encode_attrs, read_record, record_text
 from ._grid_scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
 from ._scene import engine_versions
 
@@ -67,9 +71,10 @@ __all__ = [
     "STATE_FLAGS",
 ]
 
-ATTRS_KEY = "pipeline"
-#: Layout version of the store (readers such as reports/ check it).
-FORMAT_VERSION = 1
+#: Layout version of the store (readers such as reports/ check it).  2 (issue 34): attributes
+#: as netCDF takes them (``_attrs``: the record as JSON text, CF flags, ``units`` on every float
+#: array); 1: nested attributes (read by the reports, refused for resuming).
+FORMAT_VERSION = 2
 STATE_GROUP = "pipeline_state"
 DONE_ARRAY = f"{STATE_GROUP}/chunk_done"
 NOT_COMPUTED = -1
@@ -233,16 +238,18 @@ def reduction_arrays(scene: Scene, r: Reduction) -> tuple[tuple[str, ...], tuple
     for suffix, kind in prefixes:
         base = f"{r.name}{suffix}"
         label = f"{what} ({'best grid point' if kind == 'grid' else 'polished by ' + r.polish_method})"
-        arrays[base] = (f8, np.nan, {"long_name": label})
+        # the paper's quantities are nondimensional (lengths in link lengths, mu_n mu_s = 1): units "1"
+        arrays[base] = (f8, np.nan, {"long_name": label, "units": "1"})
         if r.statistic == "absmax":
-            arrays[f"{base}_signed"] = (f8, np.nan, {"long_name": f"signed {r.quantity} at the optimum of {base}"})
+            arrays[f"{base}_signed"] = (f8, np.nan, {"long_name": f"signed {r.quantity} at the optimum of {base}",
+                                                       "units": "1"})
         for ax in r.over:
             arrays[f"{base}_{ax}"] = (f8, np.nan, {"long_name": f"{ax} at the optimum of {base}",
                                                  **{k: v for k, v in axis_attrs(ax).items() if k == "units"}})
         for q in r.report:
             if q in (r.quantity,):
                 continue
-            arrays[f"{base}_{q}"] = (f8, np.nan, {"long_name": f"{q} at the optimum of {base}"})
+            arrays[f"{base}_{q}"] = (f8, np.nan, {"long_name": f"{q} at the optimum of {base}", "units": "1"})
         if kind == "polished":
             arrays[f"{base}_status"] = (np.dtype(np.int8), NOT_COMPUTED,
                                         {"long_name": f"solver status at the polished optimum of {r.name}",
@@ -253,9 +260,15 @@ def reduction_arrays(scene: Scene, r: Reduction) -> tuple[tuple[str, ...], tuple
 
 
 def create_array(group, name, *, shape, chunks, dtype, fill, dims, attrs):
-    """A new array ``name`` in ``group`` (replacing one of that name), labelled by ``dims``."""
+    """A new array ``name`` in ``group`` (replacing one of that name), labelled by ``dims``,
+    its attributes ``attrs`` (the Python view) stored as netCDF takes them
+    (:func:`pipeline._attrs.encode_attrs`).  A float array must say its ``units`` ("1" where
+    dimensionless): CF asks it of every quantity."""
+    if np.dtype(dtype).kind == "f" and "units" not in attrs:
+        raise ValueError(f"array {name!r}: a float array needs 'units' in its attributes ('1' if dimensionless)")
     return group.create_array(name, shape=shape, chunks=chunks, dtype=dtype, fill_value=fill,
-                              dimension_names=list(dims), attributes=attrs, overwrite=True)
+                              dimension_names=list(dims), attributes=encode_attrs(attrs, np.dtype(dtype)),
+                              overwrite=True)
 
 
 def new_group(store: Path):
@@ -277,14 +290,14 @@ def finish_skeleton(g, scene, *, dims, shape, chunks, head: dict | None = None, 
     create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
                  dims=tuple(f"chunk_{d}" for d in dims),
                  attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
-    g.attrs[ATTRS_KEY] = {
+    g.attrs[ATTRS_KEY] = record_text({
         "format_version": FORMAT_VERSION, **(head or {}),
         "provenance": provenance(scene),
         "layout": {"dims": list(dims), "shape": [int(s) for s in shape], "chunks": [int(c) for c in chunks],
                    "chunk_grid": list(grid), **(layout or {})},
         "state": {"skeleton_complete": True, "chunks_complete": False,
                   "reductions_complete": bool(reductions_complete), "series_complete": bool(series_complete)},
-    }
+    })
 
 
 def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
@@ -313,9 +326,10 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
         if r.subsets is not None:
             s = r.subsets
             if s.kind == "window":
-                attrs = {"long_name": f"half-width of the {s.axes[0]} window centred at {s.center:g}"}
+                attrs = {"long_name": f"half-width of the {s.axes[0]} window centred at {s.center:g}",
+                         "units": axis_attrs(s.axes[0])["units"]}
             else:
-                attrs = {"long_name": f"index of the set of exponents allowed for {', '.join(s.axes)}",
+                attrs = {"long_name": f"index of the set of exponents allowed for {', '.join(s.axes)}", "units": "1",
                          "sets": [list(x) for x in s.sets]}
             if s.dim not in g:
                 create_array(g, s.dim, shape=(len(s.labels),), chunks=(len(s.labels),), dtype=np.float64,
@@ -337,7 +351,8 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
                          dims=("series_point",), attrs=axis_attrs(d))[:] = [dict(p)[d] for p in ser.points]
         create_array(g, "series_u", shape=(n, ser.n_tau), chunks=(n, ser.n_tau), dtype=np.float64, fill=np.nan,
                      dims=("series_point", "series_tau"),
-                     attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau"})
+                     attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau",
+                            "units": "1"})
         create_array(g, "series_status", shape=(n,), chunks=(n,), dtype=np.int8, fill=NOT_COMPUTED,
                      dims=("series_point",), attrs={"long_name": "solver status of the series points",
                                                     "flag_meanings": status_meanings(scene.method)})
@@ -346,7 +361,8 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
 
 
 def open_existing(store: Path) -> dict | None:
-    """The pipeline attributes of an existing store, or None when the skeleton is absent or incomplete.
+    """The pipeline record of an existing store (the Python view, of either format: the caller
+    checks ``format_version``), or None when the skeleton is absent or incomplete.
 
     Raises :class:`StoreMismatch` when ``store`` holds something that is not a pipeline store.
     """
@@ -358,7 +374,7 @@ def open_existing(store: Path) -> dict | None:
         raise StoreMismatch(f"{store}: exists and is not a Zarr store; refusing to touch it")
     try:
         g = open_group(store, "r")
-        meta = dict(g.attrs).get(ATTRS_KEY)
+        meta = read_record(dict(g.attrs))
     except Exception:  # an unreadable group is an interrupted skeleton
         return None
     if not meta or not meta.get("state", {}).get("skeleton_complete"):
@@ -366,23 +382,27 @@ def open_existing(store: Path) -> dict | None:
     return meta
 
 
-def set_state(store: Path, **state) -> None:
+def _update_record(store: Path, update) -> None:
+    """Rewrite the store's record as ``update(record)`` returns it (the driver only)."""
     g = open_group(store, "r+")
-    meta = dict(g.attrs[ATTRS_KEY])
-    meta["state"] = {**meta["state"], **state}
-    g.attrs[ATTRS_KEY] = meta
+    g.attrs[ATTRS_KEY] = record_text(update(read_record(dict(g.attrs))))
+
+
+def set_state(store: Path, **state) -> None:
+    """Set flags of the record's ``state``."""
+    _update_record(store, lambda meta: {**meta, "state": {**meta["state"], **state}})
 
 
 def record_run(store: Path, run: dict) -> None:
     """Record the latest run that computed something (``run``), and accumulate compute time."""
-    g = open_group(store, "r+")
-    meta = dict(g.attrs[ATTRS_KEY])
-    previous = meta.get("run", {})
-    run = dict(run)
-    run["wall_seconds_all_runs"] = float(previous.get("wall_seconds_all_runs", 0.0)) + float(run["wall_seconds"])
-    run["runs"] = int(previous.get("runs", 0)) + 1
-    meta["run"] = run
-    g.attrs[ATTRS_KEY] = meta
+    def update(meta):
+        previous = meta.get("run", {})
+        new = dict(run)
+        new["wall_seconds_all_runs"] = float(previous.get("wall_seconds_all_runs", 0.0)) + float(new["wall_seconds"])
+        new["runs"] = int(previous.get("runs", 0)) + 1
+        return {**meta, "run": new}
+
+    _update_record(store, update)
 
 
 def remove_partials(store: Path) -> int:
@@ -544,8 +564,8 @@ def consolidate(store: Path) -> None:
 
 
 def store_meta(store: Path) -> dict:
-    """The ``pipeline`` attributes of ``store`` (provenance, layout, state, run)."""
-    return dict(open_group(store, "r").attrs)[ATTRS_KEY]
+    """The ``pipeline`` record of ``store`` (provenance, layout, state, run), decoded."""
+    return read_record(dict(open_group(store, "r").attrs))
 
 
 #: Flags of ``pipeline.state`` besides ``skeleton_complete``; a store is complete when all are set.

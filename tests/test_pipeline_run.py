@@ -97,13 +97,19 @@ def test_xarray_opens_store_with_labels(reference):
     np.testing.assert_allclose(ds["scaled_period"].values, [1.0, 2.0])
     assert ds["best_efficiency"].dims == ("anisotropy_ratio", "scaled_period")
     assert ds["fastest"].dims == ("anisotropy_ratio",)
-    assert ds["status"].attrs["flag_meanings"]["0"].startswith("converged")
-    assert "-1" in ds["status"].attrs["flag_meanings"]
-    prov = ds.attrs["pipeline"]["provenance"]
+    from pipeline import decode_attrs, read_record
+
+    # CF flags as stored; their sentences through the one reader of attributes
+    assert ds["status"].attrs["flag_meanings"].split()[:2] == ["not_computed_yet", "converged"]
+    assert list(ds["status"].attrs["flag_values"][:2]) == [-1, 0]
+    meanings = decode_attrs(ds["status"].attrs)["flag_meanings"]
+    assert meanings["0"].startswith("converged") and "-1" in meanings
+    record = read_record(ds.attrs)
+    prov = record["provenance"]
     assert prov["scene_hash"] == scene.hash and prov["scene"]["name"] == "small"
     assert "zarr" in prov["library_versions"] and prov["created"]
-    assert ds.attrs["pipeline"]["format_version"] == 1
-    run = ds.attrs["pipeline"]["run"]
+    assert record["format_version"] == 2
+    run = record["run"]
     assert run["computed_points"] == 64 and run["wall_seconds"] > 0 and run["runs"] == 1
     # Label-based selection works.
     one = ds["scaled_efficiency"].sel(anisotropy_ratio=16.0, scaled_period=2.0).values
@@ -221,8 +227,9 @@ def test_not_a_zarr_store_is_refused(tmp_path):
 
 
 def test_a_grid_store_exports_to_netcdf(reference, tmp_path):
-    """Issue 34: a grid store through ``pipeline.to_netcdf`` (CF flags, JSON provenance) reads
-    back equal; its outputs carry ``units``."""
+    """Issue 34: a grid store exports as it is, ``xarray.open_zarr(store).to_netcdf(path)``, and
+    through ``pipeline.to_netcdf`` (CF flags, JSON provenance); each reads back equal; its
+    outputs carry ``units``."""
     import xarray as xr
 
     from pipeline_cases import assert_exports_to_netcdf
@@ -231,6 +238,96 @@ def test_a_grid_store_exports_to_netcdf(reference, tmp_path):
     assert_exports_to_netcdf(store, tmp_path)
     with xr.open_dataset(tmp_path / "export.nc") as back:
         assert all(back[name].attrs.get("units") == "1" for name in scene.outputs)
+        # pipeline.to_netcdf gives CF's flag_values the variable's type
+        assert back["status"].attrs["flag_values"].dtype == np.int8
+
+
+def test_the_netcdf_checks_can_fail(reference, tmp_path):
+    """Negative controls of ``assert_exports_to_netcdf``'s checks: an attribute of a dict (or
+    bool, or None, or list of words) type, and a variable of a type netCDF 3 lacks, are found
+    by ``netcdf_problems`` (and netCDF's writer refuses the dict); a value or an attribute
+    changed in the file read back fails ``assert_same_dataset``."""
+    import warnings
+
+    import xarray as xr
+
+    from pipeline_cases import assert_same_dataset, netcdf_problems
+
+    _, store, _ = reference
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        raw = xr.open_zarr(str(store), zarr_format=3, consolidated=False).load()
+    assert netcdf_problems(raw) == []
+    for bad in ({"a": 1}, True, None, ["a", "b"], []):
+        spoilt = raw.copy()
+        spoilt["status"].attrs = {**raw["status"].attrs, "extra": bad}
+        problems = netcdf_problems(spoilt)
+        assert len(problems) == 1 and problems[0].startswith("status.attrs['extra']: "), (bad, problems)
+    spoilt = raw.copy()
+    spoilt.attrs = {"pipeline": {"format_version": 2}}  # the record as format 1 stored it
+    assert netcdf_problems(spoilt) == ["attrs['pipeline']: a dict"]
+    with pytest.raises(TypeError):
+        spoilt.to_netcdf(tmp_path / "dict.nc")
+    for dtype in (np.uint8, np.int64, bool):
+        spoilt = raw.copy()
+        spoilt["status"] = spoilt["status"].astype(dtype)
+        assert netcdf_problems(spoilt) == [f"status: dtype {np.dtype(dtype)}"]
+    raw.to_netcdf(tmp_path / "raw.nc")
+    with xr.open_dataset(tmp_path / "raw.nc") as back:
+        back = back.load()
+    assert_same_dataset(raw, back)
+    changed = back.copy(deep=True)
+    changed["scaled_efficiency"][0, 0, 0, 0] += 1e-12
+    with pytest.raises(AssertionError):
+        assert_same_dataset(raw, changed)
+    changed = back.copy()
+    changed.attrs = {"pipeline": back.attrs["pipeline"].replace('"format_version": 2', '"format_version": 3')}
+    with pytest.raises(AssertionError):
+        assert_same_dataset(raw, changed)
+    changed = back.copy()
+    changed["status"].attrs = {**back["status"].attrs, "flag_descriptions": "[]"}
+    with pytest.raises(AssertionError):
+        assert_same_dataset(raw, changed)
+
+
+def test_a_store_of_format_1_is_read_by_the_reports_refused_for_resuming_and_rebuilt(reference, tmp_path, capsys):
+    """A store written before issue 34 (format 1: nested attributes) opens in the reports with
+    the same record (but its version), attributes and arrays as the same store in format 2; the
+    pipeline refuses to resume it in one line naming --overwrite (exit 3, the store untouched),
+    and ``--overwrite`` rebuilds it, equal to the reference."""
+    import shutil
+
+    from pipeline_cases import downgrade_to_format_1
+    from reports._read import open_scene_store
+
+    scene, store, _ = reference
+    old = tmp_path / "old.zarr"
+    shutil.copytree(store, old)
+    downgrade_to_format_1(old)
+    new_view, old_view = open_scene_store(store), open_scene_store(old)
+    assert old_view.meta["format_version"] == 1
+    assert {**old_view.meta, "format_version": 2} == new_view.meta
+    assert {**old_view.ds.attrs, "pipeline": old_view.meta | {"format_version": 2}} == new_view.ds.attrs
+    assert sorted(old_view.ds.variables) == sorted(new_view.ds.variables)
+    for name in new_view.ds.variables:
+        assert old_view.ds[name].attrs == new_view.ds[name].attrs, name
+        np.testing.assert_array_equal(old_view.array(name), new_view.array(name), err_msg=name)
+    assert isinstance(new_view.ds["status"].attrs["flag_meanings"], dict)
+    before = read_store(old)
+    with pytest.raises(StoreMismatch, match="format version 1.*--overwrite"):
+        run_scene(scene, old, scheduler="synchronous", progress=False)
+    path = write_scene(tmp_path, small_scene_text(polish=True))
+    assert main(["run", str(path), "--store", str(old), "--no-progress"]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(old) in err[0] and "--overwrite" in err[0]
+    after = read_store(old)
+    assert sorted(after) == sorted(before)
+    for k in after:
+        np.testing.assert_array_equal(after[k], before[k], err_msg=k)
+    summary = run_scene(scene, old, scheduler="synchronous", overwrite=True, progress=False)
+    assert summary.computed_chunks == summary.total_chunks
+    assert_stores_equal(old, store)
+    assert open_scene_store(old).meta["format_version"] == 2
 
 
 def test_concurrent_run_is_refused_and_stale_lock_taken_over(tmp_path, capsys):
