@@ -69,6 +69,14 @@ __all__ = [
     "store_meta",
     "is_complete",
     "STATE_FLAGS",
+    "COMPACT_ELEMENTS",
+    "COMPACT_FILES",
+    "wants_compaction",
+    "compact",
+    "compact_chunks",
+    "expand",
+    "rechunk",
+    "recover_rechunk",
 ]
 
 #: Layout version of the store (readers such as reports/ check it).  2 (issue 34): attributes
@@ -575,3 +583,148 @@ STATE_FLAGS = ("chunks_complete", "reductions_complete", "series_complete")
 def is_complete(state: dict) -> bool:
     """Every part of the store written (``state``: the ``pipeline.state`` attribute)."""
     return all(state.get(flag) for flag in STATE_FLAGS)
+
+
+# ---------------------------------------------------------------------------
+# Compaction: few chunk files once a store is complete (issue 34 item 6)
+# ---------------------------------------------------------------------------
+
+#: elements per chunk at most once a store is complete (8 MiB of float64 before compression):
+#: a whole array of up to 2^20 points is one file, a 10^6-point scene's array one or two
+COMPACT_ELEMENTS = 1 << 20
+#: a complete store of at least this many chunk files is compacted (reading one through
+#: zarr-python costs ~0.3 ms of CPU: below this, about a second in all; and a rewrite costs
+#: about as much as one read)
+COMPACT_FILES = 4096
+_STAGING = f"{STATE_GROUP}/rechunk_new"  # a rewritten array, until it is swapped in
+_RETIRED = f"{STATE_GROUP}/rechunk_old"  # the array it replaces, until the swap is done
+
+
+def compact_chunks(shape: tuple[int, ...], limit: int = COMPACT_ELEMENTS) -> tuple[int, ...]:
+    """Chunks of at most ``limit`` elements over ``shape``: the trailing axes whole while they
+    fit, the axis where that runs out cut into the fewest equal pieces that fit, the axes
+    before it single values."""
+    chunk, n = [1] * len(shape), 1
+    for i in range(len(shape) - 1, -1, -1):
+        if n * shape[i] <= limit:
+            chunk[i], n = int(shape[i]), n * int(shape[i])
+        else:
+            pieces = -(-n * int(shape[i]) // limit)
+            chunk[i] = -(-int(shape[i]) // pieces)
+            break
+    return tuple(max(1, c) for c in chunk)
+
+
+def _key(name: str) -> str:
+    return name.replace("/", "~")
+
+
+def _fsync_tree(root: Path) -> None:
+    paths = [p for p in root.rglob("*") if p.is_file()]
+    _fsync_all(paths)
+    _fsync_all({p.parent for p in paths} | {root, root.parent})
+
+
+def recover_rechunk(store: Path) -> None:
+    """Finish or undo the swap of an array that a kill interrupted in :func:`rechunk`: a staged
+    copy whose array is still in place may be partial and is removed; one whose array was
+    already moved away is complete (it is moved away only then) and is moved in; a moved-away
+    array whose place is empty is moved back."""
+    for area in (_STAGING, _RETIRED):
+        folder = store / area
+        if not folder.is_dir():
+            continue
+        for d in sorted(folder.iterdir()):
+            target = store / d.name.replace("~", "/")
+            if target.exists():
+                shutil.rmtree(d)
+            else:
+                os.rename(d, target)
+        folder.rmdir()
+
+
+def _chunked_arrays(store: Path) -> dict[str, tuple[tuple[int, ...], tuple[int, ...]]]:
+    """{path: (shape, chunks)} of the store's arrays (root and ``pipeline_state``) of more than
+    one chunk."""
+    out = {}
+    for zj in sorted(list(store.glob("*/zarr.json")) + list((store / STATE_GROUP).glob("*/zarr.json"))):
+        meta = json.loads(zj.read_text())
+        if meta.get("node_type") != "array" or meta["chunk_grid"]["name"] != "regular":
+            continue
+        shape, chunks = meta["shape"], meta["chunk_grid"]["configuration"]["chunk_shape"]
+        if any(-(-s // c) > 1 for s, c in zip(shape, chunks)):
+            out[str(zj.parent.relative_to(store))] = (tuple(int(s) for s in shape), tuple(int(c) for c in chunks))
+    return out
+
+
+def wants_compaction(store: Path) -> bool:
+    """Whether :func:`compact` is due on ``store`` once complete: not compacted yet, and an
+    interrupted compaction to finish or :data:`COMPACT_FILES` chunk files or more."""
+    meta = store_meta(store)
+    if meta["state"].get("compacted"):
+        return False
+    if meta.get("compacted_from"):
+        return True
+    files = sum(int(np.prod([-(-s // c) for s, c in zip(shape, chunks)]))
+                for shape, chunks in _chunked_arrays(store).values())
+    return files >= COMPACT_FILES
+
+
+def rechunk(store: Path, chunks_of: dict[str, tuple[int, ...]]) -> None:
+    """Rewrite arrays ``{path: chunks}`` of ``store`` in the chunks given, their values, data
+    type, fill value, dimension names and attributes unchanged, each swapped in atomically: the
+    copy is written whole and synced under ``pipeline_state/rechunk_new``, the array moved to
+    ``rechunk_old``, the copy into its place, the old one removed (a kill at any point leaves
+    the old array or the whole copy: :func:`recover_rechunk`)."""
+    recover_rechunk(store)
+    for name, chunks in chunks_of.items():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            old = zarr.open_array(store=str(store), path=name, mode="r")
+            if tuple(old.chunks) == tuple(chunks):
+                continue
+            staged = store / _STAGING / _key(name)
+            if staged.exists():
+                shutil.rmtree(staged)
+            new = zarr.create_array(store=str(staged), shape=old.shape, chunks=tuple(chunks), dtype=old.dtype,
+                                    fill_value=old.metadata.fill_value, zarr_format=3,
+                                    dimension_names=old.metadata.dimension_names, attributes=dict(old.attrs))
+            new[...] = old[...]
+        _fsync_tree(staged)
+        retired = store / _RETIRED / _key(name)
+        retired.parent.mkdir(parents=True, exist_ok=True)
+        os.rename(store / name, retired)
+        os.rename(staged, store / name)
+        _fsync_all({store / name, (store / name).parent, retired.parent})
+        shutil.rmtree(retired)
+    recover_rechunk(store)  # removes the emptied staging folders
+
+
+def compact(store: Path) -> int:
+    """Rewrite every array of more than one chunk of the complete store ``store`` (the driver
+    does so where :func:`wants_compaction`) in chunks of
+    :func:`compact_chunks` (few files: a task's chunk of ~256 points is ~2 KB, and a 10^6-point
+    scene would otherwise be tens of thousands of files), after recording each array's chunks
+    in the record (``compacted_from``) so that :func:`expand` can restore them; sets
+    ``state.compacted`` last.  Returns the arrays rewritten."""
+    meta = store_meta(store)
+    plan = meta.get("compacted_from") or {k: chunks for k, (_, chunks) in _chunked_arrays(store).items()}
+    plan = {k: [int(c) for c in v] for k, v in plan.items()}
+    _update_record(store, lambda m: {**m, "compacted_from": plan})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        target = {name: compact_chunks(zarr.open_array(store=str(store), path=name, mode="r").shape) for name in plan}
+    rechunk(store, target)
+    _update_record(store, lambda m: {**m, "state": {**m["state"], "compacted": True}})
+    return len(plan)
+
+
+def expand(store: Path) -> None:
+    """Undo :func:`compact` (chunks to compute again on a compacted store: each task writes its
+    own chunk files): the arrays back in the chunks recorded in ``compacted_from``."""
+    meta = store_meta(store)
+    plan = meta.get("compacted_from")
+    if plan:
+        rechunk(store, {k: tuple(v) for k, v in plan.items()})
+    _update_record(store, lambda m: {**{k: v for k, v in m.items() if k != "compacted_from"},
+                                     "state": {**m["state"], "compacted": False}})

@@ -330,6 +330,98 @@ def test_a_store_of_format_1_is_read_by_the_reports_refused_for_resuming_and_reb
     assert open_scene_store(old).meta["format_version"] == 2
 
 
+def test_a_complete_store_is_compacted_and_expands_back(reference, tmp_path, monkeypatch):
+    """Issue 34 item 6: a complete store of many chunk files (``COMPACT_FILES``; the small
+    scene's ~50 are below it: left as they are, the negative control) is rewritten in few
+    (``_store.compact``: here one file per array), values unchanged; ``expand`` restores the
+    task chunks (the layout's), and a lost marker on a compacted store recomputes exactly that
+    chunk into a store compacted again and equal to the reference."""
+    import json as _json
+    import shutil
+
+    import zarr
+
+    import pipeline._store as st
+
+    scene, store, _ = reference
+    meta = st.store_meta(store)
+    assert not meta["state"].get("compacted") and "compacted_from" not in meta and not st.wants_compaction(store)
+    assert len(_chunk_files(store, "status")) == 8 == len(_chunk_files(store, "pipeline_state/chunk_done"))
+    monkeypatch.setattr(st, "COMPACT_FILES", 50)
+    assert st.wants_compaction(store)
+    # a fresh run of a store above the threshold ends compacted
+    fresh = tmp_path / "fresh.zarr"
+    run_scene(scene, fresh, scheduler="synchronous", progress=False)
+    got = st.store_meta(fresh)
+    assert got["state"]["compacted"] and got["compacted_from"]["status"] == list(meta["layout"]["chunks"])
+    assert _chunk_files(fresh, "status") == {"0/0/0/0"} == _chunk_files(fresh, "pipeline_state/chunk_done")
+    assert_stores_equal(fresh, store)
+    assert not st.wants_compaction(fresh)
+    assert run_scene(scene, fresh, scheduler="synchronous", progress=False).computed_chunks == 0
+    # expand, compact again: values unchanged
+    st.expand(fresh)
+    assert not st.store_meta(fresh)["state"]["compacted"]
+    assert len(_chunk_files(fresh, "status")) == 8 == len(_chunk_files(fresh, "pipeline_state/chunk_done"))
+    assert tuple(_json.loads((fresh / "scaled_efficiency" / "zarr.json").read_text())
+                 ["chunk_grid"]["configuration"]["chunk_shape"]) == tuple(meta["layout"]["chunks"])
+    assert_stores_equal(fresh, store)
+    assert st.compact(fresh) == len(got["compacted_from"])
+    assert _chunk_files(fresh, "status") == {"0/0/0/0"}
+    assert_stores_equal(fresh, store)
+    # a lost marker on the compacted store
+    zarr.open_array(store=str(fresh), path="pipeline_state/chunk_done", mode="r+")[1, 0, 1, 0] = 0
+    summary = run_scene(scene, fresh, scheduler="synchronous", progress=False)
+    assert summary.computed_chunks == 1 and summary.computed_points == 8
+    assert st.store_meta(fresh)["state"]["compacted"] and _chunk_files(fresh, "status") == {"0/0/0/0"}
+    assert_stores_equal(fresh, store)
+
+
+@pytest.mark.parametrize("fail_at", ["staging", "between_renames", "after_swap"])
+def test_a_rechunk_killed_at_any_point_recovers(reference, tmp_path, monkeypatch, fail_at):
+    """A kill inside ``_store.rechunk`` leaves the old array or the whole new copy; the next
+    run's ``recover_rechunk`` (``prepare_store``) finishes or undoes the swap, the run finishes
+    the compaction (``compacted_from`` recorded first), and the store holds the same values."""
+    import shutil
+
+    import pipeline._store as st
+
+    scene, store, _ = reference
+    copy = tmp_path / "copy.zarr"
+    shutil.copytree(store, copy)
+    real_rename, real_rmtree, calls = os.rename, shutil.rmtree, []
+
+    class Killed(Exception):
+        pass
+
+    def rename(src, dst):
+        calls.append(src)
+        if fail_at == "between_renames" and len(calls) == 2:
+            raise Killed
+        return real_rename(src, dst)
+
+    def rmtree(path, *a, **k):
+        if fail_at == "after_swap" and "rechunk_old" in str(path):
+            raise Killed
+        return real_rmtree(path, *a, **k)
+
+    def fsync_tree(root):
+        if fail_at == "staging":
+            raise Killed
+
+    monkeypatch.setattr(st.os, "rename", rename)
+    monkeypatch.setattr(st.shutil, "rmtree", rmtree)
+    monkeypatch.setattr(st, "_fsync_tree", fsync_tree)
+    with pytest.raises(Killed):
+        st.compact(copy)
+    monkeypatch.undo()
+    assert any((copy / "pipeline_state").glob("rechunk_*"))  # debris of the kill
+    summary = run_scene(scene, copy, scheduler="synchronous", progress=False)  # COMPACT_FILES as shipped
+    assert summary.computed_chunks == 0
+    assert not any((copy / "pipeline_state").glob("rechunk_*"))
+    assert st.store_meta(copy)["state"]["compacted"] and _chunk_files(copy, "status") == {"0/0/0/0"}
+    assert_stores_equal(copy, store)
+
+
 def test_concurrent_run_is_refused_and_stale_lock_taken_over(tmp_path, capsys):
     path = write_scene(tmp_path, small_scene_text())
     store = tmp_path / "s.zarr"
