@@ -673,31 +673,33 @@ def wants_compaction(store: Path) -> bool:
 def rechunk(store: Path, chunks_of: dict[str, tuple[int, ...]]) -> None:
     """Rewrite arrays ``{path: chunks}`` of ``store`` in the chunks given, their values, data
     type, fill value, dimension names and attributes unchanged, each swapped in atomically: the
-    copy is written whole and synced under ``pipeline_state/rechunk_new``, the array moved to
-    ``rechunk_old``, the copy into its place, the old one removed (a kill at any point leaves
-    the old array or the whole copy: :func:`recover_rechunk`)."""
+    copies are written whole under ``pipeline_state/rechunk_new`` and synced (all at once: one
+    journal commit, not one per array), then each array is moved to ``rechunk_old`` and its
+    copy into its place, and the old ones removed (a kill at any point leaves each array old or
+    wholly new: :func:`recover_rechunk`)."""
     recover_rechunk(store)
-    for name, chunks in chunks_of.items():
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+    staged = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, chunks in chunks_of.items():
             old = zarr.open_array(store=str(store), path=name, mode="r")
             if tuple(old.chunks) == tuple(chunks):
                 continue
-            staged = store / _STAGING / _key(name)
-            if staged.exists():
-                shutil.rmtree(staged)
-            new = zarr.create_array(store=str(staged), shape=old.shape, chunks=tuple(chunks), dtype=old.dtype,
+            staged[name] = store / _STAGING / _key(name)
+            new = zarr.create_array(store=str(staged[name]), shape=old.shape, chunks=tuple(chunks), dtype=old.dtype,
                                     fill_value=old.metadata.fill_value, zarr_format=3,
                                     dimension_names=old.metadata.dimension_names, attributes=dict(old.attrs))
             new[...] = old[...]
-        _fsync_tree(staged)
-        retired = store / _RETIRED / _key(name)
-        retired.parent.mkdir(parents=True, exist_ok=True)
-        os.rename(store / name, retired)
-        os.rename(staged, store / name)
-        _fsync_all({store / name, (store / name).parent, retired.parent})
-        shutil.rmtree(retired)
-    recover_rechunk(store)  # removes the emptied staging folders
+    if not staged:
+        return
+    _fsync_tree(store / _STAGING)  # every copy whole on disk before the first array is moved
+    retired = store / _RETIRED
+    retired.mkdir(parents=True, exist_ok=True)
+    for name, copy in staged.items():
+        os.rename(store / name, retired / _key(name))
+        os.rename(copy, store / name)
+    _fsync_all({(store / name).parent for name in staged} | {retired, store / _STAGING})
+    recover_rechunk(store)  # removes the old arrays and the emptied folders
 
 
 def compact(store: Path) -> int:
