@@ -218,6 +218,12 @@ def reduction_specs(scene: OptimaScene) -> dict[str, tuple]:
     }
 
 
+def _units(long_name: str) -> str:
+    """CF units of a float array from its long name: "s" (wall times) and "rad" (angles) where
+    it ends so ("[s]", "[rad]"), else "1" (the paper's nondimensional quantities)."""
+    return "s" if long_name.endswith("[s]") else "rad" if long_name.endswith("[rad]") else "1"
+
+
 def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
     """Every array, coordinate and attribute, before any task runs (``_store`` conventions)."""
     g = new_group(store)
@@ -246,7 +252,8 @@ def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
     starts = scene.start_values()
     for j, name in enumerate(("start_A0", "start_A1")):
         create_array(g, name, shape=(n_s,), chunks=(n_s,), dtype=np.float64, fill=np.nan,
-                     dims=("start",), attrs={"long_name": f"A_{j} of the start, uniform on (0, 1) [rad]"}
+                     dims=("start",), attrs={"long_name": f"A_{j} of the start, uniform on (0, 1) [rad]",
+                                             "units": "rad"}
                      )[:] = starts[:, j]
     chunks = _start_chunks(scene)
     create_array(g, "status", shape=scene.shape, chunks=chunks, dtype=np.int8, fill=NOT_COMPUTED,
@@ -261,19 +268,21 @@ def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
                                      "at its bound: p near 2); 0: no; -1 not computed"})
     for name, text_ in START_FLOATS.items():
         create_array(g, name, shape=scene.shape, chunks=chunks, dtype=np.float64, fill=np.nan,
-                     dims=DIMS, attrs={"long_name": text_})
+                     dims=DIMS, attrs={"long_name": text_, "units": _units(text_)})
     for name, text_ in START_INTS.items():
         create_array(g, name, shape=scene.shape, chunks=chunks, dtype=np.int32, fill=0, dims=DIMS,
                      attrs={"long_name": text_})
     create_array(g, "coefficients", shape=scene.shape + (n_c,), chunks=chunks + (n_c,),
                  dtype=np.float64, fill=np.nan, dims=DIMS + ("coefficient",),
-                 attrs={"long_name": "optimal [A_0, A_k, B_k] as found (zero beyond the cell's Kmax) [rad]"})
+                 attrs={"long_name": "optimal [A_0, A_k, B_k] as found (zero beyond the cell's Kmax) [rad]",
+                        "units": "rad"})
     sizes = {"anisotropy_ratio": n_r, "max_wavenumber": n_k, "p": n_p, "rank": scene.keep.best,
              "coefficient": n_c, "tau": scene.keep.n_tau}
     for name, (dims, dtype, fill, long_name) in reduction_specs(scene).items():
         shape = tuple(sizes[d] for d in dims)
+        units = {"units": _units(long_name)} if dtype.kind == "f" else {}
         create_array(g, name, shape=shape, chunks=shape, dtype=dtype, fill=fill, dims=dims,
-                     attrs={"long_name": long_name, "reduction": "distinct_optima"})
+                     attrs={"long_name": long_name, **units, "reduction": "distinct_optima"})
     finish_skeleton(g, scene, dims=DIMS, shape=scene.shape, chunks=chunks,
                     head={"kind": KIND, "kind_version": KIND_VERSION}, reductions_complete=False)
 

@@ -5,10 +5,13 @@
     open_run        resolve store and scheduler, hold the store's lock
     prepare_store   refuse a store of a different scene, or (re)create the skeleton, or resume
     check_layout    refuse chunks still to compute in a layout that is not the scene's
+    expand          a compacted store with chunks to compute gets its task chunks back
     warm_up         compile the solver's kernels once, here, before work fans out
     compute_chunks  tasks of consecutive chunks without their done marker (each chunk whole)
     finish          the kind's steps whose state flag is unset (series, reductions)
-    record          run record and consolidated metadata, when anything was computed
+    record          state flags set, then ``compact`` where the store has many chunk files
+                    (every array of many chunks rewritten in few, values unchanged), run
+                    record and consolidated metadata, when anything was computed
 
 Only this driver writes the store's attributes; tasks write whole chunks and their markers.
 """
@@ -26,8 +29,9 @@ from ._kind import RunContext, SceneKind
 from ._registry import kind_of
 from ._scene import engine_versions
 from ._schedule import Progress, Scheduler, Session, Task, compute, take_start_seconds
-from ._store import (STATE_FLAGS, StoreMismatch, consolidate, is_complete, open_existing, record_run,
-                     remove_partials, run_lock, set_state, store_chunk)
+from ._store import (FORMAT_VERSION, STATE_FLAGS, StoreMismatch, compact, consolidate, expand, is_complete,
+                     open_existing, record_run, recover_rechunk, remove_partials, run_lock, set_state, store_chunk,
+                     store_meta, wants_compaction)
 
 __all__ = ["RunSummary", "Session", "default_store", "run_scene", "warm_up_kernels"]
 
@@ -137,13 +141,20 @@ def start_workers(run: RunContext, kind: SceneKind, echo) -> None:
 
 
 def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool, replace: bool = False) -> dict:
-    """The store's ``pipeline`` attributes, after refusing a store of a different scene or
-    engine (replaced instead where ``overwrite``), creating the skeleton of a new or replaced
+    """The store's ``pipeline`` record, after refusing a store of a different scene, engine or
+    store format version (replaced instead where ``overwrite``), creating the skeleton of a new or replaced
     store (``replace``: replaced whatever it holds), or removing the debris of interrupted
     writes from one being resumed. A store of this scene and engine is resumed, ``overwrite``
     or not (``paper --overwrite`` recomputes only the scenes whose stores would be refused)."""
     scene, store = run.scene, run.store
     meta = None if replace else open_existing(store)
+    if meta is not None and meta.get("format_version", 1) != FORMAT_VERSION:
+        if not overwrite:
+            raise StoreMismatch(
+                f"{store}: store format version {meta.get('format_version', 1)}, this pipeline writes version "
+                f"{FORMAT_VERSION} (attributes as netCDF takes them); rerun with --overwrite to rebuild it, or "
+                "choose another --store (the reports read it as it is)")
+        meta = None  # overwrite: start over
     if meta is not None:
         old = meta["provenance"]["scene_hash"]
         engines, ours = meta["provenance"].get("engines"), engine_versions()
@@ -166,7 +177,8 @@ def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool, replace: bo
         kind.create_skeleton(run)
         return open_existing(store)
     remove_partials(store)
-    return meta
+    recover_rechunk(store)
+    return store_meta(store)
 
 
 def _shape(chunks) -> str:
@@ -376,6 +388,9 @@ def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None =
                 raise
             meta = prepare_store(run, kind, overwrite, replace=True)
             pending = kind.pending_chunks(run.store)
+        if pending and meta.get("compacted_from"):
+            expand(run.store)  # each task writes whole chunk files of its own again
+            meta = store_meta(run.store)
         clock.lap("setup")
         if pending or not is_complete(meta["state"]):
             start_workers(run, kind, echo)
@@ -387,9 +402,13 @@ def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None =
         ran, step_results = finish(run, kind, meta["state"], bool(pending), clock)
         failures = kind.failures(run.store, scene)
         timing = None
-        if pending or ran or not is_complete(meta["state"]):
+        compacting = wants_compaction(run.store)
+        if pending or ran or not is_complete(meta["state"]) or compacting:
             set_state(run.store, **{flag: True for flag in STATE_FLAGS})
             clock.lap("record")
+            if compacting:
+                compact(run.store)
+                clock.lap("compact")
             timing = time_budget(clock, run.n_workers, results, step_results)
             record_run(run.store, {
                 "finished": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),

@@ -2,14 +2,17 @@
 
 Layout (Zarr format 3, one group per scene)::
 
-    <store>/                      group; attrs["pipeline"] = provenance + layout + state
+    <store>/                      group; attrs["pipeline"] = provenance + layout + state (JSON text)
         <axis>                    1-D coordinate array per axis, dimension_names [axis]
         <output>                  one array per stored quantity/diagnostic, dims = scene axes
-        status                    int8, 0 converged, > 0 solver failure, -1 not computed
+        status                    int8, 0 converged, > 0 solver failure, -1 not computed (CF flags)
         <reduction arrays>        labelled by the kept axes (+ a subset dimension)
         pipeline_state/chunk_done uint8 per chunk, 1 once the chunk's outputs are all written
 
 Only the driver writes attributes; tasks write only their own chunks and then their marker.
+Every attribute goes through :mod:`pipeline._attrs` (:func:`create_array`, the record's
+functions here), so a store is netCDF- and CF-ready: ``xarray.open_zarr(store).to_netcdf(path)``
+works on it as it is (format 2, issue 34).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import zarr
 
+from ._attrs import ATTRS_KEY, encode_attrs, read_record, record_text
 from ._grid_scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
 from ._scene import engine_versions
 
@@ -65,11 +69,20 @@ __all__ = [
     "store_meta",
     "is_complete",
     "STATE_FLAGS",
+    "COMPACT_ELEMENTS",
+    "COMPACT_FILES",
+    "wants_compaction",
+    "compact",
+    "compact_chunks",
+    "expand",
+    "rechunk",
+    "recover_rechunk",
 ]
 
-ATTRS_KEY = "pipeline"
-#: Layout version of the store (readers such as reports/ check it).
-FORMAT_VERSION = 1
+#: Layout version of the store (readers such as reports/ check it).  2 (issue 34): attributes
+#: as netCDF takes them (``_attrs``: the record as JSON text, CF flags, ``units`` on every float
+#: array); 1: nested attributes (read by the reports, refused for resuming).
+FORMAT_VERSION = 2
 STATE_GROUP = "pipeline_state"
 DONE_ARRAY = f"{STATE_GROUP}/chunk_done"
 NOT_COMPUTED = -1
@@ -233,16 +246,18 @@ def reduction_arrays(scene: Scene, r: Reduction) -> tuple[tuple[str, ...], tuple
     for suffix, kind in prefixes:
         base = f"{r.name}{suffix}"
         label = f"{what} ({'best grid point' if kind == 'grid' else 'polished by ' + r.polish_method})"
-        arrays[base] = (f8, np.nan, {"long_name": label})
+        # the paper's quantities are nondimensional (lengths in link lengths, mu_n mu_s = 1): units "1"
+        arrays[base] = (f8, np.nan, {"long_name": label, "units": "1"})
         if r.statistic == "absmax":
-            arrays[f"{base}_signed"] = (f8, np.nan, {"long_name": f"signed {r.quantity} at the optimum of {base}"})
+            arrays[f"{base}_signed"] = (f8, np.nan, {"long_name": f"signed {r.quantity} at the optimum of {base}",
+                                                       "units": "1"})
         for ax in r.over:
             arrays[f"{base}_{ax}"] = (f8, np.nan, {"long_name": f"{ax} at the optimum of {base}",
                                                  **{k: v for k, v in axis_attrs(ax).items() if k == "units"}})
         for q in r.report:
             if q in (r.quantity,):
                 continue
-            arrays[f"{base}_{q}"] = (f8, np.nan, {"long_name": f"{q} at the optimum of {base}"})
+            arrays[f"{base}_{q}"] = (f8, np.nan, {"long_name": f"{q} at the optimum of {base}", "units": "1"})
         if kind == "polished":
             arrays[f"{base}_status"] = (np.dtype(np.int8), NOT_COMPUTED,
                                         {"long_name": f"solver status at the polished optimum of {r.name}",
@@ -253,9 +268,15 @@ def reduction_arrays(scene: Scene, r: Reduction) -> tuple[tuple[str, ...], tuple
 
 
 def create_array(group, name, *, shape, chunks, dtype, fill, dims, attrs):
-    """A new array ``name`` in ``group`` (replacing one of that name), labelled by ``dims``."""
+    """A new array ``name`` in ``group`` (replacing one of that name), labelled by ``dims``,
+    its attributes ``attrs`` (the Python view) stored as netCDF takes them
+    (:func:`pipeline._attrs.encode_attrs`).  A float array must say its ``units`` ("1" where
+    dimensionless): CF asks it of every quantity."""
+    if np.dtype(dtype).kind == "f" and "units" not in attrs:
+        raise ValueError(f"array {name!r}: a float array needs 'units' in its attributes ('1' if dimensionless)")
     return group.create_array(name, shape=shape, chunks=chunks, dtype=dtype, fill_value=fill,
-                              dimension_names=list(dims), attributes=attrs, overwrite=True)
+                              dimension_names=list(dims), attributes=encode_attrs(attrs, np.dtype(dtype)),
+                              overwrite=True)
 
 
 def new_group(store: Path):
@@ -277,14 +298,14 @@ def finish_skeleton(g, scene, *, dims, shape, chunks, head: dict | None = None, 
     create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
                  dims=tuple(f"chunk_{d}" for d in dims),
                  attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
-    g.attrs[ATTRS_KEY] = {
+    g.attrs[ATTRS_KEY] = record_text({
         "format_version": FORMAT_VERSION, **(head or {}),
         "provenance": provenance(scene),
         "layout": {"dims": list(dims), "shape": [int(s) for s in shape], "chunks": [int(c) for c in chunks],
                    "chunk_grid": list(grid), **(layout or {})},
         "state": {"skeleton_complete": True, "chunks_complete": False,
                   "reductions_complete": bool(reductions_complete), "series_complete": bool(series_complete)},
-    }
+    })
 
 
 def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
@@ -313,9 +334,10 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
         if r.subsets is not None:
             s = r.subsets
             if s.kind == "window":
-                attrs = {"long_name": f"half-width of the {s.axes[0]} window centred at {s.center:g}"}
+                attrs = {"long_name": f"half-width of the {s.axes[0]} window centred at {s.center:g}",
+                         "units": axis_attrs(s.axes[0])["units"]}
             else:
-                attrs = {"long_name": f"index of the set of exponents allowed for {', '.join(s.axes)}",
+                attrs = {"long_name": f"index of the set of exponents allowed for {', '.join(s.axes)}", "units": "1",
                          "sets": [list(x) for x in s.sets]}
             if s.dim not in g:
                 create_array(g, s.dim, shape=(len(s.labels),), chunks=(len(s.labels),), dtype=np.float64,
@@ -337,7 +359,8 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
                          dims=("series_point",), attrs=axis_attrs(d))[:] = [dict(p)[d] for p in ser.points]
         create_array(g, "series_u", shape=(n, ser.n_tau), chunks=(n, ser.n_tau), dtype=np.float64, fill=np.nan,
                      dims=("series_point", "series_tau"),
-                     attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau"})
+                     attrs={"long_name": "scaled velocity u(tau) = T dx_CM/dt (eq. tau), resampled to uniform tau",
+                            "units": "1"})
         create_array(g, "series_status", shape=(n,), chunks=(n,), dtype=np.int8, fill=NOT_COMPUTED,
                      dims=("series_point",), attrs={"long_name": "solver status of the series points",
                                                     "flag_meanings": status_meanings(scene.method)})
@@ -346,7 +369,8 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
 
 
 def open_existing(store: Path) -> dict | None:
-    """The pipeline attributes of an existing store, or None when the skeleton is absent or incomplete.
+    """The pipeline record of an existing store (the Python view, of either format: the caller
+    checks ``format_version``), or None when the skeleton is absent or incomplete.
 
     Raises :class:`StoreMismatch` when ``store`` holds something that is not a pipeline store.
     """
@@ -358,7 +382,7 @@ def open_existing(store: Path) -> dict | None:
         raise StoreMismatch(f"{store}: exists and is not a Zarr store; refusing to touch it")
     try:
         g = open_group(store, "r")
-        meta = dict(g.attrs).get(ATTRS_KEY)
+        meta = read_record(dict(g.attrs))
     except Exception:  # an unreadable group is an interrupted skeleton
         return None
     if not meta or not meta.get("state", {}).get("skeleton_complete"):
@@ -366,23 +390,27 @@ def open_existing(store: Path) -> dict | None:
     return meta
 
 
-def set_state(store: Path, **state) -> None:
+def _update_record(store: Path, update) -> None:
+    """Rewrite the store's record as ``update(record)`` returns it (the driver only)."""
     g = open_group(store, "r+")
-    meta = dict(g.attrs[ATTRS_KEY])
-    meta["state"] = {**meta["state"], **state}
-    g.attrs[ATTRS_KEY] = meta
+    g.attrs[ATTRS_KEY] = record_text(update(read_record(dict(g.attrs))))
+
+
+def set_state(store: Path, **state) -> None:
+    """Set flags of the record's ``state``."""
+    _update_record(store, lambda meta: {**meta, "state": {**meta["state"], **state}})
 
 
 def record_run(store: Path, run: dict) -> None:
     """Record the latest run that computed something (``run``), and accumulate compute time."""
-    g = open_group(store, "r+")
-    meta = dict(g.attrs[ATTRS_KEY])
-    previous = meta.get("run", {})
-    run = dict(run)
-    run["wall_seconds_all_runs"] = float(previous.get("wall_seconds_all_runs", 0.0)) + float(run["wall_seconds"])
-    run["runs"] = int(previous.get("runs", 0)) + 1
-    meta["run"] = run
-    g.attrs[ATTRS_KEY] = meta
+    def update(meta):
+        previous = meta.get("run", {})
+        new = dict(run)
+        new["wall_seconds_all_runs"] = float(previous.get("wall_seconds_all_runs", 0.0)) + float(new["wall_seconds"])
+        new["runs"] = int(previous.get("runs", 0)) + 1
+        return {**meta, "run": new}
+
+    _update_record(store, update)
 
 
 def remove_partials(store: Path) -> int:
@@ -544,8 +572,8 @@ def consolidate(store: Path) -> None:
 
 
 def store_meta(store: Path) -> dict:
-    """The ``pipeline`` attributes of ``store`` (provenance, layout, state, run)."""
-    return dict(open_group(store, "r").attrs)[ATTRS_KEY]
+    """The ``pipeline`` record of ``store`` (provenance, layout, state, run), decoded."""
+    return read_record(dict(open_group(store, "r").attrs))
 
 
 #: Flags of ``pipeline.state`` besides ``skeleton_complete``; a store is complete when all are set.
@@ -555,3 +583,150 @@ STATE_FLAGS = ("chunks_complete", "reductions_complete", "series_complete")
 def is_complete(state: dict) -> bool:
     """Every part of the store written (``state``: the ``pipeline.state`` attribute)."""
     return all(state.get(flag) for flag in STATE_FLAGS)
+
+
+# ---------------------------------------------------------------------------
+# Compaction: few chunk files once a store is complete (issue 34 item 6)
+# ---------------------------------------------------------------------------
+
+#: elements per chunk at most once a store is complete (8 MiB of float64 before compression):
+#: a whole array of up to 2^20 points is one file, a 10^6-point scene's array one or two
+COMPACT_ELEMENTS = 1 << 20
+#: a complete store of at least this many chunk files is compacted (reading one through
+#: zarr-python costs ~0.3 ms of CPU: below this, about a second in all; and a rewrite costs
+#: about as much as one read)
+COMPACT_FILES = 4096
+_STAGING = f"{STATE_GROUP}/rechunk_new"  # a rewritten array, until it is swapped in
+_RETIRED = f"{STATE_GROUP}/rechunk_old"  # the array it replaces, until the swap is done
+
+
+def compact_chunks(shape: tuple[int, ...], limit: int = COMPACT_ELEMENTS) -> tuple[int, ...]:
+    """Chunks of at most ``limit`` elements over ``shape``: the trailing axes whole while they
+    fit, the axis where that runs out cut into the fewest equal pieces that fit, the axes
+    before it single values."""
+    chunk, n = [1] * len(shape), 1
+    for i in range(len(shape) - 1, -1, -1):
+        if n * shape[i] <= limit:
+            chunk[i], n = int(shape[i]), n * int(shape[i])
+        else:
+            pieces = -(-n * int(shape[i]) // limit)
+            chunk[i] = -(-int(shape[i]) // pieces)
+            break
+    return tuple(max(1, c) for c in chunk)
+
+
+def _key(name: str) -> str:
+    return name.replace("/", "~")
+
+
+def _fsync_tree(root: Path) -> None:
+    paths = [p for p in root.rglob("*") if p.is_file()]
+    _fsync_all(paths)
+    _fsync_all({p.parent for p in paths} | {root, root.parent})
+
+
+def recover_rechunk(store: Path) -> None:
+    """Finish or undo the swap of an array that a kill interrupted in :func:`rechunk`: a staged
+    copy whose array is still in place may be partial and is removed; one whose array was
+    already moved away is complete (it is moved away only then) and is moved in; a moved-away
+    array whose place is empty is moved back."""
+    for area in (_STAGING, _RETIRED):
+        folder = store / area
+        if not folder.is_dir():
+            continue
+        for d in sorted(folder.iterdir()):
+            target = store / d.name.replace("~", "/")
+            if target.exists():
+                shutil.rmtree(d)
+            else:
+                os.rename(d, target)
+        folder.rmdir()
+
+
+def _chunked_arrays(store: Path) -> dict[str, tuple[tuple[int, ...], tuple[int, ...]]]:
+    """{path: (shape, chunks)} of the store's arrays (root and ``pipeline_state``) of more than
+    one chunk."""
+    out = {}
+    for zj in sorted(list(store.glob("*/zarr.json")) + list((store / STATE_GROUP).glob("*/zarr.json"))):
+        meta = json.loads(zj.read_text())
+        if meta.get("node_type") != "array" or meta["chunk_grid"]["name"] != "regular":
+            continue
+        shape, chunks = meta["shape"], meta["chunk_grid"]["configuration"]["chunk_shape"]
+        if any(-(-s // c) > 1 for s, c in zip(shape, chunks)):
+            out[str(zj.parent.relative_to(store))] = (tuple(int(s) for s in shape), tuple(int(c) for c in chunks))
+    return out
+
+
+def wants_compaction(store: Path) -> bool:
+    """Whether :func:`compact` is due on ``store`` once complete: not compacted yet, and an
+    interrupted compaction to finish or :data:`COMPACT_FILES` chunk files or more."""
+    meta = store_meta(store)
+    if meta["state"].get("compacted"):
+        return False
+    if meta.get("compacted_from"):
+        return True
+    files = sum(int(np.prod([-(-s // c) for s, c in zip(shape, chunks)]))
+                for shape, chunks in _chunked_arrays(store).values())
+    return files >= COMPACT_FILES
+
+
+def rechunk(store: Path, chunks_of: dict[str, tuple[int, ...]]) -> None:
+    """Rewrite arrays ``{path: chunks}`` of ``store`` in the chunks given, their values, data
+    type, fill value, dimension names and attributes unchanged, each swapped in atomically: the
+    copies are written whole under ``pipeline_state/rechunk_new`` and synced (all at once: one
+    journal commit, not one per array), then each array is moved to ``rechunk_old`` and its
+    copy into its place, and the old ones removed (a kill at any point leaves each array old or
+    wholly new: :func:`recover_rechunk`)."""
+    recover_rechunk(store)
+    staged = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, chunks in chunks_of.items():
+            old = zarr.open_array(store=str(store), path=name, mode="r")
+            if tuple(old.chunks) == tuple(chunks):
+                continue
+            staged[name] = store / _STAGING / _key(name)
+            new = zarr.create_array(store=str(staged[name]), shape=old.shape, chunks=tuple(chunks), dtype=old.dtype,
+                                    fill_value=old.metadata.fill_value, zarr_format=3,
+                                    dimension_names=old.metadata.dimension_names, attributes=dict(old.attrs))
+            new[...] = old[...]
+    if not staged:
+        return
+    _fsync_tree(store / _STAGING)  # every copy whole on disk before the first array is moved
+    retired = store / _RETIRED
+    retired.mkdir(parents=True, exist_ok=True)
+    for name, copy in staged.items():
+        os.rename(store / name, retired / _key(name))
+        os.rename(copy, store / name)
+    _fsync_all({(store / name).parent for name in staged} | {retired, store / _STAGING})
+    recover_rechunk(store)  # removes the old arrays and the emptied folders
+
+
+def compact(store: Path) -> int:
+    """Rewrite every array of more than one chunk of the complete store ``store`` (the driver
+    does so where :func:`wants_compaction`) in chunks of
+    :func:`compact_chunks` (few files: a task's chunk of ~256 points is ~2 KB, and a 10^6-point
+    scene would otherwise be tens of thousands of files), after recording each array's chunks
+    in the record (``compacted_from``) so that :func:`expand` can restore them; sets
+    ``state.compacted`` last.  Returns the arrays rewritten."""
+    meta = store_meta(store)
+    plan = meta.get("compacted_from") or {k: chunks for k, (_, chunks) in _chunked_arrays(store).items()}
+    plan = {k: [int(c) for c in v] for k, v in plan.items()}
+    _update_record(store, lambda m: {**m, "compacted_from": plan})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        target = {name: compact_chunks(zarr.open_array(store=str(store), path=name, mode="r").shape) for name in plan}
+    rechunk(store, target)
+    _update_record(store, lambda m: {**m, "state": {**m["state"], "compacted": True}})
+    return len(plan)
+
+
+def expand(store: Path) -> None:
+    """Undo :func:`compact` (chunks to compute again on a compacted store: each task writes its
+    own chunk files): the arrays back in the chunks recorded in ``compacted_from``."""
+    meta = store_meta(store)
+    plan = meta.get("compacted_from")
+    if plan:
+        rechunk(store, {k: tuple(v) for k, v in plan.items()})
+    _update_record(store, lambda m: {**{k: v for k, v in m.items() if k != "compacted_from"},
+                                     "state": {**m["state"], "compacted": False}})

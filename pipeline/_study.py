@@ -136,7 +136,18 @@ def study_arrays(scene: StudyScene) -> dict[str, tuple[tuple[str, ...], np.dtype
             "baseline_error_U": (bl, f8, nan, {"long_name": err_u}),
             "baseline_error_P": (bl, f8, nan, {"long_name": err_p}),
         })
+    for _, dtype, _, attrs in out.values():
+        _nondimensional(dtype, attrs)
     return out
+
+
+def _nondimensional(dtype, attrs: dict) -> dict:
+    """``attrs`` with ``units`` "1" added where a float array names none: a study's quantities
+    are the paper's nondimensional ones (lengths in link lengths, mu_n mu_s = 1; every scanned
+    parameter is dimensionless) except those that say otherwise ("s", "rad")."""
+    if np.dtype(dtype).kind == "f":
+        attrs.setdefault("units", "1")
+    return attrs
 
 
 def point_parameters(scene: StudyScene) -> dict[str, tuple[np.ndarray, dict]]:
@@ -162,7 +173,7 @@ def point_parameters(scene: StudyScene) -> dict[str, tuple[np.ndarray, dict]]:
         if p.case.family == "fourier":
             a0[i] = p.case.value("A")[0]
     families = ["harmonic", "powerlaw", "fourier"]
-    return {
+    out = {
         "motion": (np.array([p.motion for p in pts], dtype=np.int32),
                    {"long_name": "motion (case) index", "labels": [m.name for m in scene.motions]}),
         "scan": (np.array([p.scan for p in pts], dtype=np.int32),
@@ -185,6 +196,9 @@ def point_parameters(scene: StudyScene) -> dict[str, tuple[np.ndarray, dict]]:
         "phi_min": (phi_min, {"long_name": "min of phi over a period", "units": "rad"}),
         "phi_max": (phi_max, {"long_name": "max of phi over a period", "units": "rad"}),
     }
+    for values, attrs in out.values():
+        _nondimensional(values.dtype, attrs)
+    return out
 
 
 # ---------------------------------------------------------------------------
@@ -213,7 +227,8 @@ def create_study_skeleton(store: Path, scene: StudyScene, points_per_chunk: int)
                    "baseline_tol": {"long_name": "LSODA rtol of the scipy baseline"}}
     for d, size in dims.items():
         v = coords[d]
-        create_array(g, d, shape=(size,), chunks=(size,), dtype=v.dtype, fill=0, dims=(d,), attrs=coord_attrs[d])[:] = v
+        create_array(g, d, shape=(size,), chunks=(size,), dtype=v.dtype, fill=0, dims=(d,),
+                     attrs=_nondimensional(v.dtype, coord_attrs[d]))[:] = v
     c = points_per_chunk
     for name, (values, attrs) in point_parameters(scene).items():
         fill = -1 if values.dtype.kind == "i" else np.nan

@@ -3,6 +3,9 @@
 A store is read through ``zarr.json`` first (format, group, ``pipeline`` attributes) so a
 foreign or newer store is refused before any array is touched; the arrays are then opened with
 ``xarray.open_zarr``, which labels them by the ``dimension_names`` the pipeline writes.
+Attributes are read through ``pipeline.decode_attrs`` (the one reader of them): stores of format
+2 keep them as netCDF takes them (the record as JSON text, CF flags), stores of format 1 nested;
+the report sees the same values from both.
 
 Opening reads only the metadata and the coordinate arrays: a data array is read when a figure,
 table or claim first uses it, whole, and kept in memory for the rest of the build. An array in
@@ -27,13 +30,18 @@ import xarray as xr
 from xarray.backends import BackendArray
 from xarray.core import indexing
 
+from pipeline import decode_attrs, read_record
+
 from ._chunks import layout_is_plain, read_whole
 
-__all__ = ["StoreRefused", "SceneStore", "open_scene_store", "shipped_scenes", "SUPPORTED_FORMAT"]
+__all__ = ["StoreRefused", "SceneStore", "open_scene_store", "shipped_scenes", "SUPPORTED_FORMAT", "READ_FORMATS"]
 
-#: Store layout version this report reads. Stores without ``format_version`` in their
+#: Store layout version this report reads (the newest). Stores without ``format_version`` in their
 #: ``pipeline`` attributes predate the field and are read as version 1.
-SUPPORTED_FORMAT = 1
+SUPPORTED_FORMAT = 2
+#: Every store layout version this report reads: 1 (nested attributes) and 2 (issue 34:
+#: attributes as netCDF takes them); the arrays are the same.
+READ_FORMATS = (1, 2)
 ATTRS_KEY = "pipeline"
 
 
@@ -168,14 +176,14 @@ def read_meta(path: Path) -> dict:
     if doc.get("zarr_format") != 3 or doc.get("node_type") != "group":
         raise _refuse(path, f"zarr.json is not a Zarr format 3 group (zarr_format={doc.get('zarr_format')!r}, "
                             f"node_type={doc.get('node_type')!r})")
-    meta = doc.get("attributes", {}).get(ATTRS_KEY)
+    meta = read_record(doc.get("attributes", {}))
     if not isinstance(meta, dict):
         raise _refuse(path, f"not a pipeline store (no '{ATTRS_KEY}' attributes)")
     version = meta.get("format_version", meta.get("layout", {}).get("format_version", 1))
-    if version != SUPPORTED_FORMAT:
+    if version not in READ_FORMATS:
         newer = isinstance(version, (int, float)) and version > SUPPORTED_FORMAT
         raise _refuse(path, f"store format version {version!r} is {'newer than' if newer else 'different from'} "
-                            f"the version this report reads ({SUPPORTED_FORMAT}); update the reports package "
+                            f"the versions this report reads ({', '.join(map(str, READ_FORMATS))}); update the reports package "
                             "or rerun the scene")
     missing = [k for k in ("provenance", "layout", "state") if not isinstance(meta.get(k), dict)]
     missing += [f"provenance.{k}" for k in ("scene_hash", "scene") if k not in meta.get("provenance", {})]
@@ -199,6 +207,9 @@ def open_scene_store(path) -> SceneStore:
             ds = xr.open_zarr(str(path), consolidated=False, zarr_format=3, chunks=None)
         except Exception as exc:  # an unreadable array is a store we cannot report on
             raise _refuse(path, f"cannot read arrays ({type(exc).__name__}: {exc})") from None
+    ds.attrs = decode_attrs(ds.attrs)
+    for var in ds.variables.values():
+        var.attrs = decode_attrs(var.attrs)
     dims = list(meta["layout"]["dims"])
     for d in dims:
         if d not in ds.coords:

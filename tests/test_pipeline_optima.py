@@ -219,7 +219,9 @@ def test_small_run_resumes_and_refuses_another_scene(tmp_path):
     first = run_scene(scene, store, progress=False)
     assert first.computed_points == scene.n_points and first.total_chunks == 4
     ds = _open(store)
-    assert ds.attrs["pipeline"]["kind"] == "optima"
+    from pipeline import read_record
+
+    assert read_record(ds.attrs)["kind"] == "optima"
     assert np.all(ds.status.values >= 0) and np.all(ds.ill_conditioned.values >= 0)
     converged = ds.status.values == STOP_CODES["gradient_tolerance"]
     assert converged.sum() >= scene.n_points // 2

@@ -97,13 +97,19 @@ def test_xarray_opens_store_with_labels(reference):
     np.testing.assert_allclose(ds["scaled_period"].values, [1.0, 2.0])
     assert ds["best_efficiency"].dims == ("anisotropy_ratio", "scaled_period")
     assert ds["fastest"].dims == ("anisotropy_ratio",)
-    assert ds["status"].attrs["flag_meanings"]["0"].startswith("converged")
-    assert "-1" in ds["status"].attrs["flag_meanings"]
-    prov = ds.attrs["pipeline"]["provenance"]
+    from pipeline import decode_attrs, read_record
+
+    # CF flags as stored; their sentences through the one reader of attributes
+    assert ds["status"].attrs["flag_meanings"].split()[:2] == ["not_computed_yet", "converged"]
+    assert list(ds["status"].attrs["flag_values"][:2]) == [-1, 0]
+    meanings = decode_attrs(ds["status"].attrs)["flag_meanings"]
+    assert meanings["0"].startswith("converged") and "-1" in meanings
+    record = read_record(ds.attrs)
+    prov = record["provenance"]
     assert prov["scene_hash"] == scene.hash and prov["scene"]["name"] == "small"
     assert "zarr" in prov["library_versions"] and prov["created"]
-    assert ds.attrs["pipeline"]["format_version"] == 1
-    run = ds.attrs["pipeline"]["run"]
+    assert record["format_version"] == 2
+    run = record["run"]
     assert run["computed_points"] == 64 and run["wall_seconds"] > 0 and run["runs"] == 1
     # Label-based selection works.
     one = ds["scaled_efficiency"].sel(anisotropy_ratio=16.0, scaled_period=2.0).values
@@ -221,8 +227,9 @@ def test_not_a_zarr_store_is_refused(tmp_path):
 
 
 def test_a_grid_store_exports_to_netcdf(reference, tmp_path):
-    """Issue 34: a grid store through ``pipeline.to_netcdf`` (CF flags, JSON provenance) reads
-    back equal; its outputs carry ``units``."""
+    """Issue 34: a grid store exports as it is, ``xarray.open_zarr(store).to_netcdf(path)``, and
+    through ``pipeline.to_netcdf`` (CF flags, JSON provenance); each reads back equal; its
+    outputs carry ``units``."""
     import xarray as xr
 
     from pipeline_cases import assert_exports_to_netcdf
@@ -231,6 +238,188 @@ def test_a_grid_store_exports_to_netcdf(reference, tmp_path):
     assert_exports_to_netcdf(store, tmp_path)
     with xr.open_dataset(tmp_path / "export.nc") as back:
         assert all(back[name].attrs.get("units") == "1" for name in scene.outputs)
+        # pipeline.to_netcdf gives CF's flag_values the variable's type
+        assert back["status"].attrs["flag_values"].dtype == np.int8
+
+
+def test_the_netcdf_checks_can_fail(reference, tmp_path):
+    """Negative controls of ``assert_exports_to_netcdf``'s checks: an attribute of a dict (or
+    bool, or None, or list of words) type, and a variable of a type netCDF 3 lacks, are found
+    by ``netcdf_problems`` (and netCDF's writer refuses the dict); a value or an attribute
+    changed in the file read back fails ``assert_same_dataset``."""
+    import warnings
+
+    import xarray as xr
+
+    from pipeline_cases import assert_same_dataset, netcdf_problems
+
+    _, store, _ = reference
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        raw = xr.open_zarr(str(store), zarr_format=3, consolidated=False).load()
+    assert netcdf_problems(raw) == []
+    for bad in ({"a": 1}, True, None, ["a", "b"], []):
+        spoilt = raw.copy()
+        spoilt["status"].attrs = {**raw["status"].attrs, "extra": bad}
+        problems = netcdf_problems(spoilt)
+        assert len(problems) == 1 and problems[0].startswith("status.attrs['extra']: "), (bad, problems)
+    spoilt = raw.copy()
+    spoilt.attrs = {"pipeline": {"format_version": 2}}  # the record as format 1 stored it
+    assert netcdf_problems(spoilt) == ["attrs['pipeline']: a dict"]
+    with pytest.raises(TypeError):
+        spoilt.to_netcdf(tmp_path / "dict.nc")
+    for dtype in (np.uint8, np.int64, bool):
+        spoilt = raw.copy()
+        spoilt["status"] = spoilt["status"].astype(dtype)
+        assert netcdf_problems(spoilt) == [f"status: dtype {np.dtype(dtype)}"]
+    raw.to_netcdf(tmp_path / "raw.nc")
+    with xr.open_dataset(tmp_path / "raw.nc") as back:
+        back = back.load()
+    assert_same_dataset(raw, back)
+    changed = back.copy(deep=True)
+    changed["scaled_efficiency"][0, 0, 0, 0] += 1e-12
+    with pytest.raises(AssertionError):
+        assert_same_dataset(raw, changed)
+    changed = back.copy()
+    changed.attrs = {"pipeline": back.attrs["pipeline"].replace('"format_version": 2', '"format_version": 3')}
+    with pytest.raises(AssertionError):
+        assert_same_dataset(raw, changed)
+    changed = back.copy()
+    changed["status"].attrs = {**back["status"].attrs, "flag_descriptions": "[]"}
+    with pytest.raises(AssertionError):
+        assert_same_dataset(raw, changed)
+
+
+def test_a_store_of_format_1_is_read_by_the_reports_refused_for_resuming_and_rebuilt(reference, tmp_path, capsys):
+    """A store written before issue 34 (format 1: nested attributes) opens in the reports with
+    the same record (but its version), attributes and arrays as the same store in format 2; the
+    pipeline refuses to resume it in one line naming --overwrite (exit 3, the store untouched),
+    and ``--overwrite`` rebuilds it, equal to the reference."""
+    import shutil
+
+    from pipeline_cases import downgrade_to_format_1
+    from reports._read import open_scene_store
+
+    scene, store, _ = reference
+    old = tmp_path / "old.zarr"
+    shutil.copytree(store, old)
+    downgrade_to_format_1(old)
+    new_view, old_view = open_scene_store(store), open_scene_store(old)
+    assert old_view.meta["format_version"] == 1
+    assert {**old_view.meta, "format_version": 2} == new_view.meta
+    assert {**old_view.ds.attrs, "pipeline": old_view.meta | {"format_version": 2}} == new_view.ds.attrs
+    assert sorted(old_view.ds.variables) == sorted(new_view.ds.variables)
+    for name in new_view.ds.variables:
+        assert old_view.ds[name].attrs == new_view.ds[name].attrs, name
+        np.testing.assert_array_equal(old_view.array(name), new_view.array(name), err_msg=name)
+    assert isinstance(new_view.ds["status"].attrs["flag_meanings"], dict)
+    before = read_store(old)
+    with pytest.raises(StoreMismatch, match="format version 1.*--overwrite"):
+        run_scene(scene, old, scheduler="synchronous", progress=False)
+    path = write_scene(tmp_path, small_scene_text(polish=True))
+    assert main(["run", str(path), "--store", str(old), "--no-progress"]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(old) in err[0] and "--overwrite" in err[0]
+    after = read_store(old)
+    assert sorted(after) == sorted(before)
+    for k in after:
+        np.testing.assert_array_equal(after[k], before[k], err_msg=k)
+    summary = run_scene(scene, old, scheduler="synchronous", overwrite=True, progress=False)
+    assert summary.computed_chunks == summary.total_chunks
+    assert_stores_equal(old, store)
+    assert open_scene_store(old).meta["format_version"] == 2
+
+
+def test_a_complete_store_is_compacted_and_expands_back(reference, tmp_path, monkeypatch):
+    """Issue 34 item 6: a complete store of many chunk files (``COMPACT_FILES``; the small
+    scene's ~50 are below it: left as they are, the negative control) is rewritten in few
+    (``_store.compact``: here one file per array), values unchanged; ``expand`` restores the
+    task chunks (the layout's), and a lost marker on a compacted store recomputes exactly that
+    chunk into a store compacted again and equal to the reference."""
+    import json as _json
+    import shutil
+
+    import zarr
+
+    import pipeline._store as st
+
+    scene, store, _ = reference
+    meta = st.store_meta(store)
+    assert not meta["state"].get("compacted") and "compacted_from" not in meta and not st.wants_compaction(store)
+    assert len(_chunk_files(store, "status")) == 8 == len(_chunk_files(store, "pipeline_state/chunk_done"))
+    monkeypatch.setattr(st, "COMPACT_FILES", 50)
+    assert st.wants_compaction(store)
+    # a fresh run of a store above the threshold ends compacted
+    fresh = tmp_path / "fresh.zarr"
+    run_scene(scene, fresh, scheduler="synchronous", progress=False)
+    got = st.store_meta(fresh)
+    assert got["state"]["compacted"] and got["compacted_from"]["status"] == list(meta["layout"]["chunks"])
+    assert _chunk_files(fresh, "status") == {"0/0/0/0"} == _chunk_files(fresh, "pipeline_state/chunk_done")
+    assert_stores_equal(fresh, store)
+    assert not st.wants_compaction(fresh)
+    assert run_scene(scene, fresh, scheduler="synchronous", progress=False).computed_chunks == 0
+    # expand, compact again: values unchanged
+    st.expand(fresh)
+    assert not st.store_meta(fresh)["state"]["compacted"]
+    assert len(_chunk_files(fresh, "status")) == 8 == len(_chunk_files(fresh, "pipeline_state/chunk_done"))
+    assert tuple(_json.loads((fresh / "scaled_efficiency" / "zarr.json").read_text())
+                 ["chunk_grid"]["configuration"]["chunk_shape"]) == tuple(meta["layout"]["chunks"])
+    assert_stores_equal(fresh, store)
+    assert st.compact(fresh) == len(got["compacted_from"])
+    assert _chunk_files(fresh, "status") == {"0/0/0/0"}
+    assert_stores_equal(fresh, store)
+    # a lost marker on the compacted store
+    zarr.open_array(store=str(fresh), path="pipeline_state/chunk_done", mode="r+")[1, 0, 1, 0] = 0
+    summary = run_scene(scene, fresh, scheduler="synchronous", progress=False)
+    assert summary.computed_chunks == 1 and summary.computed_points == 8
+    assert st.store_meta(fresh)["state"]["compacted"] and _chunk_files(fresh, "status") == {"0/0/0/0"}
+    assert_stores_equal(fresh, store)
+
+
+@pytest.mark.parametrize("fail_at", ["staging", "between_renames", "after_swap"])
+def test_a_rechunk_killed_at_any_point_recovers(reference, tmp_path, monkeypatch, fail_at):
+    """A kill inside ``_store.rechunk`` leaves the old array or the whole new copy; the next
+    run's ``recover_rechunk`` (``prepare_store``) finishes or undoes the swap, the run finishes
+    the compaction (``compacted_from`` recorded first), and the store holds the same values."""
+    import shutil
+
+    import pipeline._store as st
+
+    scene, store, _ = reference
+    copy = tmp_path / "copy.zarr"
+    shutil.copytree(store, copy)
+    real_rename, real_rmtree, calls = os.rename, shutil.rmtree, []
+
+    class Killed(Exception):
+        pass
+
+    def rename(src, dst):
+        calls.append(src)
+        if fail_at == "between_renames" and len(calls) == 2:
+            raise Killed
+        return real_rename(src, dst)
+
+    def rmtree(path, *a, **k):
+        if fail_at == "after_swap" and "rechunk_old" in str(path):
+            raise Killed
+        return real_rmtree(path, *a, **k)
+
+    def fsync_tree(root):
+        if fail_at == "staging":
+            raise Killed
+
+    monkeypatch.setattr(st.os, "rename", rename)
+    monkeypatch.setattr(st.shutil, "rmtree", rmtree)
+    monkeypatch.setattr(st, "_fsync_tree", fsync_tree)
+    with pytest.raises(Killed):
+        st.compact(copy)
+    monkeypatch.undo()
+    assert any((copy / "pipeline_state").glob("rechunk_*"))  # debris of the kill
+    summary = run_scene(scene, copy, scheduler="synchronous", progress=False)  # COMPACT_FILES as shipped
+    assert summary.computed_chunks == 0
+    assert not any((copy / "pipeline_state").glob("rechunk_*"))
+    assert st.store_meta(copy)["state"]["compacted"] and _chunk_files(copy, "status") == {"0/0/0/0"}
+    assert_stores_equal(copy, store)
 
 
 def test_concurrent_run_is_refused_and_stale_lock_taken_over(tmp_path, capsys):

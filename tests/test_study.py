@@ -251,7 +251,9 @@ def test_tiny_study_store_is_labelled_and_complete(tiny):
     assert summary.computed_points == scene.n_points == 5  # 2 motions x 2 deltas + 1 power law x 1 exponent
     ds = xr.open_zarr(store)
     assert ds["true_error"].dims == ("point", "method", "rtol")
-    assert ds["method"].attrs["labels"] == ["periodic", "march"]
+    from pipeline import decode_attrs
+
+    assert decode_attrs(ds["method"].attrs)["labels"] == ["periodic", "march"]
     np.testing.assert_allclose(ds["rtol"].values, [1e-3, 1e-6])
     assert (ds["status"].values >= 0).all() and (ds["ref_status"].values == 0).all()
     np.testing.assert_allclose(sorted(set(ds["delta"].values[ds["scan"].values == 0])), [1e-7, 1e-3])
@@ -265,10 +267,65 @@ def test_tiny_study_store_is_labelled_and_complete(tiny):
 
 
 def test_tiny_study_store_exports_to_netcdf(tiny, tmp_path):
-    """Issue 34: a study store through ``pipeline.to_netcdf`` reads back equal."""
+    """Issue 34: a stiffness store exports as it is (``xarray.open_zarr(store).to_netcdf``) and
+    through ``pipeline.to_netcdf``; both read back equal."""
     from pipeline_cases import assert_exports_to_netcdf
 
     assert_exports_to_netcdf(tiny[1], tmp_path)
+
+
+#: The smallest accuracy scene with every array of its kind: two methods, one rtol, two fixed
+#: grids, one LSODA baseline tolerance, one case (a few seconds).
+TINY_ACCURACY = """
+[scene]
+kind = "accuracy"
+name = "tiny_accuracy"
+
+[solver]
+methods = ["periodic", "march"]
+rtols = [1e-3]
+fixed_steps = [32, 64]
+
+[reference]
+rtol_factor = 1e-2
+check = "march"
+check_rtol = 1e-6
+check_steps = 4096
+
+[baseline]
+tolerances = [1e-3]
+cap_seconds = 5.0
+
+[[cases]]
+name = "harmonic"
+family = "harmonic"
+A0 = 1.0
+A1 = 0.5
+anisotropy_ratio = "2^-3"
+scaled_period = 1.0
+"""
+
+
+def test_tiny_accuracy_store_exports_to_netcdf(tmp_path):
+    """Issue 34: an accuracy store (fixed grids and the baseline: the arrays a stiffness store
+    lacks) exports as it is and through ``pipeline.to_netcdf``; both read back equal."""
+    from pipeline_cases import assert_exports_to_netcdf
+
+    store = tmp_path / "tiny_accuracy.zarr"
+    run_scene(parse_scene(TINY_ACCURACY, str(tmp_path / "tiny_accuracy.toml")), store, scheduler="synchronous",
+              progress=False)
+    assert {"fixed_U", "baseline_U", "n_steps", "baseline_tol"} <= set(xr_open(store).variables)
+    assert_exports_to_netcdf(store, tmp_path)
+
+
+def xr_open(store):
+    import warnings
+
+    import xarray as xr
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return xr.open_zarr(str(store), zarr_format=3, consolidated=False)
 
 
 def test_tiny_study_rerun_resume_and_refusal(tiny):
