@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 import zarr
 
+from solver.periodic.options import engine_options
+
 from ._grid_scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
 from ._scene import engine_versions
 
@@ -175,6 +177,7 @@ def provenance(scene: Scene) -> dict:
         "scene_file": str(scene.path),
         "scene_hash": scene.hash,
         "engines": engine_versions(),
+        "engine_options": engine_options(),
         "scene": scene.science,
         "scene_toml": scene.text,
         "title": scene.title,
