@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 import zarr
 
+from solver.periodic.options import engine_options
+
 from ._attrs import ATTRS_KEY, encode_attrs, read_record, record_text
 from ._grid_scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
 from ._scene import engine_versions
@@ -188,6 +190,7 @@ def provenance(scene: Scene) -> dict:
         "scene_file": str(scene.path),
         "scene_hash": scene.hash,
         "engines": engine_versions(),
+        "engine_options": engine_options(),
         "scene": scene.science,
         "scene_toml": scene.text,
         "title": scene.title,

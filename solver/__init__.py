@@ -22,8 +22,9 @@ from .adjoint.optimize import OptimizeResult, OptimizerOptions, optimize_motion
 from .solve import (ENGINES, METHODS, SWEEP_POINTS, Engine, SolveResult, snake_order,
                     solve_fixed_grid, solve_periodic, sweep_runs)
 from .status import STATUS_REASONS, status_reason  # noqa: E402
-from .periodic import (ControlOptions, EngineOptions, EventOptions, PointOptions,  # noqa: E402
-                       StepOptions, StopOptions, TrapOptions)
+from .periodic import (BatchOptions, ControlOptions, DefectOptions, EngineOptions,  # noqa: E402
+                       EventOptions, PointOptions, StageOptions, StepOptions, StopOptions,
+                       ToleranceOptions, TrapOptions)
 from ._warmup import KERNEL_SETS, kernel_cache, warm_up  # noqa: E402  (compile ahead: pipeline's driver)
 
 restore_cache_dir(_numba_cache_dir)  # other packages' kernels keep their own
@@ -39,5 +40,6 @@ __all__ = [
     "DiscreteSolution", "family_parameters",
     "force_partials", "objective_gradient", "with_family_parameters", "OptimizeResult",
     "optimize_motion", "OptimizerOptions", "EngineOptions", "ControlOptions", "PointOptions", "TrapOptions",
-    "StopOptions", "EventOptions", "StepOptions",
+    "StopOptions", "EventOptions", "StepOptions", "StageOptions", "DefectOptions",
+    "ToleranceOptions", "BatchOptions",
 ]

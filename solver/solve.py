@@ -89,6 +89,9 @@ class SolveResult:
     start : how each point's solve started (``periodic``; None for ``march``): 0 cold,
     1 warm from its sweep's previous point, 2 warm failed, then cold
     (``periodic.point.START_*``).
+    options : the ``EngineOptions`` the engine ran with (``periodic``, the defaults where
+    none were given; None for ``march``); ``periodic.options.engine_options(options)``
+    lists them flat.
     Failed points have NaN in every float output.
     """
 
@@ -112,6 +115,7 @@ class SolveResult:
     method: str = "periodic"
     force_evaluations: np.ndarray | None = None
     start: np.ndarray | None = None
+    options: object | None = None
 
     def point(self, i):
         """Dict of the scalar outputs of point ``i``."""
@@ -157,14 +161,16 @@ def _representable(out, int_u):
     return np.isfinite(U) & np.isfinite(P) & (P > 0) & ((U != 0) | (int_u == 0))
 
 
-def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e-12):
+def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e-12,
+                     options=None):
     """Period integrals on one grid of ``n_steps`` steps, without refinement.
 
     For convergence studies (order tests, work-precision): the engine's 3-stage Radau IIA
     (``method="periodic"``) or the march's Heun steps (``"march"``; ``n_steps`` a multiple of
     8) on ``model.kinematics.period_grid``'s grid, uniform inside each phase of phi with its
     corners on nodes.  ``rtol`` only sets the tolerances of the nonlinear iterations
-    (shooting, stage Newton, periodicity).
+    (shooting, stage Newton, periodicity); ``options`` (``periodic`` only) the engine's
+    ``EngineOptions`` (its tolerances', stage solve's and frozen passes' are used here).
 
     Returns
     -------
@@ -176,8 +182,11 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
     n = len(kinematics)
     if len(physics) == 1 and n > 1:
         physics = physics.take(np.zeros(n, dtype=int))
+    if options is not None and method != "periodic":
+        raise ValueError(f"options: the engine's options are for method 'periodic', not {method!r}")
     if method == "march":
         return march_driver.fixed_grid(kinematics, physics, n_steps, rtol=rtol)
+    options = periodic.checked_options(options)
     code, params = kinematics.kernel_encoding()
     vscale = kinematic_speed(kinematics)
     u0 = fast_limit_velocity(kinematics, physics)
@@ -185,7 +194,8 @@ def solve_fixed_grid(kinematics, physics, n_steps, *, method="periodic", rtol=1e
     points = periodic.Points(code, params, np.zeros((n, 0)), physics.inertia_factor,
                                     physics.mu_n, physics.mu_s, physics.p, physics.delta_tau, u0)
     return periodic.fixed_grid_points(points, grids, float(rtol),
-                                             np.maximum(vscale, 1e-300), get_num_threads())
+                                             np.maximum(vscale, 1e-300), get_num_threads(),
+                                             options)
 
 
 def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_series=False,
@@ -221,12 +231,15 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
         every point cold.
     options : EngineOptions, optional
         The engine's options passed at run time (``periodic`` only; ``periodic.options``:
-        so far the step-size controller's, ``ControlOptions``, one point's solve's,
-        ``PointOptions``, the turning-point traps', ``TrapOptions``, the kinematic stops',
-        ``StopOptions``, the state events', ``EventOptions``, and the step lengths',
-        ``StepOptions``), e.g.
+        every tuning constant of the engine, by role: the step-size controller's,
+        ``ControlOptions``, one point's solve's, ``PointOptions``, the turning-point
+        traps', ``TrapOptions``, the kinematic stops', ``StopOptions``, the state events',
+        ``EventOptions``, the step lengths', ``StepOptions``, the stage solve's,
+        ``StageOptions``, the defect estimate's, ``DefectOptions``, the tolerances'
+        factors, ``ToleranceOptions``, and the batches', ``BatchOptions``), e.g.
         ``EngineOptions(control=ControlOptions(max_factor=2.0))``.  Default: the documented
-        defaults.  Any values run on the same compiled kernels.
+        defaults.  Any values run on the same compiled kernels; the result records them
+        (``SolveResult.options``).
     keep_unconverged : bool
         ``march`` only.  Where the finest grid allowed marched to a periodic state but its
         error estimate stayed above rtol (status TOLERANCE_NOT_REACHED), return that grid's
@@ -351,4 +364,4 @@ def _result(out, physics, method, start, keep_unconverged=False):
         **outputs, status=status, converged=status == CONVERGED, error_estimate=estimate,
         iterations=out["iterations"], n_tau=out["n_tau"], u=u_arr, tau=tau_arr,
         seconds=time.perf_counter() - start, method=method,
-        force_evaluations=out["evaluations"], start=out.get("start"))
+        force_evaluations=out["evaluations"], start=out.get("start"), options=out.get("options"))

@@ -22,6 +22,9 @@ from test_solver_methods import ORDER_CASES
 #: the kinematic stops' and the state events' default options (``periodic.options``)
 STOPS = options.DEFAULT_OPTIONS.stops
 EVENTS = options.DEFAULT_OPTIONS.events
+#: the stage solve's and the defect estimate's
+STAGE = options.DEFAULT_OPTIONS.stage
+DEFECT = options.DEFAULT_OPTIONS.defect
 
 
 def _error(res, ref, kin, physics):
@@ -62,9 +65,10 @@ def _step_against_scipy(kin, physics, t0, u_n, h):
     phys = _point_physics(physics)
     f0, J0, P0, Pu0 = steps.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)
     kin3 = steps.stage_kinematics(code, params, t0, h)
-    step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
+    step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15, STAGE)
     err, used = defect.defect_error(u_n, f0, J0, P0, Pu0, step, h,
-                                     steps.sample_kinematics(code, params, t0, h), phys)
+                                     steps.sample_kinematics(code, params, t0, h), phys,
+                                     DEFECT)
     int_ref, u_ref = radau_reference(code, params, tuple(phys), t0, t0 + h, u_n)
     int_u, _ = radau.step_integrals(h, step)
     return step, err, used, u_ref - step.U3, int_ref - int_u
@@ -133,7 +137,7 @@ def test_an_event_in_the_first_sixth_of_a_step_is_found():
     t0 = t_c - 0.1 * h
     u_n = sol.sol(t0)[0]
     kin3 = steps.stage_kinematics(code, params, t0, h)
-    step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
+    step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15, STAGE)
     phi0, om0 = angle_and_rate(code, params, t0, t0 + 0.5 * h)
     f0 = steps.start_values(code, params, t0, t0 + 0.5 * h, u_n, phys)[0]
     solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
@@ -142,7 +146,7 @@ def test_an_event_in_the_first_sixth_of_a_step_is_found():
     assert abs(theta - 0.1) < 1e-2, theta
     h = theta * h
     kin3 = steps.stage_kinematics(code, params, t0, h)
-    step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15)
+    step = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin3, phys, 1e-15, STAGE)
     solved = switching.SolvedStep(t0, h, u_n, step, kin3, math.sin(phi0), om0, f0)
     cut = events.find_event(code, params, phys, solved, 1e-14, False, events.new_exit_memo(),
                            EVENTS)
@@ -559,14 +563,14 @@ def test_stage_newton_stops_within_its_tolerance():
                             rng.choice([0.0, 0.5, 1.5]), 10.0 ** rng.uniform(-8, -2))
         h = 10.0 ** rng.uniform(-4, -1)
         kin = _step_kinematics(phi, omega, h)
-        first = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, 1e-15)
+        first = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, 1e-15, STAGE)
         if not first.ok:
             continue
         ref = _stage_residual_root(u_n, (first.U1, first.U2, first.U3), h, kin, phys)
         if ref is None:
             continue
         for atol in (1e-6, 1e-9, 1e-12):
-            sol = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, atol)
+            sol = radau.radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, atol, STAGE)
             assert sol.ok
             worst = max(worst, *(abs(U - r) / atol for U, r in zip((sol.U1, sol.U2, sol.U3), ref)))
             checked += 1
@@ -606,7 +610,7 @@ def test_stage_newton_at_an_infinite_slope_converges_to_the_roots():
         kin = radau.StageKinematics(S, S, S, C, C, C, 0.0, 0.0, 0.0)
         for u_n in (*np.geomspace(1e-8, 1.0, 7), *-np.geomspace(1e-8, 1.0, 7)):
             for guess in (u_n, 0.3, -0.3, 1e-3, -1e-3):
-                sol, _ = steps.solve_step(u_n, guess, guess, guess, h, kin, phys, atol)
+                sol, _ = steps.solve_step(u_n, guess, guess, guess, h, kin, phys, atol, STAGE)
                 assert sol.ok, (h, u_n, guess)
                 dx = _newton_correction(u_n, (sol.U1, sol.U2, sol.U3), h, kin, phys)
                 assert np.max(np.abs(dx)) <= 10 * atol, (h, u_n, guess, dx)

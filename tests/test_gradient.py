@@ -293,7 +293,8 @@ def _engine_fixed_grid(kinematics, physics, nodes, rtol=1e-13):
                         physics.p[0], physics.delta_tau[0])
     return periodic_driver.fixed_grid_point(code, params[0], nodes, phys, rtol,
                                           solver.kinematic_speed(kinematics)[0],
-                                          solver.fast_limit_velocity(kinematics, physics)[0])
+                                          solver.fast_limit_velocity(kinematics, physics)[0],
+                                          solver.periodic.checked_options(None))
 
 
 @pytest.mark.parametrize("case", ["fourier_clapping", "power_law"])

@@ -21,6 +21,7 @@ from pipeline import RunContext, StoreBusy, StoreMismatch, load_scene, parse_sce
 from pipeline.__main__ import main
 from pipeline._schedule import Scheduler
 from pipeline._store import lock_path, run_lock
+from solver.periodic import engine_options
 from pipeline_cases import REPO, assert_stores_equal, cli, read_store, small_scene_text, write_scene
 
 
@@ -108,6 +109,7 @@ def test_xarray_opens_store_with_labels(reference):
     prov = record["provenance"]
     assert prov["scene_hash"] == scene.hash and prov["scene"]["name"] == "small"
     assert "zarr" in prov["library_versions"] and prov["created"]
+    assert prov["engine_options"] == engine_options()  # the defaults, by field
     assert record["format_version"] == 2
     run = record["run"]
     assert run["computed_points"] == 64 and run["wall_seconds"] > 0 and run["runs"] == 1

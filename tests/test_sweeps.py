@@ -67,7 +67,8 @@ def test_a_sweep_depends_on_its_own_points_only():
     from solver.model.limits import fast_limit_velocity
     points = driver.Points(code, params, kin.corners(), phys.inertia_factor, phys.mu_n,
                            phys.mu_s, phys.p, phys.delta_tau,
-                           fast_limit_velocity(kin, phys, driver.GUESS_STEPS))
+                           fast_limit_velocity(kin, phys,
+                                               solver.EngineOptions().batch.guess_steps))
     one, _ = driver.solve_points(points, 1e-5, 2 ** 17, runs, 1)
     two, _ = driver.solve_points(points, 1e-5, 2 ** 17, runs, 2)
     for a, b in zip(one, two):

@@ -427,7 +427,7 @@ def step_length_partials(code, params, h, tau_phase, dh):
 
 
 @njit(cache=True, error_model="numpy")
-def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
+def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics, options):
     """Periodic solution of the 3-stage Radau IIA discretisation on ``nodes`` (N steps).
 
     The engine's own fixed-grid solve (``periodic.frozen_orbit``: a frozen pass, Newton on
@@ -439,7 +439,8 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
     value (``fixed_grid_point`` starts it at u0; the two agree to the stage tolerance).
 
     Returns (status, u0, I_u, I_Pi); the speed scale V = (1/4) int |dphi/dtau| dtau (Radau
-    rule) sets the nonlinear tolerances as in the engine (``periodic.tolerances``).
+    rule) sets the nonlinear tolerances as in the engine (``periodic.tolerances``, by the
+    factors of ``options``, an ``EngineOptions``: ``discrete_solution`` passes the defaults).
     """
     vscale = 0.0
     for n in range(N):
@@ -461,7 +462,7 @@ def _forward(code, params, nodes, N, phys, u0, rtol, W, stage_kinematics):
         set_grid_step(W, n, t0, nodes[n + 1], stage_kinematics[2, 3 * n:3 * n + 3],
                       stage_kinematics[3, 3 * n:3 * n + 3], stage_kinematics[1, 3 * n:3 * n + 3],
                       u0, u0, 1.0)
-    return frozen_orbit(code, params, phys, u0, rtol, max(vscale, 1e-300), W, N)
+    return frozen_orbit(code, params, phys, u0, rtol, max(vscale, 1e-300), W, N, options)
 
 
 @njit(cache=True, error_model="numpy")
@@ -792,7 +793,7 @@ def discrete_solution(kinematics, physics, grid, *, rtol=1e-13, u0=None):
     W = new_workspace(N)
     stage_kinematics = np.empty((4, 3 * N))
     status, u0, int_u, int_pi = _forward(code, params, nodes, N, phys, float(u0), float(rtol), W,
-                                         stage_kinematics)
+                                         stage_kinematics, periodic.checked_options(None))
     stages = np.ascontiguousarray(stage_columns(W, N).T).reshape(-1)
     return DiscreteSolution(kinematics, physics, nodes, stages, stage_kinematics, int_u, int_pi,
                             int(status), u0)

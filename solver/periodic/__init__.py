@@ -16,9 +16,11 @@ Files by role (as scipy's ``integrate/_ivp`` and diffrax separate them):
 - ``shooting``: the monodromy and Newton on u(0); ``point``: one point's solve (stops,
   loose shooting, rounds, estimate, warm starts); ``driver``: batches of points and the
   entry of ``solve.solve_periodic``.
-- ``options``: every tuning constant, and ``EngineOptions``, the options passed through the
-  kernels at run time (so far the controller's, a point's solve's, the traps', the
-  kinematic stops', the state events' and the step lengths'); ``tolerances``: every tolerance from rtol.
+- ``options``: every tuning constant, each the default of a field of ``EngineOptions``,
+  the options passed through the kernels at run time by role (the controller's, a point's
+  solve's, the traps', the kinematic stops', the state events', the step lengths', the
+  stage solve's, the defect estimate's, the tolerances' factors, the batches');
+  ``tolerances``: every tolerance from rtol.
 
 "Sweep" means one thing in the engine: a chain of points solved in order, each starting
 from its predecessor's orbit (``solve_periodic(..., sweeps=...)``); one integration over
@@ -28,14 +30,16 @@ The names below are the engine's public boundary: what other packages (``solve``
 ``adjoint``) use; everything else is internal.
 """
 from .driver import Points, fixed_grid_points, solve, solve_points
-from .options import (ControlOptions, EngineOptions, EventOptions, PointOptions, StepOptions,
-                      StopOptions, TrapOptions, checked_options)
+from .options import (BatchOptions, ControlOptions, DefectOptions, EngineOptions, EventOptions,
+                      PointOptions, StageOptions, StepOptions, StopOptions, ToleranceOptions,
+                      TrapOptions, checked_options, engine_options)
 from .radau import RADAU5_A, RADAU5_C, solve3, stage_matrix
 from .record import new_workspace, set_grid_step, stage_columns
 from .shooting import frozen_orbit, monodromy_factor, one_minus_monodromy
 
 __all__ = ["Points", "fixed_grid_points", "solve", "solve_points", "ControlOptions",
            "EngineOptions", "PointOptions", "TrapOptions", "StopOptions", "EventOptions",
-           "StepOptions", "checked_options", "RADAU5_A", "RADAU5_C", "solve3", "stage_matrix",
+           "StepOptions", "StageOptions", "DefectOptions", "ToleranceOptions", "BatchOptions",
+           "checked_options", "engine_options", "RADAU5_A", "RADAU5_C", "solve3", "stage_matrix",
            "new_workspace", "set_grid_step", "stage_columns", "frozen_orbit", "monodromy_factor",
            "one_minus_monodromy"]

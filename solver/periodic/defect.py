@@ -8,6 +8,13 @@ error through the resolvent of the linearised problem (``exponential_moments``,
 ``quasi_static_kernel``).  Where the fit is poor the conservative embedded estimate of
 ``periodic.radau.embedded_error`` is used instead.  Moved here unchanged from
 ``periodic.radau`` (the step kernel stays there).
+
+The two samples are the estimator's definition, as the Radau nodes are the step's (they
+stay here, not among the options): the quadratic model of delta / w is through them, the
+6-point rule (``W6_*``) on the start, the stages and the samples is computed from them once,
+and the step record keeps the kinematics there (``SampleKinematics``).  Its tuning (the
+noise floor's gain, the fit's threshold, the variable-slope limit) is
+``periodic.options.DefectOptions``, passed in as ``options``.
 """
 from __future__ import annotations
 
@@ -18,11 +25,15 @@ import numpy as np
 from numba import njit
 
 from ..model.force import force_slope_power_sc
-from .options import DEFECT_FIT, NOISE_GAIN, THETA_LATE, THETA_MID, VARIABLE_SLOPE_LIMIT
 from .radau import A31, A32, A33, C1, C2, StepError, dense_value, embedded_error
 
 
 _EPS = float(np.finfo(np.float64).eps)
+
+#: where the defect estimate samples a step besides its start and its stages (where the
+#: defect vanishes): one point between the first two stages, one between the last two
+THETA_MID = 0.5
+THETA_LATE = 0.85
 
 
 _GX, _GW = np.polynomial.legendre.leggauss(8)
@@ -146,16 +157,17 @@ def quasi_static_kernel(z, r):
 
 
 @njit(cache=True, error_model="numpy")
-def estimate_floor(u_n, step, atol):
+def estimate_floor(u_n, step, atol, options):
     """The level below which ``defect_error``'s estimate of u's local error is the stage values'
     own error (Newton's tolerance ``atol`` and rounding) seen through the defect, not the
-    method's: NOISE_GAIN (atol + 2 eps (|u_n| + |U1| + |U2| + |U3|))."""
-    return NOISE_GAIN * (atol + 2.0 * _EPS * (abs(u_n) + abs(step.U1) + abs(step.U2)
+    method's: noise_gain (atol + 2 eps (|u_n| + |U1| + |U2| + |U3|)) (``options``, the
+    ``DefectOptions``: NOISE_GAIN)."""
+    return options.noise_gain * (atol + 2.0 * _EPS * (abs(u_n) + abs(step.U1) + abs(step.U2)
                                              + abs(step.U3)))
 
 
 @njit(cache=True, error_model="numpy")
-def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
+def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys, options):
     """The step's local error in (u, int u, int Pi) from the defect of its collocation
     polynomial p, delta(theta) = p'(theta) / h - kappa F(p(theta), tau_n + theta h): the
     error e of p obeys e' = J e - delta (J = kappa dF/du), so
@@ -175,9 +187,11 @@ def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
     stages and the samples, minus Radau's).
 
     Where the line of delta / w through the start and THETA_MID misses the late sample by
-    more than DEFECT_FIT of it (p is not in its asymptotic regime: a feature the samples
+    more than ``options.fit`` of it (p is not in its asymptotic regime: a feature the samples
     resolve differently), each error is the larger of this one and the embedded estimate's
     (``embedded_error``, O(h^4)); the pass then halves the step rather than accept it.
+    ``options``: the ``DefectOptions`` (fit DEFECT_FIT; the slope varies along the step up
+    to |h kappa dF/du| = variable_slope_limit, VARIABLE_SLOPE_LIMIT).
     Returns (StepError, whether the defect estimate's model fits).
     """
     if not h > 0.0:
@@ -200,7 +214,7 @@ def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
     curve = ((phil - phim) / (THETA_LATE - THETA_MID) - slope1) / THETA_LATE
     linear_late = phi0 + slope1 * THETA_LATE
     misfit = abs(phil - linear_late)
-    fits = misfit <= DEFECT_FIT * max(abs(phil), abs(linear_late))
+    fits = misfit <= options.fit * max(abs(phil), abs(linear_late))
     # phi(s) = a + b s + c s^2 and q(1 - x) = w(1 - x) phi(1 - x) = sum_k q_k x^k
     a = phi0
     b = slope1 - curve * THETA_MID
@@ -222,7 +236,7 @@ def defect_error(u_n, f0, J0, Pi0, Pi_u0, step, h, samples, phys):
     z3 = h * kappa * step.d3
     s_i, s_g = exponential_moments(max(z1, z2, z3), q1, q2, q3, q4, q5)
     err_v = -h * h * s_g
-    if max(abs(z1), abs(z2), abs(z3)) <= VARIABLE_SLOPE_LIMIT:
+    if max(abs(z1), abs(z2), abs(z3)) <= options.variable_slope_limit:
         # the resolvent with the slope varying along the step (quadratic through the
         # stages): at leading order its change is as large as the constant slope's own term
         err_u = -h * _resolvent_moment(z1, z2, z3, a, b, c)

@@ -13,33 +13,36 @@ from numba import get_num_threads, njit
 
 from ..model.physics import PointPhysics
 from ..status import CONVERGED, NON_FINITE
-from .options import GUESS_STEPS, IN_LINE_SHARE, START_CAPACITY, checked_options
+from .options import checked_options
 from .point import N_COSTS, Orbit, fixed_grid_point, no_orbit, solve_point
 from .record import new_workspace, node_series
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _fixed_grid_lane(lane, lanes, points, grids, rtol, vscale, out):
+def _fixed_grid_lane(lane, lanes, points, grids, rtol, vscale, out, options):
     """Points lane, lane + lanes, ... of ``fixed_grid_points``; out: (int_u, int_pi, status)."""
     for i in range(lane, points.params.shape[0], lanes):
         phys = PointPhysics(points.kappa[i], points.mu_n[i], points.mu_s[i], points.p[i],
                             points.dtau[i])
         out[0][i], out[1][i], out[2][i] = fixed_grid_point(
-            points.code, points.params[i], grids[i], phys, rtol, vscale[i], points.u_guess[i])
+            points.code, points.params[i], grids[i], phys, rtol, vscale[i], points.u_guess[i],
+            options)
 
 
-def fixed_grid_points(points, grids, rtol, vscale, threads):
+def fixed_grid_points(points, grids, rtol, vscale, threads, options=None):
     """``fixed_grid_point`` of every point of ``points`` (Points; its corners unused) on its
-    row of ``grids``, on ``threads`` Python threads: (int_u, int_pi, status), each (n,)."""
+    row of ``grids``, on ``threads`` Python threads: (int_u, int_pi, status), each (n,).
+    ``options``: an ``EngineOptions`` (None: the defaults)."""
+    options = checked_options(options)
     n = points.params.shape[0]
     out = (np.full(n, np.nan), np.full(n, np.nan), np.full(n, NON_FINITE, dtype=np.int8))
     lanes = max(min(n, threads), 1)
     if lanes == 1:
-        _fixed_grid_lane(0, 1, points, grids, rtol, vscale, out)
+        _fixed_grid_lane(0, 1, points, grids, rtol, vscale, out, options)
         return out
     with ThreadPoolExecutor(lanes) as pool:
         for _ in pool.map(lambda lane: _fixed_grid_lane(lane, lanes, points, grids, rtol,
-                                                        vscale, out), range(lanes)):
+                                                        vscale, out, options), range(lanes)):
             pass
     return out
 
@@ -100,37 +103,40 @@ def _store(out, i, sol):
 
 
 @njit(cache=True, error_model="numpy")
-def _second_difference_small(a, b, c):
-    return abs(a - 2.0 * b + c) <= IN_LINE_SHARE * max(abs(a), abs(b), abs(c), 1e-300)
+def _second_difference_small(a, b, c, share):
+    return abs(a - 2.0 * b + c) <= share * max(abs(a), abs(b), abs(c), 1e-300)
 
 
 @njit(cache=True, error_model="numpy")
-def in_line(points, i, j, k):
+def in_line(points, i, j, k, share):
     """Whether points i, j, k lie evenly spaced on a line in parameter space (every
-    parameter and physical constant has a vanishing second difference): then j's orbit
-    and its change from i predict k's."""
+    parameter and physical constant has a second difference within ``share`` of its size,
+    ``BatchOptions.in_line_share``): then j's orbit and its change from i predict k's."""
     for c in range(points.params.shape[1]):
         if not _second_difference_small(points.params[i, c], points.params[j, c],
-                                        points.params[k, c]):
+                                        points.params[k, c], share):
             return False
-    return (_second_difference_small(points.kappa[i], points.kappa[j], points.kappa[k])
-            and _second_difference_small(points.mu_n[i], points.mu_n[j], points.mu_n[k])
-            and _second_difference_small(points.mu_s[i], points.mu_s[j], points.mu_s[k])
-            and _second_difference_small(points.p[i], points.p[j], points.p[k])
-            and _second_difference_small(points.dtau[i], points.dtau[j], points.dtau[k]))
+    return (_second_difference_small(points.kappa[i], points.kappa[j], points.kappa[k], share)
+            and _second_difference_small(points.mu_n[i], points.mu_n[j], points.mu_n[k], share)
+            and _second_difference_small(points.mu_s[i], points.mu_s[j], points.mu_s[k], share)
+            and _second_difference_small(points.p[i], points.p[j], points.p[k], share)
+            and _second_difference_small(points.dtau[i], points.dtau[j], points.dtau[k],
+                                         share))
 
 
 @njit(cache=True, error_model="numpy")
-def predicted_u0(points, out, first, i):
+def predicted_u0(points, out, first, i, share):
     """u(0) of point i predicted from its sweep's points before it (from ``first`` on;
     ``out`` holds their results; point i - 1 converged): by the quadratic through the last
-    three where the last four lie evenly on a line (``in_line``), by the line through the
-    last two where the last three do, else the last one's."""
+    three where the last four lie evenly on a line (``in_line`` with ``share``), by the line
+    through the last two where the last three do, else the last one's."""
     u1 = out.u0[i - 1]
-    if i - 2 < first or out.status[i - 2] != CONVERGED or not in_line(points, i - 2, i - 1, i):
+    if (i - 2 < first or out.status[i - 2] != CONVERGED
+            or not in_line(points, i - 2, i - 1, i, share)):
         return u1
     u2 = out.u0[i - 2]
-    if i - 3 < first or out.status[i - 3] != CONVERGED or not in_line(points, i - 3, i - 2, i - 1):
+    if (i - 3 < first or out.status[i - 3] != CONVERGED
+            or not in_line(points, i - 3, i - 2, i - 1, share)):
         return 2.0 * u1 - u2
     return 3.0 * u1 - 3.0 * u2 + out.u0[i - 3]
 
@@ -154,9 +160,10 @@ def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep_series, opt
     Returns (tau, u): with ``keep_series``, the final pass's nodes (without tau = 1) and u
     there of every point of the lane's sweeps in the order solved, ``out.n_steps[i]`` of
     point i (read from the converged orbit in the workspace, not solved again); else empty."""
-    W = new_workspace(START_CAPACITY)
-    kept_tau = np.empty(START_CAPACITY if keep_series else 0)
-    kept_u = np.empty(START_CAPACITY if keep_series else 0)
+    capacity = options.batch.start_capacity
+    W = new_workspace(capacity)
+    kept_tau = np.empty(capacity if keep_series else 0)
+    kept_u = np.empty(capacity if keep_series else 0)
     kept = 0
     for r in range(lane, runs.size - 1, lanes):
         orbit = no_orbit()
@@ -165,8 +172,9 @@ def solve_lane(lane, lanes, points, rtol, max_steps, runs, out, keep_series, opt
                                 points.dtau[i])
             start = orbit
             if orbit.N > 0:
-                start = Orbit(orbit.N, predicted_u0(points, out, runs[r], i), orbit.scale_u,
-                              orbit.scale_p, orbit.largest_weight)
+                start = Orbit(orbit.N, predicted_u0(points, out, runs[r], i,
+                                                    options.batch.in_line_share),
+                              orbit.scale_u, orbit.scale_p, orbit.largest_weight)
             W, sol, orbit = solve_point(points.code, points.params[i], points.corners[i], phys,
                                         rtol, points.u_guess[i], max_steps, W, start, options)
             _store(out, i, sol)
@@ -221,19 +229,21 @@ def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None, opti
     ``sweeps``: None (every point cold) or the offsets of ``solve_points``' runs; ``options``:
     an ``EngineOptions`` (None: the defaults).  Returns a
     dict with int_u, int_pi, status, estimate, n_tau, iterations (passes over the period), still (phi
-    constant: nothing solved), evaluations, start (``PointSolution.start``) and, with
-    ``return_series``, per point (u nodes, tau nodes)."""
+    constant: nothing solved), evaluations, start (``PointSolution.start``), options (the
+    checked ``EngineOptions`` used) and, with ``return_series``, per point (u nodes, tau
+    nodes)."""
     from ..model.limits import fast_limit_velocity
 
+    options = checked_options(options)
     code, params = kinematics.kernel_encoding()
     n = params.shape[0]
     runs = np.arange(n + 1, dtype=np.int64) if sweeps is None else np.asarray(sweeps, np.int64)
     points = Points(code, params, kinematics.corners(), physics.inertia_factor, physics.mu_n,
                     physics.mu_s, physics.p, physics.delta_tau,
-                    fast_limit_velocity(kinematics, physics, GUESS_STEPS))
+                    fast_limit_velocity(kinematics, physics, options.batch.guess_steps))
     out, series = solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(),
                                return_series, options)
     return dict(int_u=out.int_u, int_pi=out.int_pi, status=out.status, estimate=out.estimate,
                 n_tau=out.n_steps, iterations=out.passes, still=out.vscale == 0.0,
-                series=series, evaluations=out.evaluations, start=out.start)
+                series=series, evaluations=out.evaluations, start=out.start, options=options)
 

@@ -44,14 +44,14 @@ def floored_errors(err, floor, h, pi_u):
 
 
 @njit(cache=True, error_model="numpy")
-def estimate_pass(code, params, phys, corner_nodes, atol, W, N):
+def estimate_pass(code, params, phys, corner_nodes, atol, W, N, options):
     """The defect estimate (``periodic.defect.defect_error``) of every recorded step of ``W``, in
     place (rows ERR), from its stored stages: two evaluations of F per step, and the start
     values where phi has a corner (``corner_nodes``, (N,)) or at tau = 0; and the estimate's
     floor (rows FLOOR) for rounding alone (the stage tolerance ``atol`` is set so that the
     stages' Newton error stays a small share of rtol; subtracting a floor of the tolerance
-    here hid true errors of 5 rtol where the node weights reach 4e3).  Returns how many steps fell back to
-    the embedded estimate."""
+    here hid true errors of 5 rtol where the node weights reach 4e3).  ``options``: the
+    ``DefectOptions``.  Returns how many steps fell back to the embedded estimate."""
     kappa = phys.kappa
     fallbacks = 0
     evaluations = 2 * N
@@ -64,10 +64,10 @@ def estimate_pass(code, params, phys, corner_nodes, atol, W, N):
             evaluations += 1
         step = recorded_solution(W, n)
         err, used = defect_error(u, f0, J0, P0, Pu0, step, h,
-                                 sample_kinematics(code, params, t0, h), phys)
+                                 sample_kinematics(code, params, t0, h), phys, options)
         fallbacks += not used
         set_error(W, n, err)
-        set_error_floor(W, n, estimate_floor(u, step, 0.0))
+        set_error_floor(W, n, estimate_floor(u, step, 0.0, options))
         f0, J0, P0, Pu0 = kappa * step.F3, kappa * step.d3, step.P3, step.Pu3
     return fallbacks, evaluations
 
@@ -98,14 +98,14 @@ def event_split_errors(code, params, phys, atol, W, N, split, options):
     moved it after the adaptive pass had put it on a node): each such step is solved again
     as two steps split at the event, and the change of its end value and integrals replaces
     its estimate where larger (the defect's samples need not see a corner between them).
-    ``split`` (N,) is set for those steps; ``options``: the ``EventOptions``.  Returns (their
-    count, evaluations of F)."""
+    ``split`` (N,) is set for those steps; ``options``: the ``EngineOptions`` (its events'
+    and stage solve's).  Returns (their count, evaluations of F)."""
     count = 0
     evaluations = 0
     memo = new_exit_memo()
     for n in range(N):
         split[n] = False
-        theta = _interior_event(code, params, phys, atol, W, N, n, memo, options)
+        theta = _interior_event(code, params, phys, atol, W, N, n, memo, options.events)
         if theta < 0.0:
             continue
         t0, h = step_span(W, n)
@@ -116,13 +116,13 @@ def event_split_errors(code, params, phys, atol, W, N, split, options):
         first, its1 = solve_step(u_n, dense_value(C1 * theta, u_n, U1, U2, U3),
                               dense_value(C2 * theta, u_n, U1, U2, U3),
                               dense_value(theta, u_n, U1, U2, U3), h1,
-                              stage_kinematics(code, params, t0, h1), phys, atol, math.inf,
-                              math.nan)
+                              stage_kinematics(code, params, t0, h1), phys, atol,
+                              options.stage, math.inf, math.nan)
         r = 1.0 - theta
         second, its2 = solve_step(first.U3, dense_value(theta + C1 * r, u_n, U1, U2, U3),
                                dense_value(theta + C2 * r, u_n, U1, U2, U3), U3, h2,
                                stage_kinematics(code, params, t0 + h1, h2), phys, atol,
-                               math.inf, math.nan)
+                               options.stage, math.inf, math.nan)
         evaluations += 3 * (its1 + its2)
         if not (first.ok and second.ok):
             continue

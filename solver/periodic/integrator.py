@@ -152,8 +152,9 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W, options)
         budget, events, sharp).
     W : workspace, grown as needed
     options : EngineOptions (``periodic.options``): the controller's (``options.control``)
-        the traps' (``options.traps``), the events' (``options.events``) and the step
-        lengths' (``options.steps``)
+        the traps' (``options.traps``), the events' (``options.events``), the step
+        lengths' (``options.steps``), the stage solve's (``options.stage``) and the defect
+        estimate's (``options.defect``)
 
     Returns
     -------
@@ -252,7 +253,7 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W, options)
             g3 = dense_value(1.0 + r, prev_u, prev_U1, prev_U2, prev_U3)
         else:
             g1 = g2 = g3 = u
-        sol, its = solve_step(u, g1, g2, g3, h, kin, phys, atol,
+        sol, its = solve_step(u, g1, g2, g3, h, kin, phys, atol, options.stage,
                               math.inf if sharp else rate, J0 / phys.kappa)
         if sol.rate == sol.rate:
             rate = sol.rate
@@ -279,14 +280,15 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W, options)
                     end_kind = STATE_EVENT
         if sharp:
             err, fits = defect_error(u, f0, J0, P0, Pu0, sol, h,
-                                     sample_kinematics(code, params, t, h), phys)
+                                     sample_kinematics(code, params, t, h), phys,
+                                     options.defect)
             evaluations += 2
         else:
             err = embedded_error(u, f0, J0, P0, Pu0, sol, h)
             fits = True
         lam_end, mu_end, _, k_model = _model_at(model, t + h, k_model)
         ratio = weighted_error(err, lam_end, mu_end, scale_u, scale_p,
-                               estimate_floor(u, sol, atol), h,
+                               estimate_floor(u, sol, atol, options.defect), h,
                                max(abs(sol.Pu1), abs(sol.Pu2), abs(sol.Pu3))) / (target * h)
         if not fits:  # the defect's model does not fit: its error is not trusted as it is
             ratio *= step_options.fit_distrust
@@ -344,10 +346,11 @@ def adaptive_pass(code, params, phys, point_stops, u0, h_first, aim, W, options)
 
 
 @njit(cache=True, error_model="numpy")
-def frozen_pass(code, params, phys, u0, atol, W, N):
+def frozen_pass(code, params, phys, u0, atol, W, N, stage):
     """Solve the N recorded steps of ``W`` again from u(0) = u0, in place (the stages start
     at their previous values moved along their sensitivities; the step kinematics are
-    reused).  The error estimates are left as they were (``estimate_pass`` makes them).
+    reused; ``stage``: the ``StageOptions``).  The error estimates are left as they were
+    (``estimate_pass`` makes them).
 
     Returns (status, evaluations of F)."""
     u = u0
@@ -356,7 +359,7 @@ def frozen_pass(code, params, phys, u0, atol, W, N):
         t0, h = step_span(W, n)
         kin = recorded_kinematics(W, n)
         g1, g2, g3 = predicted_stages(W, n, u)
-        sol, its = solve_step(u, g1, g2, g3, h, kin, phys, atol, math.inf, math.nan)
+        sol, its = solve_step(u, g1, g2, g3, h, kin, phys, atol, stage, math.inf, math.nan)
         iterations += 3 * its
         if not sol.ok:
             return (STAGE_SOLVE_FAILED if math.isfinite(sol.U3) else NON_FINITE), iterations

@@ -1,31 +1,34 @@
 """The engine's tuning constants, in one place: the defaults of every choice the periodic
 engine makes that is not mathematics (issue 37).
 
-Each constant is documented where it is defined below, with the measurement that set it.
-The Radau IIA tableau (``periodic.radau``), the step record's layout (``periodic.record``)
-and the codes of stops, events and statuses keep their own modules; the tolerances that
-derive from rtol are in ``periodic.tolerances``.
+Each constant is documented where it is defined below, with the measurement that set it,
+and each is the default of one field of ``EngineOptions``, the options passed through the
+kernels at run time by role: the step-size controller's (``ControlOptions``), one point's
+solve's (``PointOptions``), the turning-point traps' (``TrapOptions``), the kinematic
+stops' (``StopOptions``), the state events' (``EventOptions``), the step lengths'
+(``StepOptions``), the stage solve's (``StageOptions``), the defect estimate's
+(``DefectOptions``), the tolerances' factors (``ToleranceOptions``) and the batches'
+(``BatchOptions``).  ``solve_periodic(..., options=EngineOptions(...))`` changes them
+without recompiling (one compiled signature for every value); no other module reads them
+as globals (``tests/test_engine_options.py``).  ``engine_options()`` lists the values of
+an ``EngineOptions``, for provenance; ``SolveResult.options`` holds those a solve used.
 
-numba reads module globals as compile-time constants, so most of these are fixed when the
-kernels compile: changing one means editing it here (which also starts a fresh kernel cache,
-``solver._cache``).  Those of the roles in ``EngineOptions`` (so far the step-size
-controller's, ``ControlOptions``, one point's solve's, ``PointOptions``, the
-turning-point traps', ``TrapOptions``, the kinematic stops', ``StopOptions``, the state
-events', ``EventOptions``, and the step lengths', ``StepOptions``) are passed
-through the kernels at run time instead: the constants here are their defaults, and
-``solve_periodic(..., options=EngineOptions(...))`` changes them without recompiling (one
-compiled signature for every value).  ``engine_options()`` lists the constants, for
-provenance.
+What defines the method rather than tunes it keeps its own module: the Radau IIA tableau
+(``periodic.radau``), the defect estimate's two samples and its quadrature rule
+(``periodic.defect``), the step record's layout (``periodic.record``) and the codes of
+stops, events and statuses; the tolerances are derived from rtol in ``periodic.tolerances``.
 """
 from __future__ import annotations
 
 from typing import NamedTuple
 
 
-def engine_options() -> dict:
-    """{name: value} of every tuning constant of this module."""
-    return {name: value for name, value in globals().items()
-            if name.isupper() and isinstance(value, (int, float))}
+def engine_options(options=None) -> dict:
+    """{"role.name": value} of every field of ``options`` (an EngineOptions; None: the
+    defaults), for provenance."""
+    options = DEFAULT_OPTIONS if options is None else options
+    return {f"{role}.{name}": value for role, group in zip(options._fields, options)
+            for name, value in zip(group._fields, group)}
 
 
 # ------------------------------------------------ the stage solve (``periodic.radau.radau5_step``)
@@ -42,10 +45,9 @@ FIRST_CORRECTION_SHARE = 0.1
 SLOPE_SHARE = 0.25
 
 # ------------------------------------------------------- the defect estimate (``periodic.defect``)
-#: where the defect estimate samples a step besides its start and its stages (where the
-#: defect vanishes): one point between the first two stages, one between the last two
-THETA_MID = 0.5
-THETA_LATE = 0.85
+#: (its two samples, THETA_MID and THETA_LATE, are the estimator's definition, as the Radau
+#: nodes are the step's: they fix its 6-point quadrature rule, computed from them once, and
+#: are not a tuning; they live in ``periodic.defect``)
 #: the defect estimate moves by about this many times a change of the stage values (the
 #: polynomial's slope at the start, divided by h, times h): its floor is this times the
 #: stages' error (the Newton tolerance plus rounding), which no smaller step reduces
@@ -227,17 +229,21 @@ class ControlOptions(NamedTuple):
 
 
 class PointOptions(NamedTuple):
-    """One point's solve (``periodic.point``): at most ``max_loose_passes`` loose passes and
-    ``max_rounds`` rounds, a kept shooting residual counted ``residual_weight`` times, the
-    first pass's first step ``first_step``, and a warm start kept where its stage tolerance
-    is at most ``warm_atol_slack`` times the point's own; defaults MAX_LOOSE_PASSES,
-    MAX_ROUNDS, RESIDUAL_WEIGHT, FIRST_STEP, WARM_ATOL_SLACK (documented above)."""
+    """One point's solve (``periodic.point``, ``periodic.shooting``): at most
+    ``max_loose_passes`` loose passes and ``max_rounds`` rounds, a kept shooting residual
+    counted ``residual_weight`` times, the first pass's first step ``first_step``, a warm
+    start kept where its stage tolerance is at most ``warm_atol_slack`` times the point's
+    own, at most ``max_frozen_passes`` frozen-grid Newton passes per round (also on the
+    fixed-grid path, ``periodic.shooting.frozen_orbit``); defaults MAX_LOOSE_PASSES,
+    MAX_ROUNDS, RESIDUAL_WEIGHT, FIRST_STEP, WARM_ATOL_SLACK, MAX_FROZEN_PASSES (documented
+    above)."""
 
     max_loose_passes: int = MAX_LOOSE_PASSES
     max_rounds: int = MAX_ROUNDS
     residual_weight: float = RESIDUAL_WEIGHT
     first_step: float = FIRST_STEP
     warm_atol_slack: float = WARM_ATOL_SLACK
+    max_frozen_passes: int = MAX_FROZEN_PASSES
 
 
 class TrapOptions(NamedTuple):
@@ -312,6 +318,66 @@ class StepOptions(NamedTuple):
     max_refinement: float = MAX_REFINEMENT
 
 
+class StageOptions(NamedTuple):
+    """The stage solve (``periodic.radau.radau5_step``): Newton gives up after
+    ``max_iterations``; its first correction is taken as the last where the carried
+    quadratic constant predicts the next below ``first_correction_share`` of the tolerance,
+    and only where dF/du at the predicted stages lies within ``slope_share`` of the previous
+    step's end; defaults MAX_STAGE_ITERATIONS, FIRST_CORRECTION_SHARE, SLOPE_SHARE
+    (documented above)."""
+
+    max_iterations: int = MAX_STAGE_ITERATIONS
+    first_correction_share: float = FIRST_CORRECTION_SHARE
+    slope_share: float = SLOPE_SHARE
+
+
+class DefectOptions(NamedTuple):
+    """The defect estimate (``periodic.defect``): its floor is ``noise_gain`` times the
+    stages' error; its model fits where the line through the start and the middle sample
+    predicts the late one within ``fit`` of it; its resolvent is integrated with the slope
+    varying along the step up to |h kappa dF/du| = ``variable_slope_limit``; defaults
+    NOISE_GAIN, DEFECT_FIT, VARIABLE_SLOPE_LIMIT (documented above).  (Its two samples are
+    the estimator's definition, not options: ``periodic.defect``.)"""
+
+    noise_gain: float = NOISE_GAIN
+    fit: float = DEFECT_FIT
+    variable_slope_limit: float = VARIABLE_SLOPE_LIMIT
+
+
+class ToleranceOptions(NamedTuple):
+    """The factors by which ``periodic.tolerances`` derives every tolerance from rtol and the
+    speed scale V: the loose tolerance max(``loose_rtol``, rtol); the passes' target
+    ``target_share`` of their tolerance; the stage tolerance max(``stage_share`` rtol,
+    ``stage_floor``) of the norm, for p = 0 at most ``band_share`` delta_tau; the shooting's
+    max(``shooting_share`` rtol, ``shooting_floor``) V; U's norm at least ``u_norm_floor`` V;
+    u(0)'s bracket +-(``bracket_speeds`` V + ``bracket_guesses`` |u_guess|).  Defaults
+    LOOSE_RTOL, TARGET_SHARE, STAGE_SHARE, STAGE_FLOOR, BAND_SHARE, SHOOTING_SHARE,
+    SHOOTING_FLOOR, U_NORM_FLOOR, BRACKET_SPEEDS, BRACKET_GUESSES (documented above)."""
+
+    loose_rtol: float = LOOSE_RTOL
+    target_share: float = TARGET_SHARE
+    stage_share: float = STAGE_SHARE
+    stage_floor: float = STAGE_FLOOR
+    band_share: float = BAND_SHARE
+    shooting_share: float = SHOOTING_SHARE
+    shooting_floor: float = SHOOTING_FLOOR
+    u_norm_floor: float = U_NORM_FLOOR
+    bracket_speeds: float = BRACKET_SPEEDS
+    bracket_guesses: float = BRACKET_GUESSES
+
+
+class BatchOptions(NamedTuple):
+    """Batches of points (``periodic.driver``): each thread's step record starts with room
+    for ``start_capacity`` steps (it doubles as needed: no result depends on it); a sweep's
+    points lie on a line where their second differences are within ``in_line_share``; the
+    fast limit's u that starts a cold solve is taken on ``guess_steps`` steps; defaults
+    START_CAPACITY, IN_LINE_SHARE, GUESS_STEPS (documented above)."""
+
+    start_capacity: int = START_CAPACITY
+    in_line_share: float = IN_LINE_SHARE
+    guess_steps: int = GUESS_STEPS
+
+
 class EngineOptions(NamedTuple):
     """The engine's options passed through its kernels, by role (a numba NamedTuple of
     NamedTuples of floats: every value compiles to one signature).  ``EngineOptions()`` is
@@ -324,6 +390,10 @@ class EngineOptions(NamedTuple):
     stops: StopOptions = StopOptions()
     events: EventOptions = EventOptions()
     steps: StepOptions = StepOptions()
+    stage: StageOptions = StageOptions()
+    defect: DefectOptions = DefectOptions()
+    tolerances: ToleranceOptions = ToleranceOptions()
+    batch: BatchOptions = BatchOptions()
 
 
 #: the defaults
@@ -339,6 +409,7 @@ _DOMAINS = {
     ("point", "residual_weight"): (float, 0.0, float("inf"), True, False),
     ("point", "first_step"): (float, 0.0, 1.0, False, True),
     ("point", "warm_atol_slack"): (float, 1.0, float("inf"), True, False),
+    ("point", "max_frozen_passes"): (int, 1, 10 ** 4, True, True),
     ("traps", "share"): (float, 0.0, float("inf"), False, False),
     ("traps", "floor"): (float, 0.0, 1.0, True, True),
     ("traps", "slack"): (float, 1.0, float("inf"), True, False),
@@ -365,6 +436,29 @@ _DOMAINS = {
     ("steps", "stretch"): (float, 1.0, 2.0, True, True),
     ("steps", "max_attempts_per_step"): (int, 1, 10 ** 6, True, True),
     ("steps", "max_refinement"): (float, 1.0, float("inf"), False, False),
+    ("stage", "max_iterations"): (int, 1, 10 ** 4, True, True),
+    # (above 1 the first correction would be kept where the next is predicted above atol)
+    ("stage", "first_correction_share"): (float, 0.0, 1.0, True, True),
+    ("stage", "slope_share"): (float, 0.0, float("inf"), True, False),
+    ("defect", "noise_gain"): (float, 0.0, float("inf"), True, False),
+    ("defect", "fit"): (float, 0.0, float("inf"), True, False),
+    # (beyond 32 the 8-point rule misses the resolvent's integral by more than 2 %:
+    # 2.4e-2 at z = -32, 0.26 at -64, against 2.5e-4 at -16)
+    ("defect", "variable_slope_limit"): (float, 0.0, 32.0, True, True),
+    ("tolerances", "loose_rtol"): (float, 0.0, 1.0, False, False),
+    ("tolerances", "target_share"): (float, 0.0, 1.0, False, True),
+    ("tolerances", "stage_share"): (float, 0.0, 1.0, False, True),
+    ("tolerances", "stage_floor"): (float, 0.0, 1e-3, True, True),
+    ("tolerances", "band_share"): (float, 0.0, 1.0, False, True),
+    ("tolerances", "shooting_share"): (float, 0.0, 1.0, False, True),
+    ("tolerances", "shooting_floor"): (float, 0.0, 1e-3, True, True),
+    ("tolerances", "u_norm_floor"): (float, 0.0, 1.0, False, True),
+    ("tolerances", "bracket_speeds"): (float, 0.0, float("inf"), False, False),
+    ("tolerances", "bracket_guesses"): (float, 0.0, float("inf"), True, False),
+    ("batch", "start_capacity"): (int, 1, 2 ** 24, True, True),
+    ("batch", "in_line_share"): (float, 0.0, 1.0, True, False),
+    # (``model.kinematics.period_grid`` gives each of two phases at least 2 steps)
+    ("batch", "guess_steps"): (int, 4, 2 ** 16, True, True),
 }
 
 

@@ -193,13 +193,14 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     corner_nodes = np.zeros(N, dtype=np.bool_)
     for n in range(N - 1):
         corner_nodes[n + 1] = end_kind(W, n) == CORNER_STOP
-    evaluations = estimate_pass(code, params, phys, corner_nodes, atol, W, N)[1]
+    evaluations = estimate_pass(code, params, phys, corner_nodes, atol, W, N,
+                                problem.options.defect)[1]
     split = np.zeros(N, dtype=np.bool_)
     evaluations += event_split_errors(code, params, phys, atol, W, N, split,
-                                      problem.options.events)[1]
+                                      problem.options)[1]
     node_weights(W, N, one_minus_M)
     int_u, int_p = period_integrals(W, N)
-    scale_u, scale_p = norm_scales(int_u, int_p, problem.vscale)
+    scale_u, scale_p = norm_scales(int_u, int_p, problem.vscale, problem.options.tolerances)
     shares = np.zeros(N)
     e_u, e_p = local_error_estimate(W, N, shares, scale_u, scale_p)
     # a kept shooting residual g is a jump of u at node 0: it moves int u by lambda_0 g
@@ -260,7 +261,8 @@ def _rounds(problem, start, W, evals, passes, start_kind):
             return W, PointSolution(nan, nan, u0, status, N, passes, math.inf, evals, vscale,
                                     start_kind)
         round_start = u0
-        fn = frozen_newton(code, params, phys, u0, atol, W, N, tols.shooting, problem.bound)
+        fn = frozen_newton(code, params, phys, u0, atol, W, N, tols.shooting, problem.bound,
+                           problem.options)
         passes += fn.passes
         evals[COST_FROZEN] += fn.evaluations
         u0, g, one_minus_M = fn.u0, fn.g, fn.one_minus_M
@@ -281,7 +283,7 @@ def _rounds(problem, start, W, evals, passes, start_kind):
             # long_period_powerlaw point 356 at rtol 1e-7, g from +5.4e-11 to -2.8e-10 across
             # 1e-21 of u(0), M = 0; NOT_PERIODIC before.)
             u0 = round_start
-            status, e = frozen_pass(code, params, phys, u0, atol, W, N)
+            status, e = frozen_pass(code, params, phys, u0, atol, W, N, problem.options.stage)
             passes += 1
             evals[COST_FROZEN] += e
             if status != CONVERGED:
@@ -344,7 +346,8 @@ def _cold_start(problem, u_guess, W, evals):
     scale_u = scale_p = 1.0
     for _ in range(problem.options.point.max_loose_passes):
         aim = PassAim(tols.loose_target, vscale, math.inf, model,
-                       stage_atol(loose, vscale, phys), problem.max_steps, True, False)
+                       stage_atol(loose, vscale, phys, problem.options.tolerances),
+                       problem.max_steps, True, False)
         period_pass = adaptive_pass(code, params, phys, problem.stops, u0,
                                     problem.options.point.first_step, aim, W, problem.options)
         W, N, status = period_pass.W, period_pass.N, period_pass.status
@@ -353,7 +356,7 @@ def _cold_start(problem, u_guess, W, evals):
         if status != CONVERGED:
             return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), status, N, passes
         int_u, int_p = period_integrals(W, N)
-        scale_u, scale_p = norm_scales(int_u, int_p, vscale)
+        scale_u, scale_p = norm_scales(int_u, int_p, vscale, problem.options.tolerances)
         g, one_minus_M = period_map(W, N, u0)
         if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
             return W, RoundStart(u0, 0.0, model, 0.0, 1.0, 1.0), NON_FINITE, N, passes
@@ -365,7 +368,8 @@ def _cold_start(problem, u_guess, W, evals):
         if moved <= loose * vscale:
             break
     # steps 3 and 4: the stage tolerance relative to U's norm (V is up to 1e3 times larger)
-    atol = target_stage_atol(rtol, scale_u, phys, _largest_weight(model, scale_u, scale_p))
+    atol = target_stage_atol(rtol, scale_u, phys, _largest_weight(model, scale_u, scale_p),
+                             problem.options.tolerances)
     h_first = max((step_span(W, 0)[1]) * (rtol / loose) ** (1.0 / ERROR_ORDER),
                   64.0 * problem.options.steps.min_step)
     return W, RoundStart(u0, h_first, model, atol, scale_u, scale_p), CONVERGED, N, passes
@@ -392,7 +396,8 @@ def warm_start(W, orbit, problem):
     slower: ``docs/validation.md``, "Warm starts".)"""
     N = orbit.N
     model = _model(W, N, np.full(N, math.inf))
-    atol = target_stage_atol(problem.tols.rtol, orbit.scale_u, problem.phys, orbit.largest_weight)
+    atol = target_stage_atol(problem.tols.rtol, orbit.scale_u, problem.phys, orbit.largest_weight,
+                             problem.options.tolerances)
     return RoundStart(orbit.u0, step_span(W, 0)[1], model, atol, orbit.scale_u, orbit.scale_p)
 
 
@@ -427,8 +432,9 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit,
     if vscale == 0.0:
         return W, PointSolution(0.0, 0.0, 0.0, NO_MOTION, 0, 0, 0.0, evals, vscale,
                                 START_COLD), no_orbit()
-    problem = PointProblem(code, params, phys, point_stops, vscale, tolerances(rtol, vscale),
-                           max_steps, u0_bound(vscale, u_guess), options)
+    problem = PointProblem(code, params, phys, point_stops, vscale,
+                           tolerances(rtol, vscale, options.tolerances), max_steps,
+                           u0_bound(vscale, u_guess, options.tolerances), options)
     verdict = START_COLD
     if orbit.N > 0:
         # warm: the rounds of steps 3-4 from the neighbour's orbit (``warm_start``)
@@ -436,7 +442,8 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit,
         W, sol = _rounds(problem, start, W, evals, 0, START_WARM)
         if sol.status == CONVERGED:
             own = _orbit_of(W, sol, problem)
-            own_atol = target_stage_atol(rtol, own.scale_u, phys, own.largest_weight)
+            own_atol = target_stage_atol(rtol, own.scale_u, phys, own.largest_weight,
+                                         options.tolerances)
             if start.atol <= options.point.warm_atol_slack * own_atol:
                 return W, sol, own
             # the neighbour's norm and node weights set a stage tolerance too loose for this
@@ -461,24 +468,27 @@ def _orbit_of(W, sol, problem):
     """The ``Orbit`` of a solution whose final pass is in ``W`` (none unless CONVERGED)."""
     if sol.status != CONVERGED:
         return no_orbit()
-    scale_u, scale_p = norm_scales(sol.int_u, sol.int_pi, problem.vscale)
+    scale_u, scale_p = norm_scales(sol.int_u, sol.int_pi, problem.vscale,
+                                   problem.options.tolerances)
     return Orbit(sol.n_steps, sol.u0, scale_u, scale_p,
                  _largest_node_weight(W, sol.n_steps, scale_u, scale_p))
 
 
 @njit(cache=True, error_model="numpy")
-def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess):
+def fixed_grid_point(code, params, grid, phys, rtol, vscale, u_guess, options):
     """The periodic solution of the Radau IIA discretisation on the given ``grid`` (N + 1,
     nodes from 0 to 1, with the corners of phi among them), without error control
     (``periodic.shooting.frozen_orbit`` from ``u_guess``, every stage's first guess
-    ``u_guess``).  For order tests.  Returns (int_u, int_pi, status)."""
+    ``u_guess``; ``options``, the ``EngineOptions``).  For order tests.  Returns (int_u,
+    int_pi, status)."""
     N = grid.size - 1
     W = new_workspace(N)
     for n in range(N):
         set_step_span(W, n, grid[n], grid[n + 1])
         stage_kinematics_into(code, params, W, n)
         set_step_start(W, n, u_guess, u_guess, 0.0)
-    status, _, int_u, int_p = frozen_orbit(code, params, phys, u_guess, rtol, vscale, W, N)
+    status, _, int_u, int_p = frozen_orbit(code, params, phys, u_guess, rtol, vscale, W, N,
+                                           options)
     if status != CONVERGED:
         return math.nan, math.nan, status
     return int_u, int_p, CONVERGED

@@ -42,7 +42,6 @@ import numpy as np
 from numba import njit
 
 from ..model.force import force_slope_power_sc
-from .options import FIRST_CORRECTION_SHARE, MAX_STAGE_ITERATIONS, SLOPE_SHARE
 
 
 _S6 = math.sqrt(6.0)
@@ -224,7 +223,7 @@ def _residual(u_n, hk, U1, U2, U3, F1, F2, F3):
 
 
 @njit(cache=True, error_model="numpy")
-def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.nan):
+def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, options, rate=math.inf, slope=math.nan):
     """Solve one Radau IIA step from u_n over h, starting Newton at (U1, U2, U3).
 
     Parameters
@@ -242,16 +241,19 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.n
     atol : float
         Absolute tolerance of the stage values (the Newton step, or the error left after it
         at the observed contraction (Hairer & Wanner IV.8), must be below it).
+    options : StageOptions
+        ``periodic.options``: Newton gives up after ``max_iterations`` (MAX_STAGE_ITERATIONS);
+        ``first_correction_share`` and ``slope_share`` below.
     rate : float
         Newton's quadratic constant K (1/u) observed on the previous step (its
         ``StepSolution.rate``; inf: none).  The first correction x is taken as the last
-        when K |x|^2 <= FIRST_CORRECTION_SHARE atol (with the exact Jacobian the next
+        when K |x|^2 <= first_correction_share atol (with the exact Jacobian the next
         correction is about K |x|^2), which saves the second evaluation of most steps; the
         stage error is then predicted, not measured (callers that need ``atol`` to hold pass
         inf).
     slope : float
         dF/du at the previous step's end (NaN: none).  ``rate`` is used only where dF/du at
-        the predicted stages lies within SLOPE_SHARE of it: across the friction's band
+        the predicted stages lies within slope_share of it: across the friction's band
         (width delta) K grows by orders of magnitude from one step to the next (measured
         without this guard: step budgets exceeded on 20-30 % of the stress power laws).
 
@@ -276,9 +278,9 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.n
     # the carried constant holds where F's slope at the predicted stages is that of the
     # previous step's end (not across the friction's band, where it changes by mu / delta)
     span = max(abs(d1 - slope), abs(d2 - slope), abs(d3 - slope))
-    if not span <= SLOPE_SHARE * abs(slope):
+    if not span <= options.slope_share * abs(slope):
         rate = math.inf
-    for it in range(MAX_STAGE_ITERATIONS):
+    for it in range(options.max_iterations):
         J = stage_matrix(hk, d1, d2, d3)
         x1, x2, x3 = solve3(J, -R1, -R2, -R3)
         size = max(abs(x1), abs(x2), abs(x3))
@@ -286,7 +288,7 @@ def radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.n
             observed = size / (first_size * first_size)
         if size <= atol or (size < previous < math.inf
                             and size * size <= atol * (previous - size)) \
-                or (it == 0 and rate * size * size <= FIRST_CORRECTION_SHARE * atol):
+                or (it == 0 and rate * size * size <= options.first_correction_share * atol):
             U1 += x1
             U2 += x2
             U3 += x3

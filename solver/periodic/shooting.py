@@ -17,7 +17,6 @@ from numba import njit
 
 from ..status import CONVERGED, NON_FINITE, NOT_PERIODIC, STAGE_SOLVE_FAILED
 from .integrator import frozen_pass
-from .options import MAX_FROZEN_PASSES
 from .record import monodromy_minus_1, node_value, recorded_integrals, shift_node_value, shift_step
 from .tolerances import stage_atol, tolerances, u0_bound
 
@@ -109,12 +108,13 @@ class FrozenNewton(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
-def frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound):
+def frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound, options):
     """Newton on u(0) over the N recorded steps of ``W`` (``frozen_pass``, in place) until
-    |g| <= tol_fix |1 - M|, bracketed in +-bound.
+    |g| <= tol_fix |1 - M|, bracketed in +-bound; ``options``: the ``EngineOptions`` (at
+    most ``options.point.max_frozen_passes`` passes, MAX_FROZEN_PASSES; the stage solve's).
 
     Where the frozen steps do not carry Newton to the fixed point (a stage solve fails on
-    them, a pass is not finite, or MAX_FROZEN_PASSES run out), the next round's adaptive
+    them, a pass is not finite, or the passes run out), the next round's adaptive
     pass places its steps anew: from Newton's last proposal after a failed stage solve,
     else from the best u(0) seen (smallest |g / (1 - M)|); where that is the start, the next
     round would repeat this one, and the failure stands (restart_u0 NaN), as it does where
@@ -127,7 +127,7 @@ def frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound):
     g = 0.0
     one_minus_M = 1.0
     status = NOT_PERIODIC
-    for _ in range(MAX_FROZEN_PASSES):
+    for _ in range(options.point.max_frozen_passes):
         g, one_minus_M = period_map(W, N, u0)
         if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
             return FrozenNewton(u0, g, one_minus_M, NON_FINITE, math.nan, passes, evaluations)
@@ -137,7 +137,7 @@ def frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound):
         if abs(g / one_minus_M) < best_residual:
             best_u0, best_residual = u0, abs(g / one_minus_M)
         u0, lo, hi = bracketed_newton_update(u0, g, one_minus_M, lo, hi)
-        status, e = frozen_pass(code, params, phys, u0, atol, W, N)
+        status, e = frozen_pass(code, params, phys, u0, atol, W, N, options.stage)
         passes += 1
         evaluations += e
         if status == STAGE_SOLVE_FAILED:
@@ -152,22 +152,25 @@ def frozen_newton(code, params, phys, u0, atol, W, N, tol_fix, bound):
 
 
 @njit(cache=True, error_model="numpy")
-def frozen_orbit(code, params, phys, u0, rtol, vscale, W, N):
+def frozen_orbit(code, params, phys, u0, rtol, vscale, W, N, options):
     """The periodic solution of the Radau IIA discretisation on the N steps set up in ``W``
     (their times, kinematics and first stage guesses, ``periodic.record.set_grid_step``),
     without error control: a frozen pass from u(0) = ``u0``, Newton on u(0) by frozen passes
     (``frozen_newton``) to the shooting tolerance of ``rtol`` and ``vscale``
     (``periodic.tolerances``), and the converged pass shifted onto the fixed point.  ``W``
     holds that pass afterwards.  The fixed-grid solves of the order tests and of the adjoint.
+    ``options``: the ``EngineOptions`` (its tolerances', stage solve's and frozen passes').
 
     Returns (status, u(0), int u, int Pi): the integrals NaN unless CONVERGED; u(0) the
     last one reached."""
-    atol = stage_atol(rtol, vscale, phys)
-    status, _ = frozen_pass(code, params, phys, u0, atol, W, N)
+    tols = options.tolerances
+    atol = stage_atol(rtol, vscale, phys, tols)
+    status, _ = frozen_pass(code, params, phys, u0, atol, W, N, options.stage)
     if status != CONVERGED:
         return status, u0, math.nan, math.nan
-    fn = frozen_newton(code, params, phys, u0, atol, W, N, tolerances(rtol, vscale).shooting,
-                       u0_bound(vscale, u0))
+    fn = frozen_newton(code, params, phys, u0, atol, W, N,
+                       tolerances(rtol, vscale, tols).shooting, u0_bound(vscale, u0, tols),
+                       options)
     if fn.status != CONVERGED:
         return fn.status, fn.u0, math.nan, math.nan
     shift = fn.g / fn.one_minus_M

@@ -11,8 +11,7 @@ from numba import njit
 
 from ..model.force import force_slope_power_sc
 from ..model.kinematics import angle_and_rate
-from .defect import SampleKinematics
-from .options import THETA_LATE, THETA_MID
+from .defect import THETA_LATE, THETA_MID, SampleKinematics
 from .radau import C1, C2, StageKinematics, radau5_step
 
 
@@ -47,17 +46,17 @@ def start_values(code, params, t, side, u, phys):
 
 
 @njit(cache=True, error_model="numpy")
-def solve_step(u_n, U1, U2, U3, h, kin, phys, atol, rate=math.inf, slope=math.nan):
+def solve_step(u_n, U1, U2, U3, h, kin, phys, atol, options, rate=math.inf, slope=math.nan):
     """``radau5_step`` from the predicted stages (with the carried Newton ``rate`` and
-    ``slope``); where its Newton fails, again from u_n, then from rest (a step into a stop
-    can defeat a prediction: the former engine measured it at a burst-and-coast corner).  Returns
-    (StepSolution, iterations summed)."""
-    sol = radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, rate, slope)
+    ``slope``; ``options``: the ``StageOptions``); where its Newton fails, again from u_n,
+    then from rest (a step into a stop can defeat a prediction: the former engine measured
+    it at a burst-and-coast corner).  Returns (StepSolution, iterations summed)."""
+    sol = radau5_step(u_n, U1, U2, U3, h, kin, phys, atol, options, rate, slope)
     its = sol.iterations
     if not sol.ok:
-        sol = radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, atol, math.inf, math.nan)
+        sol = radau5_step(u_n, u_n, u_n, u_n, h, kin, phys, atol, options, math.inf, math.nan)
         its += sol.iterations
     if not sol.ok and u_n != 0.0:
-        sol = radau5_step(u_n, 0.0, 0.0, 0.0, h, kin, phys, atol, math.inf, math.nan)
+        sol = radau5_step(u_n, 0.0, 0.0, 0.0, h, kin, phys, atol, options, math.inf, math.nan)
         its += sol.iterations
     return sol, its

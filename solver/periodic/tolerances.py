@@ -25,7 +25,8 @@ scale_p = |int Pi|, or 1 where it vanishes).  From rtol and that norm:
 - **bound** (``u0_bound``): u(0) is bracketed in +-(BRACKET_SPEEDS V + BRACKET_GUESSES
   |u_guess|).
 
-The factors are in ``periodic.options``.
+The factors are ``periodic.options.ToleranceOptions`` (the defaults, documented there, are
+the names above), passed to every function here as ``options``.
 """
 from __future__ import annotations
 
@@ -33,8 +34,6 @@ from typing import NamedTuple
 
 from numba import njit
 
-from .options import (BAND_SHARE, BRACKET_GUESSES, BRACKET_SPEEDS, LOOSE_RTOL, SHOOTING_FLOOR,
-                      SHOOTING_SHARE, STAGE_FLOOR, STAGE_SHARE, TARGET_SHARE, U_NORM_FLOOR)
 
 
 class Tolerances(NamedTuple):
@@ -48,43 +47,44 @@ class Tolerances(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy")
-def tolerances(rtol, vscale):
-    """The ``Tolerances`` of a solve at ``rtol`` of a point with speed scale ``vscale``."""
-    loose = max(LOOSE_RTOL, rtol)
-    return Tolerances(rtol, TARGET_SHARE * rtol, loose, TARGET_SHARE * loose,
-                      max(SHOOTING_SHARE * rtol, SHOOTING_FLOOR) * vscale)
+def tolerances(rtol, vscale, options):
+    """The ``Tolerances`` of a solve at ``rtol`` of a point with speed scale ``vscale``, by
+    the factors ``options`` (``ToleranceOptions``)."""
+    loose = max(options.loose_rtol, rtol)
+    return Tolerances(rtol, options.target_share * rtol, loose, options.target_share * loose,
+                      max(options.shooting_share * rtol, options.shooting_floor) * vscale)
 
 
 @njit(cache=True, error_model="numpy")
-def norm_scales(int_u, int_p, vscale):
+def norm_scales(int_u, int_p, vscale, options):
     """(scale_u, scale_p): the norm of U and P (see the module docstring)."""
-    return max(abs(int_u), U_NORM_FLOOR * vscale), (abs(int_p) if int_p != 0.0 else 1.0)
+    return max(abs(int_u), options.u_norm_floor * vscale), (abs(int_p) if int_p != 0.0 else 1.0)
 
 
 @njit(cache=True, error_model="numpy")
-def stage_tolerance(rtol, scale):
-    """max(STAGE_SHARE rtol, STAGE_FLOOR) ``scale``."""
-    return max(STAGE_SHARE * rtol, STAGE_FLOOR) * scale
+def stage_tolerance(rtol, scale, options):
+    """max(stage_share rtol, stage_floor) ``scale``."""
+    return max(options.stage_share * rtol, options.stage_floor) * scale
 
 
 @njit(cache=True, error_model="numpy")
-def stage_atol(rtol, scale, phys):
+def stage_atol(rtol, scale, phys, options):
     """The stage Newton's tolerance at ``rtol`` in the norm ``scale``, for p = 0 at most
-    BAND_SHARE delta_tau."""
-    atol = stage_tolerance(rtol, scale)
+    band_share delta_tau."""
+    atol = stage_tolerance(rtol, scale, options)
     if phys.p == 0.0:
-        atol = min(atol, BAND_SHARE * phys.dtau)
+        atol = min(atol, options.band_share * phys.dtau)
     return atol
 
 
 @njit(cache=True, error_model="numpy")
-def target_stage_atol(rtol, scale_u, phys, largest_weight):
+def target_stage_atol(rtol, scale_u, phys, largest_weight, options):
     """``stage_atol`` in U's norm divided by the largest node weight (``periodic.point``'s
     ``largest_weight``)."""
-    return stage_atol(rtol, scale_u, phys) / largest_weight
+    return stage_atol(rtol, scale_u, phys, options) / largest_weight
 
 
 @njit(cache=True, error_model="numpy")
-def u0_bound(vscale, u_guess):
+def u0_bound(vscale, u_guess, options):
     """The half-width of u(0)'s bracket."""
-    return BRACKET_SPEEDS * vscale + BRACKET_GUESSES * abs(u_guess)
+    return options.bracket_speeds * vscale + options.bracket_guesses * abs(u_guess)
