@@ -596,9 +596,12 @@ def is_complete(state: dict) -> bool:
 #: a whole array of up to 2^20 points is one file, a 10^6-point scene's array one or two
 COMPACT_ELEMENTS = 1 << 20
 #: a complete store of at least this many chunk files is compacted (reading one through
-#: zarr-python costs ~0.3 ms of CPU: below this, about a second in all; and a rewrite costs
-#: about as much as one read)
-COMPACT_FILES = 4096
+#: zarr-python costs ~0.3 ms of CPU, and a rewrite about as much as one read).  Above the
+#: paper's stores (force_laws 11,636 files, fourier_optima 9,623, linear_two_phase 6,622): at
+#: 4,096 the rewrite took 4.5 s of linear_two_phase's 42.4 s wall on 2 idle cores, its
+#: solving share 76 % instead of 85 % (docs/validation.md, issue 34); a user's 10^6-point
+#: grid scene (~3,900 chunks of 256 points x ~14 arrays, ~55,000 files) is compacted
+COMPACT_FILES = 16384
 _STAGING = f"{STATE_GROUP}/rechunk_new"  # a rewritten array, until it is swapped in
 _RETIRED = f"{STATE_GROUP}/rechunk_old"  # the array it replaces, until the swap is done
 
