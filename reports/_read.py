@@ -9,7 +9,7 @@ the report sees the same values from both.
 
 Opening reads only the metadata and the coordinate arrays: a data array is read when a figure,
 table or claim first uses it, whole, and kept in memory for the rest of the build. An array in
-the pipeline's own layout is read chunk file by chunk file (:mod:`reports._chunks`, ~20x faster
+the pipeline's own layout is read chunk file by chunk file (:mod:`pipeline._chunks`, ~20x faster
 than zarr-python's per-chunk requests); any other through zarr (no dask graph, ``chunks=None``:
 xarray's in-memory cache).
 :meth:`SceneStore.load` reads a list of arrays up front, so a section that draws from several
@@ -32,7 +32,7 @@ from xarray.core import indexing
 
 from pipeline import decode_attrs, read_record
 
-from ._chunks import layout_is_plain, read_whole
+from pipeline._chunks import layout_is_plain, read_whole
 
 __all__ = ["StoreRefused", "SceneStore", "open_scene_store", "shipped_scenes", "SUPPORTED_FORMAT", "READ_FORMATS"]
 
@@ -223,7 +223,7 @@ def open_scene_store(path) -> SceneStore:
 
 
 class _WholeArray(BackendArray):
-    """xarray's lazy backend array over :func:`reports._chunks.read_whole`: the array is read
+    """xarray's lazy backend array over :func:`pipeline._chunks.read_whole`: the array is read
     whole on first access and kept."""
 
     def __init__(self, path: Path, shape, dtype):

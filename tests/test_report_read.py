@@ -1,4 +1,4 @@
-"""reports._chunks.read_whole reads an array as zarr reads it, without zarr.
+"""pipeline._chunks.read_whole reads an array as zarr reads it, without zarr.
 
 Compared with ``zarr.open_array(...)[...]`` on synthetic arrays (every numeric data type, edge
 chunks, chunks never written, 0-d, with and without zstd) and on every array of a real pipeline
@@ -16,7 +16,7 @@ import pytest
 
 zarr = pytest.importorskip("zarr")
 
-from reports._chunks import layout_is_plain, read_whole  # noqa: E402
+from pipeline._chunks import layout_is_plain, read_whole  # noqa: E402
 
 DTYPES = ["bool", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "float32",
           "float64"]
@@ -65,7 +65,7 @@ def test_other_layouts_are_left_to_zarr(tmp_path):
 def test_the_comparison_can_fail(tmp_path, monkeypatch):
     """Negative controls: a fill value changed in the metadata, and a reader that takes the wrong
     byte order, give arrays the comparison tells apart from zarr's."""
-    import reports._chunks as chunks
+    import pipeline._chunks as chunks
 
     a = _array(tmp_path / "a", (6,), (2,), "float64", fill=np.nan, write=slice(0, 4))
     meta = json.loads((tmp_path / "a" / "zarr.json").read_text())
