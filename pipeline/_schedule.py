@@ -110,8 +110,13 @@ def _start_worker(threads: int, kernel_sets: tuple[str, ...]) -> None:
     _worker_start["cpu"] += time.process_time() - c0
 
 
-def _ready() -> int:
-    return os.getpid()
+def _ready(hold: float = 0.0, take: bool = False) -> tuple[int, dict]:
+    """(pid, this worker's start-up not yet reported if ``take``, else zeros and left to its
+    first task): a started worker's answer, after ``hold`` seconds (so that one worker does not
+    answer for a sibling still starting)."""
+    if hold:
+        time.sleep(hold)
+    return os.getpid(), take_start_seconds() if take else {"start_seconds": 0.0, "start_cpu_seconds": 0.0}
 
 
 def take_start_seconds() -> dict:
@@ -170,6 +175,37 @@ class Scheduler:
             pool = self.pool()
             self._ready = [pool.submit(_ready) for _ in range(self.n_workers)]
         return self
+
+    def wait_ready(self, timeout: float = 600.0) -> dict:
+        """Start the worker processes (on "processes") and wait until every one has run its
+        initializer (imports, kernels loaded): a ``Session`` shared by several runs pays its
+        start-up once, here, instead of inside its first run's budget.  Returns the start-up:
+        ``wall_seconds`` (waited here), ``workers`` and ``worker_seconds`` / ``worker_cpu_seconds``
+        (summed over the workers; zero on the other schedulers, which start nothing here)."""
+        t0 = time.perf_counter()
+        out = {"workers": 0, "wall_seconds": 0.0, "worker_seconds": 0.0, "worker_cpu_seconds": 0.0}
+        if self.name != "processes":
+            return out
+        self.start()
+        for f in self._ready:  # every worker spawned
+            f.result(timeout=timeout)
+        self._ready = []
+        seen: set[int] = set()
+        pending = [self._pool.submit(_ready, 0.05, True) for _ in range(self.n_workers)]
+        while True:
+            for f in pending:
+                pid, start = f.result(timeout=max(1.0, timeout - (time.perf_counter() - t0)))
+                seen.add(pid)
+                out["worker_seconds"] += start["start_seconds"]
+                out["worker_cpu_seconds"] += start["start_cpu_seconds"]
+            if len(seen) >= self.n_workers:
+                break
+            if time.perf_counter() - t0 > timeout:
+                raise TimeoutError(f"{self.n_workers - len(seen)} of {self.n_workers} workers did not start in {timeout:.0f} s")
+            # a started worker answered for one still starting: ask again, holding each answer
+            pending = [self._pool.submit(_ready, 0.05, True) for _ in range(self.n_workers)]
+        out.update(workers=len(seen), wall_seconds=time.perf_counter() - t0)
+        return out
 
     def close(self):
         if self._pool is not None:

@@ -503,6 +503,27 @@ def test_one_pool_serves_several_scenes(reference, tmp_path):
         assert_stores_equal(store, ref_store)
 
 
+def test_a_session_started_before_its_runs_reports_no_start_up_in_them(reference, tmp_path):
+    """Issue 34: ``Session.wait_ready`` (``paper``) waits until every worker has started (imports,
+    kernels) and returns that start-up, so no run's budget carries it; negative control: without
+    it the first run's record has the workers' start-up (the test above)."""
+    from pipeline import Session
+    from pipeline._store import store_meta
+
+    scene, ref_store, _ = reference
+    with Session("processes", 2, ("periodic",)) as session:
+        started = session.wait_ready()
+        assert started["workers"] == 2 and started["worker_seconds"] > 0, started
+        assert started["wall_seconds"] > 0
+        assert session.wait_ready()["worker_seconds"] == 0.0  # taken once
+        run_scene(scene, tmp_path / "s.zarr", session=session, progress=False)
+    parts = store_meta(tmp_path / "s.zarr")["run"]["timing"]["not_solving_worker_seconds"]
+    assert parts.get("worker start-up", 0.0) == 0.0, parts
+    assert_stores_equal(tmp_path / "s.zarr", ref_store)
+    assert Scheduler("threads", 2).wait_ready() == {"workers": 0, "wall_seconds": 0.0,
+                                                    "worker_seconds": 0.0, "worker_cpu_seconds": 0.0}
+
+
 def test_distributed_local_cluster_matches_local_scheduler(reference, tmp_path):
     distributed = pytest.importorskip("distributed")
     _, ref_store, _ = reference
