@@ -83,11 +83,35 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
 _worker_start = {"seconds": 0.0, "cpu": 0.0}
 
 
+def set_numba_threads_env(threads: int) -> None:
+    """``NUMBA_NUM_THREADS`` = ``threads`` for this process, before numba's thread pool starts.
+
+    numba reads the variable when it is imported, and again (``config.reload_config``) at every
+    compilation, refusing a value other than the pool's once the pool runs.  A spawned worker
+    has often imported numba already (the driver's ``__main__``, e.g. ``python -m pipeline``,
+    is imported again in the child), with the default of one thread per core: so the config is
+    reloaded here, before anything launches the pool.  Without it the first kernel compiled
+    after the pool's launch (a first run, numba's cache empty) raised "Cannot set
+    NUMBA_NUM_THREADS to a different value once the threads have been launched" in every
+    worker (found running a scene from a fresh checkout)."""
+    os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    if "numba" in sys.modules:
+        from numba.core import config
+        from numba.np.ufunc import parallel
+
+        if parallel._is_initialized:
+            # too late to change the pool: keep the variable equal to it, so later reloads
+            # agree; ``numba.set_num_threads`` still caps the threads used
+            os.environ["NUMBA_NUM_THREADS"] = str(config.NUMBA_NUM_THREADS)
+        else:
+            config.reload_config()
+
+
 def _start_worker(threads: int, kernel_sets: tuple[str, ...]) -> None:
     """Initializer of a pool's worker process: its numba thread count, then the solver and its
     kernels loaded once, before any task (so no task's timing pays for them)."""
     t0, c0 = time.perf_counter(), time.process_time()
-    os.environ["NUMBA_NUM_THREADS"] = str(threads)  # read when numba is first imported
+    set_numba_threads_env(threads)
     import pipeline  # noqa: F401  (the tasks' modules, imported once here)
 
     if kernel_sets:

@@ -83,6 +83,45 @@ def test_workers_times_threads_is_the_cores():
     assert threads == {threads_per_worker(2)}
 
 
+_THREADS_SCRIPT = """
+import os, sys
+os.environ.pop("NUMBA_NUM_THREADS", None)
+import numba  # imported before the worker's setting, as a spawned worker imports the driver's __main__
+from numba.core import config
+from pipeline._schedule import set_numba_threads_env
+want = config.NUMBA_DEFAULT_NUM_THREADS + 1  # differs from the default on any machine
+if sys.argv[1] == "fixed":
+    set_numba_threads_env(want)
+else:
+    os.environ["NUMBA_NUM_THREADS"] = str(want)  # what the worker did before
+numba.get_num_threads()  # the pool launches (a single-point kernel's thread count read)
+
+@numba.njit
+def f(x):
+    return x + 1
+
+try:
+    f(1)  # a compilation: numba reloads its config
+    print("ok", numba.config.NUMBA_NUM_THREADS == want)
+except RuntimeError as exc:
+    print("raised", exc)
+"""
+
+
+@pytest.mark.parametrize("mode, expected", [("fixed", "ok True"), ("env only", "raised")])
+def test_a_worker_that_imported_numba_early_can_compile_after_its_pool_starts(mode, expected):
+    """A spawned worker imports numba before its initializer (``python -m pipeline`` is its
+    ``__main__``); setting NUMBA_NUM_THREADS then, the first compilation after the pool launched
+    raised, and a first run from a fresh checkout (empty kernel cache) died in every worker.
+    ``set_numba_threads_env`` reloads numba's config first; the "env only" case is the negative
+    control (the old initializer's sequence, which must raise)."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_NUM_THREADS"}
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")])
+    out = subprocess.run([sys.executable, "-c", _THREADS_SCRIPT, mode], capture_output=True,
+                         text=True, env=env, cwd=str(REPO), timeout=300)
+    assert out.stdout.strip().startswith(expected), (out.stdout, out.stderr[-2000:])
+
+
 def _numba_threads() -> int:
     import numba
 
