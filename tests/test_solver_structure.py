@@ -18,7 +18,7 @@ LAYOUT = {
                  "options", "tolerances"},
     "march": {"heun", "driver"},
     "adjoint": {"gradient", "optimize"},
-    "tools": {"bench", "bench_optimize", "bench_sweep", "honesty"},
+    "tools": {"bench", "bench_ab", "bench_optimize", "bench_sweep", "honesty"},
 }
 
 
