@@ -215,19 +215,16 @@ class Scheduler:
             f.result(timeout=timeout)
         self._ready = []
         seen: set[int] = set()
-        pending = [self._pool.submit(_ready, 0.05, True) for _ in range(self.n_workers)]
-        while True:
-            for f in pending:
+        while len(seen) < self.n_workers:
+            if time.perf_counter() - t0 > timeout:
+                raise TimeoutError(f"{self.n_workers - len(seen)} of {self.n_workers} workers did not start in {timeout:.0f} s")
+            # one answer per worker, each held a moment so that a started worker does not answer
+            # for a sibling still starting (then the round is asked again)
+            for f in [self._pool.submit(_ready, 0.05, True) for _ in range(self.n_workers)]:
                 pid, start = f.result(timeout=max(1.0, timeout - (time.perf_counter() - t0)))
                 seen.add(pid)
                 out["worker_seconds"] += start["start_seconds"]
                 out["worker_cpu_seconds"] += start["start_cpu_seconds"]
-            if len(seen) >= self.n_workers:
-                break
-            if time.perf_counter() - t0 > timeout:
-                raise TimeoutError(f"{self.n_workers - len(seen)} of {self.n_workers} workers did not start in {timeout:.0f} s")
-            # a started worker answered for one still starting: ask again, holding each answer
-            pending = [self._pool.submit(_ready, 0.05, True) for _ in range(self.n_workers)]
         out.update(workers=len(seen), wall_seconds=time.perf_counter() - t0)
         return out
 
