@@ -283,7 +283,7 @@ def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
         units = {"units": _units(long_name)} if dtype.kind == "f" else {}
         create_array(g, name, shape=shape, chunks=shape, dtype=dtype, fill=fill, dims=dims,
                      attrs={"long_name": long_name, **units, "reduction": "distinct_optima"})
-    finish_skeleton(g, scene, dims=DIMS, shape=scene.shape, chunks=chunks,
+    finish_skeleton(g, scene, store=store, dims=DIMS, shape=scene.shape, chunks=chunks,
                     head={"kind": KIND, "kind_version": KIND_VERSION}, reductions_complete=False)
 
 

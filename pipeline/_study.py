@@ -237,7 +237,7 @@ def create_study_skeleton(store: Path, scene: StudyScene, points_per_chunk: int)
     for name, (adims, dtype, fill, attrs) in study_arrays(scene).items():
         shape = tuple(dims[d] for d in adims)
         create_array(g, name, shape=shape, chunks=(c,) + shape[1:], dtype=dtype, fill=fill, dims=adims, attrs=attrs)
-    finish_skeleton(g, scene, dims=("point",), shape=(scene.n_points,), chunks=(c,), head={"kind": scene.kind},
+    finish_skeleton(g, scene, store=store, dims=("point",), shape=(scene.n_points,), chunks=(c,), head={"kind": scene.kind},
                     layout={"result_dims": dims}, reductions_complete=True)
 
 
