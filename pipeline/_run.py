@@ -30,7 +30,8 @@ from ._registry import kind_of
 from ._scene import engine_versions
 from ._schedule import Progress, Scheduler, Session, Task, compute, take_start_seconds
 from ._store import (FORMAT_VERSION, STATE_FLAGS, StoreMismatch, compact, consolidate, expand, is_complete,
-                     open_existing, record_run, recover_rechunk, remove_partials, run_lock, set_state, store_chunk,
+                     is_marked, open_existing, record_run, recover_rechunk, remove_partials, run_lock, set_state,
+                     store_chunk,
                      store_meta, wants_compaction)
 
 __all__ = ["RunSummary", "Session", "default_store", "run_scene", "warm_up_kernels"]
@@ -201,47 +202,87 @@ def check_layout(run: RunContext, kind: SceneKind, meta: dict, pending) -> None:
         "start over, or choose another --store")
 
 
-def run_chunks(solve_chunk, store: str, scene, chunks: tuple[int, ...], indices) -> dict:
+#: this worker process's chunk writer where tasks leave their last chunk's write running
+#: (``run_chunks(..., detach=True)``, the local process pool): one thread, and the one write
+#: it may still hold, ``(store, future)``, which the process's next task collects first
+_WRITER = None
+_LEFT: tuple[str, object] | None = None
+
+#: seconds the driver waits, after the last task returned, for a chunk's done marker (a write
+#: takes milliseconds; the marker delay of the tests' hook comes on top)
+MARKER_TIMEOUT = 60.0
+
+
+def run_chunks(solve_chunk, store: str, scene, chunks: tuple[int, ...], indices, detach: bool = False) -> dict:
     """One task: ``solve_chunk`` on each chunk of ``indices`` in turn, each stored whole and then
     marked done (``_store.store_chunk``) by a writer thread while the next chunk is solved (the
     solver's kernels release the GIL), so a chunk's fsyncs do not hold up the solving; at most
     one chunk waits to be written.
 
-    Returns the sums of the chunks' ``points``, ``failures``, ``seconds`` (solving),
-    ``write_seconds`` and ``mark_seconds`` (in the writer thread, overlapping the solving),
-    ``write_wait_seconds`` (the solving held up waiting for the writer), ``task_seconds``
-    (the task's wall time), ``task_cpu_seconds``, and the worker's start-up on its first task
-    (``_schedule.take_start_seconds``).
+    ``detach``: the task returns without waiting for its last chunk's write, which the
+    process's writer thread finishes while the process's next task solves (that task collects
+    it first, raising its error if it failed); the driver waits for the done markers
+    (:func:`wait_for_markers`).  Only for a pool of worker processes: tasks of other schedulers
+    share a process.
+
+    Returns the sums of the chunks' ``points``, ``failures``, ``seconds`` (solving), the
+    ``write_seconds`` and ``mark_seconds`` (in the writer thread, overlapping the solving) of
+    the ``written_chunks`` of ``store`` whose writes the task collected, ``write_wait_seconds``
+    (the solving held up waiting for the writer, for this store's chunks or a write left by an
+    earlier task), ``task_seconds`` (the task's wall time), ``task_cpu_seconds``, and the
+    worker's start-up on its first task (``_schedule.take_start_seconds``).
     """
+    global _WRITER, _LEFT
     from concurrent.futures import ThreadPoolExecutor
 
     t0, c0 = time.perf_counter(), time.process_time()
-    total = {"points": 0, "failures": 0, "seconds": 0.0, "write_seconds": 0.0, "mark_seconds": 0.0}
+    total = {"points": 0, "failures": 0, "seconds": 0.0}
+    writes = {"write_seconds": 0.0, "mark_seconds": 0.0, "written_chunks": 0}
     wait = 0.0
 
-    def collect(future):
-        nonlocal total, wait
+    def collect(pending):
+        nonlocal wait
+        owner, future = pending
         tw = time.perf_counter()
-        r = future.result()
+        r = future.result()  # raises the write's error, in this task
         wait += time.perf_counter() - tw
-        total = {k: total[k] + r[k] for k in total}
+        if owner == store:
+            writes["write_seconds"] += r["write_seconds"]
+            writes["mark_seconds"] += r["mark_seconds"]
+            writes["written_chunks"] += 1
 
-    with ThreadPoolExecutor(1, thread_name_prefix="chunk-writer") as writer:
-        writing = None
+    if detach:
+        if _WRITER is None:
+            _WRITER = ThreadPoolExecutor(1, thread_name_prefix="chunk-writer")
+        writer, pending, _LEFT = _WRITER, _LEFT, None
+    else:
+        writer, pending = ThreadPoolExecutor(1, thread_name_prefix="chunk-writer"), None
+    try:
         for idx in indices:
             solved = solve_chunk(scene, chunks, idx)
-            if writing is not None:
-                collect(writing)
-            writing = writer.submit(store_chunk, Path(store), tuple(idx), solved)
-        if writing is not None:
-            collect(writing)
-    return {**total, "write_wait_seconds": wait, "task_seconds": time.perf_counter() - t0,
+            total["points"] += int(solved.points)
+            total["failures"] += int(solved.failures)
+            total["seconds"] += float(solved.seconds)
+            if pending is not None:
+                collect(pending)
+            pending = (store, writer.submit(store_chunk, Path(store), tuple(idx), solved))
+        if pending is not None and not detach:
+            collect(pending)
+            pending = None
+    finally:
+        if detach:
+            _LEFT = pending
+        else:
+            writer.shutdown(wait=True)
+    return {**total, **writes, "write_wait_seconds": wait, "task_seconds": time.perf_counter() - t0,
             "task_cpu_seconds": time.process_time() - c0, **take_start_seconds()}
 
 
 def compute_chunks(run: RunContext, kind: SceneKind, meta: dict, pending, clock: Clock | None = None) -> list[dict]:
     """Tasks of ``kind.chunks_per_task`` consecutive pending chunks, fanned out on the run's
-    scheduler; their results."""
+    scheduler; their results.  On the local process pool the tasks leave their last chunk's
+    write to the worker (``run_chunks(..., detach=True)``) and this waits for the done markers
+    of every chunk before it returns (the phase "last writes")."""
     if not pending:
         return []
     chunks = tuple(int(c) for c in meta["layout"]["chunks"])
@@ -253,12 +294,13 @@ def compute_chunks(run: RunContext, kind: SceneKind, meta: dict, pending, clock:
     costs = [sum(kind.chunk_cost(run.scene, idx) for idx in group) for group in groups]
     groups = [groups[i] for i in sorted(range(len(groups)), key=lambda i: -costs[i])]  # stable
     label = run.scene.kind
+    detach = run.scheduler.name == "processes"
 
     def key(group):
         first = f"pipeline-{label}-" + "-".join(map(str, group[0]))
         return first if len(group) == 1 else f"{first}-and-{len(group) - 1}"
 
-    tasks = [Task(key(group), run_chunks, (kind.solve_chunk, str(run.store), run.scene, chunks, group))
+    tasks = [Task(key(group), run_chunks, (kind.solve_chunk, str(run.store), run.scene, chunks, group, detach))
              for group in groups]
     total = int(_chunk_count(meta))
     bar = Progress(len(tasks), per_task * run.scene.n_points / total, run.scene.name, run.progress,
@@ -266,7 +308,32 @@ def compute_chunks(run: RunContext, kind: SceneKind, meta: dict, pending, clock:
     results = compute(tasks, run.scheduler, bar)
     if clock is not None:
         clock.lap("chunks")
+    if detach:
+        wait_for_markers(run.store, pending)
+        if clock is not None:
+            clock.lap("last writes")
     return results
+
+
+def wait_for_markers(store: Path, indices, timeout: float | None = None) -> None:
+    """Return once every chunk of ``indices`` has its done marker; raise RuntimeError naming
+    the first missing one ``timeout`` seconds (``MARKER_TIMEOUT`` and the tests' marker delay)
+    after the call: its write failed in a worker that ran no later task, or its worker died."""
+    import os
+
+    if timeout is None:
+        timeout = MARKER_TIMEOUT + float(os.environ.get("TWOLINK_PIPELINE_MARKER_DELAY", "0") or 0)
+    remaining = [tuple(int(i) for i in idx) for idx in indices]
+    deadline = time.monotonic() + timeout
+    while True:
+        remaining = [idx for idx in remaining if not is_marked(Path(store), idx)]
+        if not remaining:
+            return
+        if time.monotonic() > deadline:
+            raise RuntimeError(
+                f"{store}: {len(remaining)} chunks without their done marker {timeout:g} s after their tasks "
+                f"returned (the first: {remaining[0]}): a write failed or a worker died; a rerun computes them")
+        time.sleep(0.002)
 
 
 def _chunk_count(meta: dict) -> int:
@@ -353,7 +420,10 @@ def time_budget(clock: Clock, workers: int, chunk_results: list[dict], step_resu
             "tasks_cpu_seconds": round(_sum(tasks, "task_cpu_seconds"), 3),
             "worker_start_cpu_seconds": round(_sum(tasks, "start_cpu_seconds"), 3),
             "writer_thread_seconds": {"writes (fsync included)": round(_sum(chunk_results, "write_seconds"), 3),
-                                      "done markers": round(_sum(chunk_results, "mark_seconds"), 3)},
+                                      "done markers": round(_sum(chunk_results, "mark_seconds"), 3),
+                                      # a task leaves its last write to its worker's next task
+                                      # (run_chunks' detach), whose scene may be the next one
+                                      "chunks counted": int(_sum(chunk_results, "written_chunks"))},
             "not_solving_worker_seconds": {k: round(v, 3) for k, v in
                                            sorted(parts.items(), key=lambda kv: -kv[1]) if v >= 0.0005}}
 

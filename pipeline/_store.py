@@ -55,6 +55,7 @@ __all__ = [
     "reduction_arrays",
     "run_lock",
     "read_done",
+    "is_marked",
     "mark_done",
     "write_region",
     "ChunkWrite",
@@ -462,6 +463,17 @@ def remove_partials(store: Path) -> int:
         p.unlink(missing_ok=True)
         n += 1
     return n
+
+
+def is_marked(store: Path, index: tuple[int, ...]) -> bool:
+    """Whether chunk ``index`` has its done marker (its marker's file exists: a marker is
+    written as a value 1 where the fill is 0, so zarr and ``_chunks.write_chunk`` keep a file
+    for it; read through zarr where the layout is not plain)."""
+    meta = _plain_meta(store, DONE_ARRAY)
+    if meta is None:
+        return bool(read_done(store)[tuple(index)])
+    sep = meta["chunk_key_encoding"].get("configuration", {}).get("separator", "/")
+    return (store / DONE_ARRAY / sep.join(["c", *map(str, index)])).is_file()
 
 
 def read_done(store: Path) -> np.ndarray:

@@ -230,3 +230,82 @@ def test_a_skeleton_interrupted_while_written_is_rebuilt(tmp_path, monkeypatch):
     create_skeleton(store, scene, GRID.chunk_layout(scene))
     meta = open_existing(store)
     assert meta is not None and meta["state"]["skeleton_complete"]
+
+
+# --- tasks that leave their last write to their worker (``_run.run_chunks(..., detach=True)``)
+
+def _quick_store(tmp_path):
+    from pipeline import load_scene
+    from pipeline._grid_kind import GRID
+    from pipeline._store import create_skeleton
+
+    scene = load_scene(Path(__file__).resolve().parents[1] / "workflows" / "quick.toml")
+    chunks = GRID.chunk_layout(scene)
+    store = tmp_path / "q.zarr"
+    create_skeleton(store, scene, chunks)
+    return scene, chunks, store
+
+
+def _fake_solve(scene, chunks, index):
+    """A chunk's outputs without solving: each point's value its chunk's first index."""
+    from pipeline._grid import chunk_region
+    from pipeline._store import ChunkWrite, SolvedChunk, output_dtype
+
+    region = chunk_region(index, scene.shape, chunks)
+    rshape = tuple(sl.stop - sl.start for sl in region)
+    values = {n: np.full(rshape, index[0] + 1, dtype=output_dtype(n)[0]) for n in scene.outputs}
+    values["status"] = np.zeros(rshape, dtype=np.int8)
+    return SolvedChunk(writes=(ChunkWrite(region, tuple(index), tuple(chunks), scene.shape, values),),
+                       points=int(np.prod(rshape)), failures=0, seconds=0.001)
+
+
+def test_a_detached_task_leaves_its_last_write_and_the_next_task_collects_it(tmp_path, monkeypatch):
+    import pipeline._run as run_mod
+    from pipeline._store import is_marked, read_done
+
+    scene, chunks, store = _quick_store(tmp_path)
+    grid = read_done(store).shape
+    idx = [tuple(i) for i in np.ndindex(*grid)]
+    monkeypatch.setattr(run_mod, "_LEFT", None)
+    first = run_mod.run_chunks(_fake_solve, str(store), scene, chunks, idx[:3], detach=True)
+    assert first["points"] == 3 * int(np.prod(chunks)) and first["written_chunks"] == 2
+    assert run_mod._LEFT is not None and run_mod._LEFT[0] == str(store)
+    second = run_mod.run_chunks(_fake_solve, str(store), scene, chunks, idx[3:4], detach=True)
+    assert second["written_chunks"] == 1  # the first task's last write, collected here
+    run_mod.wait_for_markers(store, idx[:4], timeout=10)
+    assert all(is_marked(store, i) for i in idx[:4]) and not is_marked(store, idx[4])
+    run_mod._LEFT[1].result()
+    monkeypatch.setattr(run_mod, "_LEFT", None)
+    # without detach every write is collected in its own task
+    third = run_mod.run_chunks(_fake_solve, str(store), scene, chunks, idx[4:6], detach=False)
+    assert third["written_chunks"] == 2 and run_mod._LEFT is None and all(is_marked(store, i) for i in idx[4:6])
+
+
+def test_a_failed_detached_write_is_raised_by_the_next_task_of_its_process(tmp_path, monkeypatch):
+    import pipeline._run as run_mod
+
+    scene, chunks, store = _quick_store(tmp_path)
+    monkeypatch.setattr(run_mod, "_LEFT", None)
+
+    def broken(store_path, index, solved):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(run_mod, "store_chunk", broken)
+    run_mod.run_chunks(_fake_solve, str(store), scene, chunks, [(0, 0, 0, 0)], detach=True)  # returns: write left
+    with pytest.raises(OSError, match="disk full"):
+        run_mod.run_chunks(_fake_solve, str(store), scene, chunks, [(0, 0, 1, 0)], detach=True)
+    monkeypatch.setattr(run_mod, "_LEFT", None)
+
+
+def test_waiting_for_markers_names_the_chunk_that_has_none(tmp_path):
+    """The driver's wait returns at once where every marker is there, and refuses by name,
+    after its timeout, where one is missing (its negative control)."""
+    import pipeline._run as run_mod
+    from pipeline._store import mark_done
+
+    scene, chunks, store = _quick_store(tmp_path)
+    mark_done(store, (0, 0, 0, 0))
+    mark_done(store, (1, 2, 1, 0))
+    run_mod.wait_for_markers(store, [(0, 0, 0, 0), (1, 2, 1, 0)], timeout=0.05)
+    with pytest.raises(RuntimeError, match=r"1 chunks without their done marker .*\(1, 2, 0, 0\)"):
+        run_mod.wait_for_markers(store, [(0, 0, 0, 0), (1, 2, 0, 0)], timeout=0.05)
