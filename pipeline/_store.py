@@ -196,6 +196,13 @@ def _package_version() -> str:
         return "0+unknown"
 
 
+def read_provenance_once() -> None:
+    """Read what every store's provenance shares and this process reads once (the libraries'
+    versions, the package's, the git commit): a run of many scenes pays it before its first
+    scene instead of inside it."""
+    _versions(), _package_version(), _git_commit()
+
+
 def provenance(scene: Scene) -> dict:
     return {
         "scene_name": scene.name,
