@@ -319,7 +319,8 @@ class SkeletonGroup:
             self.groups: list[str] = []
             self.arrays: list[tuple[str, dict]] = []
             self.values: dict[str, object] = {}
-        self.attrs: dict = {}
+            self.group_attrs: dict[str, dict] = {}
+        self.attrs: dict = self.root.group_attrs.setdefault(path, {})
 
     def _key(self, name: str) -> str:
         return f"{self.path}/{name}" if self.path else name
@@ -359,7 +360,7 @@ class SkeletonGroup:
             by_key = {k: a for (k, _), a in zip(self.arrays, arrays)}
             await asyncio.gather(*(by_key[k].setitem(slice(None), v) for k, v in self.values.items()))
             for key, group in made.items():
-                attrs = self.attrs if key == "" else None
+                attrs = self.group_attrs.get(key)
                 if attrs:
                     await group.update_attributes(attrs)
 

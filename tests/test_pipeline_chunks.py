@@ -309,3 +309,28 @@ def test_waiting_for_markers_names_the_chunk_that_has_none(tmp_path):
     run_mod.wait_for_markers(store, [(0, 0, 0, 0), (1, 2, 1, 0)], timeout=0.05)
     with pytest.raises(RuntimeError, match=r"1 chunks without their done marker .*\(1, 2, 0, 0\)"):
         run_mod.wait_for_markers(store, [(0, 0, 0, 0), (1, 2, 0, 0)], timeout=0.05)
+
+
+def test_a_declared_skeleton_keeps_every_groups_attributes(tmp_path):
+    """``SkeletonGroup``: attributes set on a sub-group and on the root, an array filled whole,
+    and ``in``, as a zarr group on disk has them."""
+    import zarr
+
+    from pipeline._store import SkeletonGroup, _write_skeleton, new_group
+
+    store = tmp_path / "s.zarr"
+    g = new_group(store)
+    assert isinstance(g, SkeletonGroup)
+    sub = g.create_group("inner")
+    sub.attrs["note"] = "kept"
+    g.attrs["top"] = 1
+    g.create_array("x", shape=(3,), chunks=(3,), dtype="f8", fill_value=np.nan)[:] = [1.0, 2.0, 3.0]
+    sub.create_array("y", shape=(2,), chunks=(1,), dtype="i4", fill_value=0)
+    assert "x" in g and "inner" in g and "y" in sub and "y" not in g
+    with pytest.raises(ValueError, match="filled whole"):
+        g.create_array("z", shape=(2,), chunks=(2,), dtype="f8", fill_value=0.0)[0] = 1.0
+    _write_skeleton(g, store)
+    root = zarr.open_group(str(store), mode="r")
+    assert dict(root.attrs) == {"top": 1} and dict(root["inner"].attrs) == {"note": "kept"}
+    np.testing.assert_array_equal(root["x"][...], [1.0, 2.0, 3.0])
+    assert root["inner/y"].shape == (2,) and not (store / "inner" / "y" / "c").exists()
