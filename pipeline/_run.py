@@ -264,11 +264,12 @@ def run_chunks(solve_chunk, store: str, scene, chunks: tuple[int, ...], indices,
             total["failures"] += int(solved.failures)
             total["seconds"] += float(solved.seconds)
             if pending is not None:
-                collect(pending)
+                waited, pending = pending, None  # a failed write is raised once, here, not left again
+                collect(waited)
             pending = (store, writer.submit(store_chunk, Path(store), tuple(idx), solved))
         if pending is not None and not detach:
-            collect(pending)
-            pending = None
+            waited, pending = pending, None
+            collect(waited)
     finally:
         if detach:
             _LEFT = pending

@@ -283,6 +283,7 @@ def test_a_detached_task_leaves_its_last_write_and_the_next_task_collects_it(tmp
 
 def test_a_failed_detached_write_is_raised_by_the_next_task_of_its_process(tmp_path, monkeypatch):
     import pipeline._run as run_mod
+    from pipeline._store import store_chunk
 
     scene, chunks, store = _quick_store(tmp_path)
     monkeypatch.setattr(run_mod, "_LEFT", None)
@@ -294,6 +295,11 @@ def test_a_failed_detached_write_is_raised_by_the_next_task_of_its_process(tmp_p
     run_mod.run_chunks(_fake_solve, str(store), scene, chunks, [(0, 0, 0, 0)], detach=True)  # returns: write left
     with pytest.raises(OSError, match="disk full"):
         run_mod.run_chunks(_fake_solve, str(store), scene, chunks, [(0, 0, 1, 0)], detach=True)
+    # raised once: the process's next task (its store writable again) is not failed by it
+    assert run_mod._LEFT is None
+    monkeypatch.setattr(run_mod, "store_chunk", store_chunk)
+    run_mod.run_chunks(_fake_solve, str(store), scene, chunks, [(0, 0, 1, 0)], detach=True)
+    run_mod._LEFT[1].result()
     monkeypatch.setattr(run_mod, "_LEFT", None)
 
 
