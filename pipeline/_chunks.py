@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_whole", "layout_is_plain", "write_chunk", "write_whole"]
+__all__ = ["chunk_key", "read_whole", "layout_is_plain", "write_chunk", "write_whole"]
 
 _KINDS = "biuf"  # bool, signed and unsigned integers, floats
 _SPECIAL_FLOATS = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
@@ -68,6 +68,13 @@ def layout_is_plain(meta: dict) -> bool:
         return False
 
 
+def chunk_key(meta: dict, index) -> str:
+    """The key of chunk ``index`` under its array's folder, by the array's default chunk key
+    encoding (``c/i/j`` with separator "/")."""
+    sep = meta["chunk_key_encoding"].get("configuration", {}).get("separator", "/")
+    return sep.join(["c", *map(str, index)])
+
+
 def read_whole(array_dir) -> np.ndarray | None:
     """The whole array stored under ``array_dir`` (a folder with its ``zarr.json``), or None where
     its layout is not :func:`layout_is_plain` (read it through zarr then). Missing chunks hold the
@@ -83,7 +90,6 @@ def read_whole(array_dir) -> np.ndarray | None:
     out = np.full(shape, _SPECIAL_FLOATS.get(fill, fill) if isinstance(fill, str) else fill, dtype=dtype)
     if out.size == 0:
         return out
-    sep = meta["chunk_key_encoding"].get("configuration", {}).get("separator", "/")
     decompress = None
     if [c["name"] for c in meta["codecs"]][-1] == "zstd":
         from numcodecs import Zstd
@@ -91,9 +97,8 @@ def read_whole(array_dir) -> np.ndarray | None:
         decompress = Zstd().decode
     grid = tuple(-(-s // c) for s, c in zip(shape, chunk))
     for idx in np.ndindex(*grid):
-        key = sep.join(["c", *map(str, idx)])
         try:
-            raw = (array_dir / key).read_bytes()
+            raw = (array_dir / chunk_key(meta, idx)).read_bytes()
         except FileNotFoundError:
             continue
         if decompress is not None:
@@ -150,8 +155,7 @@ def write_chunk(array_dir, meta: dict, index: tuple[int, ...], values: np.ndarra
     fill = _fill(meta)
     block = np.full(chunk, fill, dtype=dtype)
     block[tuple(slice(0, n) for n in values.shape)] = values
-    sep = meta["chunk_key_encoding"].get("configuration", {}).get("separator", "/")
-    path = array_dir / sep.join(["c", *map(str, index)])
+    path = array_dir / chunk_key(meta, index)
     if _only_fill(block, fill):
         path.unlink(missing_ok=True)
         return None

@@ -36,7 +36,7 @@ import zarr
 from solver.periodic.options import engine_options
 
 from ._attrs import ATTRS_KEY, encode_attrs, read_record, record_text
-from ._chunks import layout_is_plain, read_whole, write_chunk, write_whole
+from ._chunks import chunk_key, layout_is_plain, read_whole, write_chunk, write_whole
 from ._grid_scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
 from ._scene import engine_versions
 
@@ -553,8 +553,7 @@ def is_marked(store: Path, index: tuple[int, ...]) -> bool:
     meta = _plain_meta(store, DONE_ARRAY)
     if meta is None:
         return bool(read_done(store)[tuple(index)])
-    sep = meta["chunk_key_encoding"].get("configuration", {}).get("separator", "/")
-    return (store / DONE_ARRAY / sep.join(["c", *map(str, index)])).is_file()
+    return (store / DONE_ARRAY / chunk_key(meta, index)).is_file()
 
 
 def read_done(store: Path) -> np.ndarray:
