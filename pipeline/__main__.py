@@ -1,15 +1,24 @@
 """Command line: ``python -m pipeline run SCENE.toml``, ``estimate SCENE.toml...`` and ``paper``.
 
-Exit codes: 0 done; 2 bad scene file or arguments (nothing written); 3 store refused (a
-different scene is stored there, it is not a Zarr store, or another run holds it).
+Exit codes (every error is one line on stderr): 0 done; 1 the run failed part-way (an I/O
+error such as a full disk; the chunks done are kept, the same command resumes); 2 bad scene
+file or arguments, or a dask scheduler that does not answer (nothing written); 3 store refused
+(a different scene or a Zarr store the pipeline did not write is there: ``--overwrite``
+replaces it; it is not a Zarr store; it cannot be written there; another run holds it;
+nothing written); 130 interrupted by Ctrl-C, 143 by SIGTERM (the chunks done are kept, the
+same command resumes).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import re
+import signal
 import sys
+import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import workflows as _workflows
@@ -17,14 +26,17 @@ from solver._version import VersionAction
 
 from ._grid_scene import Scene
 from ._registry import kind_of, load_scene, parse_scene
-from ._run import run_scene, warm_up_kernels
+from ._run import kept_chunks, resumable_record, run_scene, warm_up_kernels
 from ._store import read_provenance_once
 from ._scene import SceneError, read_scene_file
-from ._schedule import Session
-from ._store import StoreBusy, StoreMismatch
+from ._schedule import DISTRIBUTED_PREFIXES, LOCAL_SCHEDULERS, SchedulerUnavailable, Session
+from ._store import StoreBusy, StoreMismatch, unwritable_reason
 
+EXIT_FAILED = 1
 EXIT_BAD_SCENE = 2
 EXIT_REFUSED = 3
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a process ended by Ctrl-C
+EXIT_TERMINATED = 143  # 128 + SIGTERM
 
 #: Shipped scenes in the order ``paper`` runs them (the four before the studies exist for
 #: cause checks of the reproduction audit, reports/claims.toml).
@@ -36,14 +48,48 @@ PAPER_SCENES = ("quick", "harmonic_grid", "harmonic_diagonals", "harmonic_optimu
 WORKFLOWS = _workflows.DIRECTORY
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised in the driver like Ctrl-C's KeyboardInterrupt (not an error: the
+    workers are ended at once, ``Scheduler.close(kill=True)``)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, its errors on one line (the usage is ``--help``'s), exit code 2."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_SCENE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def _scheduler(value: str) -> str:
-    if value in ("processes", "threads", "synchronous") or "://" in value:
+    if value in LOCAL_SCHEDULERS or value.startswith(DISTRIBUTED_PREFIXES):
         return value
-    raise argparse.ArgumentTypeError(f"must be processes, threads, synchronous or tcp://host:port, got {value!r}")
+    raise argparse.ArgumentTypeError(f"must be processes, threads, synchronous or the address of a dask "
+                                     f"scheduler ({', '.join(p + 'host:port' for p in DISTRIBUTED_PREFIXES)}), "
+                                     f"got {value!r}")
+
+
+def _count(value: str) -> int:
+    try:
+        n = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {value!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {n}")
+    return n
+
+
+def _seconds(value: str) -> float:
+    try:
+        x = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {value!r}") from None
+    if not x >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return x
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.splitlines()[0])
+    ap = _Parser(prog="python -m pipeline", description=__doc__.splitlines()[0])
     ap.add_argument("--version", action=VersionAction)
     sub = ap.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="compute one scene into its Zarr store (resumes an interrupted run)")
@@ -65,7 +111,8 @@ def _parser() -> argparse.ArgumentParser:
             p.add_argument("--store", help="Zarr store (default out/<scene>.zarr)")
         p.add_argument("--scheduler", type=_scheduler, default=None,
                        help="processes (default), threads, synchronous, or tcp://host:port of a dask cluster")
-        p.add_argument("--workers", type=int, default=None, help="local worker count (default: all cores)")
+        p.add_argument("--workers", type=_count, default=None,
+                       help="local worker count, for processes and threads (default: all cores)")
         p.add_argument("--overwrite", action="store_true", help="replace a store that would be refused (another scene, engine or chunk layout); a store of this scene resumes")
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return ap
@@ -93,13 +140,31 @@ def quick_variant(path) -> "Scene":
     return scene.quick_variant() if hasattr(scene, "quick_variant") else scene
 
 
+def _error(message) -> None:
+    print(f"error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+
+
 def _run_one(scene, store, args, session=None) -> int:
+    """One scene's run; every refusal or failure one line on stderr and its exit code."""
     try:
         summary = run_scene(scene, store, scheduler=args.scheduler, workers=args.workers,
                             overwrite=args.overwrite, progress=not args.no_progress, session=session)
     except (StoreMismatch, StoreBusy) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        _error(exc)
         return EXIT_REFUSED
+    except SchedulerUnavailable as exc:
+        _error(exc)
+        return EXIT_BAD_SCENE
+    except (KeyboardInterrupt, Terminated) as exc:
+        # a progress bar's line is left open on a terminal: the message starts on a line of its own
+        end = "\n" if sys.stderr.isatty() and not args.no_progress else ""
+        what = "interrupted" if isinstance(exc, KeyboardInterrupt) else "terminated (SIGTERM)"
+        print(f"{end}{kept_chunks(scene, store).line(what)}", file=sys.stderr, flush=True)
+        return EXIT_INTERRUPTED if isinstance(exc, KeyboardInterrupt) else EXIT_TERMINATED
+    except OSError as exc:  # a full disk, a store removed under the run: what is done is kept
+        where = f"{exc.filename}: " if exc.filename else ""
+        _error(f"{where}{exc.strerror or exc}; {kept_chunks(scene, store).summary()}")
+        return EXIT_FAILED
     if summary.timing:
         print(summary.timing_line(), flush=True)  # where the time went; the summary line last
     print(summary.line(), flush=True)
@@ -117,7 +182,7 @@ def _estimate(args) -> int:
         try:
             scenes.append(load_scene(_workflows.scene_path(path)))
         except SceneError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            _error(exc)
             return EXIT_BAD_SCENE
     total = 0.0
     for scene in scenes:
@@ -133,16 +198,75 @@ def _estimate(args) -> int:
     return 0
 
 
+@contextmanager
+def _sigterm_raises():
+    """SIGTERM raises :class:`Terminated` in this (main) thread for the block, so that a run
+    ends like after Ctrl-C: its workers ended, the chunks kept counted on one line."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise Terminated()
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _writable_folder(out: Path) -> bool:
+    """Whether the stores can be written under ``out`` (created if absent): a file made and
+    removed there; else one line, False, and nothing left (a folder created here removed)."""
+    import tempfile
+
+    made = [p for p in (out, *out.parents) if not os.path.lexists(p)]
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+        return True
+    except OSError as exc:
+        for folder in made:  # deepest first
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
+        _error(f"--out {out}: cannot write there: {unwritable_reason(out / 'x', exc)}; choose another --out")
+        return False
+
+
+def _check_workers(args, scheduler: str) -> bool:
+    """``--workers`` is a local pool's size: refused (one line) with another scheduler."""
+    if args.workers is not None and scheduler not in ("processes", "threads"):
+        _error(f"--workers: sets the size of a local pool (processes, threads), not of --scheduler {scheduler} "
+               f"({'the cluster has its own workers' if scheduler.startswith(DISTRIBUTED_PREFIXES) else 'one task at a time'}); "
+               "leave it out")
+        return False
+    return True
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
-    if args.workers is not None and args.workers < 1:
-        print("error: --workers: must be >= 1", file=sys.stderr)
-        return EXIT_BAD_SCENE
+    with _sigterm_raises():
+        try:
+            return _main(args)
+        except (KeyboardInterrupt, Terminated) as exc:  # outside a run (estimate, the paper's set-up)
+            interrupted = isinstance(exc, KeyboardInterrupt)
+            print(f"{'interrupted' if interrupted else 'terminated (SIGTERM)'}: {args.command} stopped; rerun the "
+                  "same command to resume", file=sys.stderr, flush=True)
+            return EXIT_INTERRUPTED if interrupted else EXIT_TERMINATED
+
+
+def _main(args) -> int:
     if args.command == "run":
         try:
             scene = load_scene(_workflows.scene_path(args.scene))
         except SceneError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            _error(exc)
+            return EXIT_BAD_SCENE
+        if not _check_workers(args, args.scheduler or scene.execution.scheduler):
             return EXIT_BAD_SCENE
         return _run_one(scene, args.store, args)
     if args.command == "estimate":
@@ -151,7 +275,9 @@ def main(argv=None) -> int:
     out = Path(args.out) / "quick" if args.quick else Path(args.out)
     folder = args.workflows or WORKFLOWS
     if not folder.is_dir():
-        print(f"error: --workflows: no such folder: {folder}", file=sys.stderr)
+        _error(f"--workflows: no such folder: {folder}")
+        return EXIT_BAD_SCENE
+    if not _check_workers(args, args.scheduler or "processes"):
         return EXIT_BAD_SCENE
     # Validate every scene before running any, so a bad file costs nothing.
     scenes = []
@@ -159,14 +285,29 @@ def main(argv=None) -> int:
         try:
             scenes.append((quick_variant if args.quick else load_scene)(folder / f"{name}.toml"))
         except SceneError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            _error(exc)
             return EXIT_BAD_SCENE
+    # ... and every store, so that a refused one stops the paper before its first scene runs
+    stores = [out / f"{name}.zarr" for name in names]
+    for scene, store in zip(scenes, stores):
+        try:
+            resumable_record(scene, store, args.overwrite)
+        except StoreMismatch as exc:
+            _error(exc)
+            return EXIT_REFUSED
     t0 = time.perf_counter()
-    # Compile the solver's kernels once, here, for every scene; the workers load them from the cache.
     kernel_sets = tuple(dict.fromkeys(k for scene in scenes for k in kind_of(scene).kernel_sets(scene)))
-    warm_up_kernels(kernel_sets)
     # One pool of workers for every scene: each worker imports the solver and loads its kernels once.
     with Session(args.scheduler or "processes", args.workers, kernel_sets) as session:
+        try:
+            session.connect()  # a cluster that does not answer: refused before anything is written
+        except SchedulerUnavailable as exc:
+            _error(exc)
+            return EXIT_BAD_SCENE
+        if not _writable_folder(out):
+            return EXIT_REFUSED
+        # Compile the solver's kernels once, here, for every scene; the workers load them from the cache.
+        warm_up_kernels(kernel_sets)
         # the workers start (imports, kernels) once, before the first scene: a cost of the run,
         # not of whichever scene comes first; so do this process's provenance reads (library
         # versions, git commit: ~65 ms once per process), made while the workers start
@@ -177,14 +318,20 @@ def main(argv=None) -> int:
             print(f"paper: {started['workers']} worker processes started in {started['wall_seconds']:.1f} s "
                   f"(imports and the solver's kernels: {started['worker_seconds']:.1f} worker-s), once for "
                   "every scene", flush=True)
-        for name, scene in zip(names, scenes):
-            rc = _run_one(scene, out / f"{name}.zarr", args, session)
+        for name, scene, store in zip(names, scenes, stores):
+            rc = _run_one(scene, store, args, session)
+            if rc in (EXIT_INTERRUPTED, EXIT_TERMINATED):
+                session.close(kill=True)  # its workers ended now, not after their running tasks
             if rc:
                 return rc
     print(f"paper: {len(names)} scenes, total wall {time.perf_counter() - t0:.1f} s", flush=True)
     from reports import build_report  # the report reads every store under --out
 
-    index = build_report(sorted(out.glob("*.zarr")), out / "report")
+    try:
+        index = build_report(sorted(out.glob("*.zarr")), out / "report")
+    except OSError as exc:
+        _error(f"{exc.filename or out / 'report'}: cannot write the report: {exc.strerror or exc}")
+        return EXIT_REFUSED
     print(f"paper: report at {index}", flush=True)
     return 0
 

@@ -2,9 +2,10 @@
 
 ``run_scene`` is a chain of small named steps over the kind's protocol (``pipeline._kind``)::
 
-    open_run        resolve store and scheduler, hold the store's lock
-    prepare_store   refuse a store of a different scene, or (re)create the skeleton, or resume
-    check_layout    refuse chunks still to compute in a layout that is not the scene's
+    open_run        resolve store and scheduler; refuse, before anything is written, a cluster
+                    that does not answer and a store that would be refused; hold the lock
+    prepare_store   refuse a store of a different scene, or of another chunk layout with chunks
+                    still to compute (``check_layout``), or (re)create the skeleton, or resume
     expand          a compacted store with chunks to compute gets its task chunks back
     warm_up         compile the solver's kernels once, here, before work fans out
     compute_chunks  tasks of consecutive chunks without their done marker (each chunk whole)
@@ -29,12 +30,13 @@ from ._kind import RunContext, SceneKind
 from ._registry import kind_of
 from ._scene import engine_versions
 from ._schedule import Progress, Scheduler, Session, Task, compute, take_start_seconds
-from ._store import (FORMAT_VERSION, STATE_FLAGS, StoreMismatch, compact, consolidate, expand, is_complete,
-                     is_marked, open_existing, record_run, recover_rechunk, remove_partials, run_lock, set_state,
-                     store_chunk,
-                     store_meta, wants_compaction)
+from ._store import (FORMAT_VERSION, STATE_FLAGS, StoreForeign, StoreMismatch, StoreUnwritable, compact,
+                     consolidate, expand, is_complete, is_marked, open_existing, record_run, recover_rechunk,
+                     remove_partials, run_lock, set_state, store_chunk, store_meta, unwritable_reason,
+                     wants_compaction)
 
-__all__ = ["RunSummary", "Session", "default_store", "run_scene", "warm_up_kernels"]
+__all__ = ["KeptChunks", "RunSummary", "Session", "default_store", "kept_chunks", "resumable_record", "run_scene",
+           "warm_up_kernels"]
 
 
 @dataclass(frozen=True)
@@ -107,20 +109,32 @@ def warm_up_kernels(kernel_sets, echo=print) -> None:
 
 
 @contextmanager
-def open_run(scene, store, scheduler, workers, session, progress, echo):
-    """The run's context: resolved store path and scheduler (the ``session``'s pool when it
-    matches), holding the store's lock for the duration."""
+def open_run(scene, store, scheduler, workers, session, progress, echo, overwrite: bool = False):
+    """The run's context and the record of the store it resumes (None: a skeleton to build):
+    resolved store path and scheduler (the ``session``'s pool when it matches), holding the
+    store's lock for the duration.
+
+    Before the lock file or anything else is written, a dask.distributed scheduler must answer
+    (``Scheduler.connect``, which also counts its workers) and the store must not be one that
+    :func:`resumable_record` refuses; the record is read again under the lock (``prepare_store``).
+    Left by Ctrl-C (an exception that is not an error), the run's own worker processes are
+    ended at once (``Scheduler.close(kill=True)``)."""
     store = Path(store) if store is not None else default_store(scene)
     name = scheduler or scene.execution.scheduler
     workers = workers or scene.execution.workers
     # the session's pool serves every run of its scheduler that asks for no other worker count
     own = session is None or session.name != name or (workers is not None and session.n_workers != workers)
     sched = Scheduler(name, workers, kind_of(scene).kernel_sets(scene)) if own else session
-    n_workers = workers or sched.n_workers
     try:
+        sched.connect()  # a cluster that does not answer is refused here, nothing written
+        early = resumable_record(scene, store, overwrite)
         with run_lock(store):
-            yield RunContext(scene, store, sched, n_workers, progress, echo)
-    finally:
+            yield RunContext(scene, store, sched, sched.n_workers, progress, echo), early
+    except BaseException as exc:
+        if own:
+            sched.close(kill=not isinstance(exc, Exception))
+        raise
+    else:
         if own:
             sched.close()
 
@@ -141,41 +155,73 @@ def start_workers(run: RunContext, kind: SceneKind, echo) -> None:
     warm_up_kernels(kind.kernel_sets(run.scene), echo)
 
 
-def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool, replace: bool = False) -> dict:
-    """The store's ``pipeline`` record, after refusing a store of a different scene, engine or
-    store format version (replaced instead where ``overwrite``), creating the skeleton of a new or replaced
-    store (``replace``: replaced whatever it holds), or removing the debris of interrupted
-    writes from one being resumed. A store of this scene and engine is resumed, ``overwrite``
-    or not (``paper --overwrite`` recomputes only the scenes whose stores would be refused)."""
-    scene, store = run.scene, run.store
-    meta = None if replace else open_existing(store)
-    if meta is not None and meta.get("format_version", 1) != FORMAT_VERSION:
+def resumable_record(scene, store: Path, overwrite: bool) -> dict | None:
+    """The ``pipeline`` record of the store to resume, or None where a skeleton is to be built
+    (no store yet, an interrupted skeleton, or, with ``overwrite``, one that would be refused).
+
+    Refused (:class:`StoreMismatch`) unless ``overwrite``: a Zarr store the pipeline did not
+    write (:class:`StoreForeign`), a store of another format version, engine or scene, or of
+    another chunk layout with chunks still to compute (:func:`check_layout`).  Refused
+    even with ``overwrite``: a path that is not a Zarr store (a file, a folder of other files).
+    Writes nothing."""
+    try:
+        meta = open_existing(store)
+    except StoreForeign:
+        if not overwrite:
+            raise
+        return None
+    if meta is None:
+        return None
+    if meta.get("format_version", 1) != FORMAT_VERSION:
         if not overwrite:
             raise StoreMismatch(
                 f"{store}: store format version {meta.get('format_version', 1)}, this pipeline writes version "
                 f"{FORMAT_VERSION} (attributes as netCDF takes them); rerun with --overwrite to rebuild it, or "
                 "choose another --store (the reports read it as it is)")
-        meta = None  # overwrite: start over
-    if meta is not None:
-        old = meta["provenance"]["scene_hash"]
-        engines, ours = meta["provenance"].get("engines"), engine_versions()
-        if engines != ours and not overwrite:
-            def label(versions):
-                return (", ".join(f"{k} {v}" for k, v in versions.items()) if versions
-                        else "an engine before versions were recorded")
-            raise StoreMismatch(
-                f"{store}: computed by {label(engines)}; this solver is {label(ours)}: results "
-                "of two engines are never mixed in one store; rerun with --overwrite to start "
-                "over, or choose another --store")
-        if old != scene.hash and not overwrite:
-            raise StoreMismatch(
-                f"{store}: built from a different scene ({meta['provenance']['scene_file']}, hash "
-                f"{old[:12]}) than {scene.path} (hash {scene.hash[:12]}); rerun with --overwrite to "
-                "replace it, or choose another --store")
-        if engines != ours or old != scene.hash:
-            meta = None  # overwrite: start over
+        return None  # overwrite: start over
+    old = meta["provenance"]["scene_hash"]
+    engines, ours = meta["provenance"].get("engines"), engine_versions()
+    if engines != ours and not overwrite:
+        def label(versions):
+            return (", ".join(f"{k} {v}" for k, v in versions.items()) if versions
+                    else "an engine before versions were recorded")
+        raise StoreMismatch(
+            f"{store}: computed by {label(engines)}; this solver is {label(ours)}: results "
+            "of two engines are never mixed in one store; rerun with --overwrite to start "
+            "over, or choose another --store")
+    if old != scene.hash and not overwrite:
+        raise StoreMismatch(
+            f"{store}: built from a different scene ({meta['provenance']['scene_file']}, hash "
+            f"{old[:12]}) than {scene.path} (hash {scene.hash[:12]}); rerun with --overwrite to "
+            "replace it, or choose another --store")
+    if engines != ours or old != scene.hash:
+        return None  # overwrite: start over
+    want = kind_of(scene).chunk_layout(scene)
+    if want is not None and tuple(want) != tuple(int(c) for c in meta["layout"]["chunks"]):
+        try:
+            check_layout(scene, store, meta, kind_of(scene).pending_chunks(store))
+        except StoreMismatch:
+            if not overwrite:
+                raise
+            return None  # overwrite: start over
+    return meta
+
+
+def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool, replace: bool = False) -> dict:
+    """The store's ``pipeline`` record, after refusing a store of a different scene, engine or
+    store format version, or one the pipeline did not write (replaced instead where
+    ``overwrite``: :func:`resumable_record`), creating the skeleton of a new or replaced store
+    (``replace``: replaced whatever it holds), or removing the debris of interrupted writes
+    from one being resumed. A store of this scene and engine is resumed, ``overwrite`` or not
+    (``paper --overwrite`` recomputes only the scenes whose stores would be refused)."""
+    store = run.store
+    meta = None if replace else resumable_record(run.scene, store, overwrite)
     if meta is None:
-        kind.create_skeleton(run)
+        try:
+            kind.create_skeleton(run)
+        except OSError as exc:  # a folder that refuses the store (read-only, full): one line, not a traceback
+            raise StoreUnwritable(f"{store}: cannot write the store: {unwritable_reason(store, exc)}; "
+                                  "choose another --store (or --out)") from None
         return open_existing(store)
     remove_partials(store)
     recover_rechunk(store)
@@ -186,17 +232,17 @@ def _shape(chunks) -> str:
     return " x ".join(str(int(c)) for c in chunks)
 
 
-def check_layout(run: RunContext, kind: SceneKind, meta: dict, pending) -> None:
+def check_layout(scene, store: Path, meta: dict, pending) -> None:
     """Refuse a store whose chunk layout is not the scene's (``kind.chunk_layout``) while chunks
-    remain to compute: the store was started by an older pipeline, whose layout came from a
-    timing probe, or with another ``[execution] points_per_chunk``.  A store with every chunk
-    done is left as it is (nothing is computed in its layout)."""
-    want = kind.chunk_layout(run.scene)
+    remain to compute (``pending``): the store was started by an older pipeline, whose layout
+    came from a timing probe, or with another ``[execution] points_per_chunk``.  A store with
+    every chunk done is left as it is (nothing is computed in its layout)."""
+    want = kind_of(scene).chunk_layout(scene)
     have = tuple(int(c) for c in meta["layout"]["chunks"])
     if want is None or not pending or tuple(want) == have:
         return
     raise StoreMismatch(
-        f"{run.store}: its chunks ({_shape(have)}) are not this scene's chunk layout ({_shape(want)}), so its "
+        f"{store}: its chunks ({_shape(have)}) are not this scene's chunk layout ({_shape(want)}), so its "
         f"{len(pending)} unfinished chunks cannot be resumed (a store started by an older pipeline, which chose "
         "chunks by a timing probe, or with another [execution] points_per_chunk); rerun with --overwrite to "
         "start over, or choose another --store")
@@ -437,28 +483,24 @@ def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None =
     Raises
     ------
     StoreMismatch
-        The store holds a different scene (and ``overwrite`` is false), or is not a Zarr store.
+        The store holds a different scene or a Zarr store the pipeline did not write
+        (:class:`~pipeline._store.StoreForeign`; both replaced where ``overwrite``), or is not a
+        Zarr store; or it cannot be written there (:class:`~pipeline._store.StoreUnwritable`).
     StoreBusy
         Another run holds the store's lock.
+    SchedulerUnavailable
+        A dask.distributed scheduler that does not answer, or has no worker (nothing written).
 
     ``session`` (a :class:`Session`) lets several runs share one pool of worker processes, so
     each worker imports the solver and loads its kernels once (``python -m pipeline paper``).
     """
     kind = kind_of(scene)
     clock = Clock()
-    with open_run(scene, store, scheduler, workers, session, progress, echo) as run:
-        early = open_existing(run.store) if run.store.exists() else None
+    with open_run(scene, store, scheduler, workers, session, progress, echo, overwrite) as (run, early):
         if early is None or not is_complete(early["state"]) or overwrite:
             run.scheduler.start()  # the workers start while this process prepares the store
-        meta = prepare_store(run, kind, overwrite)
+        meta = prepare_store(run, kind, overwrite)  # refuses (or replaces) another chunk layout too
         pending = kind.pending_chunks(run.store)
-        try:
-            check_layout(run, kind, meta, pending)
-        except StoreMismatch:
-            if not overwrite:
-                raise
-            meta = prepare_store(run, kind, overwrite, replace=True)
-            pending = kind.pending_chunks(run.store)
         if pending and meta.get("compacted_from"):
             expand(run.store)  # each task writes whole chunk files of its own again
             meta = store_meta(run.store)
@@ -494,3 +536,35 @@ def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None =
                       total_chunks=_chunk_count(meta), failures=failures,
                       wall_seconds=clock.wall, solve_seconds=solve_seconds,
                       reductions_computed="reductions" in ran, series_computed="series" in ran, timing=timing)
+
+
+@dataclass(frozen=True)
+class KeptChunks:
+    """What a stopped run left in its store: ``kept`` chunks with their done marker of
+    ``total`` (None where the store's record does not exist yet)."""
+
+    kept: int
+    total: int | None
+
+    def summary(self) -> str:
+        """``N of M chunks kept; rerun the same command to resume``."""
+        if self.total is None:
+            return "no chunk kept (the store was not created yet); rerun the same command to start it"
+        return f"{self.kept} of {self.total} chunks kept; rerun the same command to resume"
+
+    def line(self, what: str = "interrupted") -> str:
+        """``interrupted: N of M chunks kept; rerun the same command to resume``."""
+        return f"{what}: {self.summary()}"
+
+
+def kept_chunks(scene, store: str | Path | None) -> KeptChunks:
+    """The chunks of ``scene``'s ``store`` with their done marker (after a run was stopped)."""
+    store = Path(store) if store is not None else default_store(scene)
+    try:
+        meta = open_existing(store)
+    except StoreMismatch:
+        meta = None
+    if meta is None:
+        return KeptChunks(0, None)
+    total = _chunk_count(meta)
+    return KeptChunks(total - len(kind_of(scene).pending_chunks(store)), total)

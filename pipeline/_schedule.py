@@ -5,22 +5,39 @@ processes ("processes", the default: the tasks go to the pool directly, in the o
 on one of dask's other local schedulers ("threads", "synchronous") or on a dask.distributed
 cluster ("tcp://host:port", also "tls://", "inproc://", "ucx://") and returns their results in
 order.  Tasks are keyed ``pipeline-...`` so the progress bar counts them and nothing else.
+
+The progress bar moves as each task finishes, on every scheduler.  The pool's worker processes
+end when their driver dies, by any signal (SIGKILL included: :func:`watch_parent`), and ignore
+Ctrl-C, which the driver handles (it ends them itself: ``Scheduler.close(kill=True)``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable
 
-__all__ = ["DISTRIBUTED_PREFIXES", "LOCAL_SCHEDULERS", "Progress", "Scheduler", "Session", "Task", "compute",
-           "threads_per_worker", "usable_cores"]
+__all__ = ["CONNECT_SECONDS", "DISTRIBUTED_PREFIXES", "LOCAL_SCHEDULERS", "Progress", "Scheduler",
+           "SchedulerUnavailable", "Session", "Task", "compute", "threads_per_worker", "usable_cores",
+           "watch_parent"]
 
 LOCAL_SCHEDULERS = ("processes", "threads", "synchronous")
 #: addresses of a dask.distributed scheduler
 DISTRIBUTED_PREFIXES = ("tcp://", "inproc://", "tls://", "ucx://")
+#: seconds a dask.distributed scheduler has to answer (and to have a worker) before a run is
+#: refused, with nothing written (dask's own default is 30 s)
+CONNECT_SECONDS = 5.0
+#: seconds between a worker's checks that its driver is alive (:func:`watch_parent`)
+PARENT_POLL_SECONDS = 0.5
+
+
+class SchedulerUnavailable(RuntimeError):
+    """The scheduler named cannot run tasks: a cluster that does not answer, or has no worker."""
 
 
 class Progress:
@@ -107,10 +124,48 @@ def set_numba_threads_env(threads: int) -> None:
             config.reload_config()
 
 
-def _start_worker(threads: int, kernel_sets: tuple[str, ...]) -> None:
-    """Initializer of a pool's worker process: its numba thread count, then the solver and its
-    kernels loaded once, before any task (so no task's timing pays for them)."""
+#: ``prctl`` option: the signal the kernel sends this process when its parent thread ends
+_PR_SET_PDEATHSIG = 1
+
+
+def watch_parent(parent_pid: int, *, death_signal: bool = False, interval: float = PARENT_POLL_SECONDS) -> None:
+    """End this process (a pool's worker) when the process ``parent_pid`` (its driver) dies, by
+    any signal, SIGKILL included: a killed driver left its workers (188 MB each) and the
+    multiprocessing resource tracker running for minutes (issue 45).
+
+    Two watches: on Linux, where ``death_signal`` (the worker was spawned from the driver's
+    main thread, whose end is the process's), the kernel sends SIGKILL at once
+    (``prctl(PR_SET_PDEATHSIG)``, through ctypes); everywhere, a daemon thread compares
+    ``os.getppid()`` with ``parent_pid`` every ``interval`` seconds (an orphan is adopted by
+    another process) and exits.  A driver already gone when this is called ends it at once."""
+    if death_signal and sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass  # the polling below still holds
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+    def poll():
+        while True:
+            time.sleep(interval)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=poll, name="twolink-parent-watch", daemon=True).start()
+
+
+def _start_worker(threads: int, kernel_sets: tuple[str, ...], parent_pid: int | None = None,
+                  death_signal: bool = False) -> None:
+    """Initializer of a pool's worker process: it watches its driver (:func:`watch_parent`) and
+    leaves Ctrl-C to it, sets its numba thread count, then loads the solver and its kernels once,
+    before any task (so no task's timing pays for them)."""
     t0, c0 = time.perf_counter(), time.process_time()
+    if parent_pid is not None:
+        watch_parent(parent_pid, death_signal=death_signal)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver handles Ctrl-C and ends its workers
     set_numba_threads_env(threads)
     import pipeline  # noqa: F401  (the tasks' modules, imported once here)
 
@@ -151,14 +206,33 @@ def take_start_seconds() -> dict:
     return out
 
 
+@contextlib.contextmanager
+def _sigint_ignored(here: bool):
+    """SIGINT ignored in this process for the block (``here``: the main thread, the only one
+    that may set a handler): processes spawned inside inherit the disposition through exec and
+    keep it, so a Ctrl-C that reaches a worker still starting prints no traceback there."""
+    if not here:
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 class Scheduler:
     """Where tasks run: a scheduler name (or cluster address) and a local worker count.
 
     One process pool serves every ``compute`` on "processes" until ``close``, so each worker
     process imports the solver (and loads the compiled kernels of ``kernel_sets``) once, with
     :func:`threads_per_worker` numba threads.  ``start()`` spawns the workers at once, so they
-    start while the driver prepares the store.  Use as a context manager; a ``Session`` is the
-    same object shared by several runs (``python -m pipeline paper``).
+    start while the driver prepares the store.  On a dask.distributed cluster, ``connect()``
+    opens one client for the scheduler's runs (refusing, within :data:`CONNECT_SECONDS`, a
+    cluster that does not answer or has no worker) and counts its workers.  Use as a context
+    manager; a ``Session`` is the same object shared by several runs (``python -m pipeline
+    paper``).  Leaving it by an exception that is not an error (Ctrl-C: KeyboardInterrupt)
+    ends the worker processes at once instead of waiting for their tasks.
     """
 
     def __init__(self, name: str, workers: int | None, kernel_sets: tuple[str, ...] = ()):
@@ -166,6 +240,8 @@ class Scheduler:
         self.kernel_sets = tuple(kernel_sets)
         self._pool = None
         self._ready = []
+        self._client = None
+        self._cluster_workers = None
 
     @property
     def distributed(self) -> bool:
@@ -173,9 +249,12 @@ class Scheduler:
 
     @property
     def n_workers(self) -> int:
-        """Local workers ("processes", "threads": ``workers`` or every core); 1 otherwise."""
+        """Tasks that run at once: local workers ("processes", "threads": ``workers`` or every
+        core); on a cluster its workers' threads, counted by ``connect`` (1 before); else 1."""
         if self.name in ("processes", "threads"):
             return self.workers or usable_cores()
+        if self.distributed and self._cluster_workers:
+            return self._cluster_workers
         return 1
 
     @property
@@ -183,21 +262,63 @@ class Scheduler:
         """numba threads of each worker process (``threads_per_worker``)."""
         return threads_per_worker(self.n_workers)
 
+    def connect(self, timeout: float = CONNECT_SECONDS) -> "Scheduler":
+        """On a dask.distributed cluster: open the client these runs use and count the
+        cluster's task slots (the threads of its workers) for ``n_workers``.  Raises
+        :class:`SchedulerUnavailable` (one line) where the scheduler does not answer within
+        ``timeout`` seconds, or has no worker by then.  A no-op on the local schedulers."""
+        if not self.distributed or self._client is not None:
+            return self
+        try:
+            from distributed import Client
+        except ImportError:
+            raise SchedulerUnavailable(f"--scheduler {self.name}: the package 'distributed' is not "
+                                       "installed (pip install distributed)") from None
+        try:
+            client = Client(self.name, timeout=timeout, set_as_default=False)
+        except (OSError, TimeoutError, ValueError, TypeError) as exc:
+            raise SchedulerUnavailable(f"--scheduler {self.name}: no dask scheduler answers there within "
+                                       f"{timeout:g} s ({' '.join(str(exc).split()) or type(exc).__name__}); "
+                                       "start the cluster first, or choose another --scheduler") from None
+        try:
+            try:
+                client.wait_for_workers(1, timeout=timeout)
+            except (OSError, TimeoutError):
+                raise SchedulerUnavailable(f"--scheduler {self.name}: the scheduler answers but has no worker "
+                                           f"after {timeout:g} s; start its workers, or choose another "
+                                           "--scheduler") from None
+            workers = client.scheduler_info().get("workers", {})
+            self._cluster_workers = max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
+        except BaseException:
+            client.close()
+            raise
+        self._client = client
+        return self
+
+    def client(self):
+        """The cluster's client (``connect``-ed on first use)."""
+        return self.connect()._client
+
     def pool(self):
+        """The process pool, its workers spawned at once from this thread (each one watches
+        this process, :func:`watch_parent`, and ignores Ctrl-C from its start)."""
         if self._pool is None:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
 
+            main = threading.current_thread() is threading.main_thread()
             self._pool = ProcessPoolExecutor(self.n_workers, mp_context=multiprocessing.get_context("spawn"),
                                              initializer=_start_worker,
-                                             initargs=(self.threads, self.kernel_sets))
+                                             initargs=(self.threads, self.kernel_sets, os.getpid(), main))
+            with _sigint_ignored(main):
+                # a submitted call spawns a worker while none is idle: all of them here, in this thread
+                self._ready = [self._pool.submit(_ready) for _ in range(self.n_workers)]
         return self._pool
 
     def start(self) -> "Scheduler":
         """Spawn the worker processes now (on "processes"; a no-op otherwise), without waiting."""
-        if self.name == "processes" and self._pool is None:
-            pool = self.pool()
-            self._ready = [pool.submit(_ready) for _ in range(self.n_workers)]
+        if self.name == "processes":
+            self.pool()
         return self
 
     def wait_ready(self, timeout: float = 600.0) -> dict:
@@ -228,16 +349,30 @@ class Scheduler:
         out.update(workers=len(seen), wall_seconds=time.perf_counter() - t0)
         return out
 
-    def close(self):
+    def worker_pids(self) -> list[int]:
+        """Process ids of the pool's workers (none on the other schedulers)."""
+        return sorted(getattr(self._pool, "_processes", None) or {}) if self._pool is not None else []
+
+    def close(self, kill: bool = False):
+        """Shut the pool down (waiting for the tasks running; ``kill``: ending its worker
+        processes at once, as after Ctrl-C) and close a cluster's client."""
         if self._pool is not None:
+            if kill:
+                for process in list((getattr(self._pool, "_processes", None) or {}).values()):
+                    with contextlib.suppress(OSError, ValueError, AttributeError):
+                        process.kill()
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
+        if self._client is not None:
+            client, self._client = self._client, None
+            with contextlib.suppress(Exception):
+                client.close()
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, exc, tb):
+        self.close(kill=exc_type is not None and not issubclass(exc_type, Exception))
 
 
 #: A scheduler (and its process pool) shared by several runs; use as a context manager.
@@ -255,27 +390,26 @@ class Task:
 
 
 def compute(tasks: list[Task], scheduler: Scheduler, progress: Progress) -> list:
-    """Run ``tasks`` on ``scheduler``; their results in order.  ``progress`` is advanced once
-    per finished task.
+    """Run ``tasks`` on ``scheduler``; their results in order.  ``progress`` is advanced as each
+    task finishes, on every scheduler (on "processes" it waited for the first exception or the
+    last task, so the bar stood still, then printed every line at once: issue 45).
 
     On "processes" the tasks go straight to the scheduler's pool in the order given (so a kind
     can put its longest tasks first), all queued at once; on the other schedulers through dask
-    (``dask.delayed``).  The first task to raise cancels those not yet started and raises here.
+    (``dask.delayed``).  The first task to raise cancels those not yet started and raises here,
+    and so does an interrupt (Ctrl-C).
     """
     if scheduler.name == "processes":
-        from concurrent.futures import FIRST_EXCEPTION, wait
+        from concurrent.futures import as_completed
 
         pool = scheduler.pool()
         futures = [pool.submit(t.func, *t.args) for t in tasks]
         index = {f: i for i, f in enumerate(futures)}
         results = [None] * len(futures)
-        todo = set(futures)
         try:
-            while todo:
-                done, todo = wait(todo, return_when=FIRST_EXCEPTION)
-                for f in done:
-                    results[index[f]] = f.result()  # raises the task's exception
-                    progress.update()
+            for f in as_completed(futures):
+                results[index[f]] = f.result()  # raises the task's exception
+                progress.update()
         except BaseException:
             for f in futures:
                 f.cancel()
@@ -285,16 +419,21 @@ def compute(tasks: list[Task], scheduler: Scheduler, progress: Progress) -> list
 
     delayed = [dask.delayed(t.func, pure=False)(*t.args, dask_key_name=t.key) for t in tasks]
     if scheduler.distributed:
-        from distributed import Client, as_completed
+        from distributed import as_completed
 
-        with Client(scheduler.name, set_as_default=False) as client:
-            futures = client.compute(delayed)
-            index = {f.key: i for i, f in enumerate(futures)}
-            results = [None] * len(futures)
+        client = scheduler.client()
+        futures = client.compute(delayed)
+        index = {f.key: i for i, f in enumerate(futures)}
+        results = [None] * len(futures)
+        try:
             for fut in as_completed(futures, loop=client.loop):
                 results[index[fut.key]] = fut.result()
                 progress.update()
-            return results
+        except BaseException:
+            with contextlib.suppress(Exception):
+                client.cancel(futures)
+            raise
+        return results
     from dask.callbacks import Callback
 
     class _Count(Callback):

@@ -45,8 +45,12 @@ __all__ = [
     "FORMAT_VERSION",
     "NOT_COMPUTED",
     "STATE_GROUP",
+    "STARTED_MARKER",
     "StoreBusy",
+    "StoreForeign",
     "StoreMismatch",
+    "StoreUnwritable",
+    "unwritable_reason",
     "create_skeleton",
     "finish_skeleton",
     "SkeletonGroup",
@@ -102,6 +106,24 @@ class StoreMismatch(RuntimeError):
     """The store was built from a different scene (or is not a pipeline store)."""
 
 
+class StoreForeign(StoreMismatch):
+    """A Zarr store the pipeline did not write (no pipeline record, no sign that a run of the
+    pipeline started it): replaced only where the user asks (``--overwrite``)."""
+
+
+class StoreUnwritable(StoreMismatch):
+    """The store (or its lock file) cannot be created or written where it was asked for: a
+    read-only folder, a path under a regular file, a file system that refuses it."""
+
+
+#: the file a run writes first into a store it creates, before the store's root group: the
+#: positive sign that the pipeline started this store, so that a skeleton interrupted before
+#: its record was written (which reads as a group without a pipeline record) is rebuilt, while
+#: a Zarr store the pipeline did not write is refused (issue 45: one written by xarray was
+#: deleted and replaced).  Removed once the skeleton's record is in place.
+STARTED_MARKER = ".pipeline-skeleton"
+
+
 # ---------------------------------------------------------------------------
 # Lock
 # ---------------------------------------------------------------------------
@@ -111,19 +133,37 @@ def lock_path(store: Path) -> Path:
     return store.with_name(store.name + ".lock")
 
 
+def unwritable_reason(path: Path, exc: OSError) -> str:
+    """Why ``path`` could not be created, in words: a file where a folder must be (mkdir says
+    only "File exists" or "Not a directory" there), else the system's reason."""
+    above = next((p for p in Path(path).parents if os.path.lexists(p)), None)
+    if above is not None and not above.is_dir():
+        return f"{above} is a file, not a folder"
+    return exc.strerror or str(exc)
+
+
 @contextmanager
 def run_lock(store: Path):
     """Hold an exclusive lock on ``store`` for the duration of a run.
 
-    The lock is an ``flock`` on ``<store>.lock``, which also records the holder's pid and host.
-    The kernel drops an ``flock`` when its holder dies (SIGKILL, power loss), so a lock file
-    left behind by a dead run is stale and is taken over; a live holder makes this raise
-    :class:`StoreBusy` naming its pid.
+    The lock is an ``flock`` on ``<store>.lock``, which also records the holder's pid, host and
+    start time.  The kernel drops an ``flock`` when its holder dies (SIGKILL, power loss), so a
+    lock file left behind by a dead run is stale and is taken over; a live holder makes this
+    raise :class:`StoreBusy` naming its pid, and leaves the file as it is (its holder's record
+    is what the next refusal shows).  The holder empties the file when it is done; a run that
+    leaves no store behind (refused, or stopped before its skeleton) removes the lock file it
+    created, so nothing of it remains.  A lock file that cannot be created (a read-only
+    folder, a path under a regular file) raises :class:`StoreUnwritable`.
     """
     path = lock_path(store)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)  # non-inheritable: spawned workers do not keep it
-    try:
+    while True:
+        created = not path.exists()
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)  # non-inheritable: spawned workers do not keep it
+        except OSError as exc:
+            raise StoreUnwritable(f"{store}: cannot create the store's lock file {path}: "
+                                  f"{unwritable_reason(path, exc)}; choose another --store (or --out)") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -131,10 +171,24 @@ def run_lock(store: Path):
                 holder = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
             except (ValueError, OSError):
                 holder = {}
+            os.close(fd)  # the holder's record left as it is
             raise StoreBusy(
                 f"{store}: another run is using this store (pid {holder.get('pid', '?')} on "
                 f"{holder.get('host', '?')} since {holder.get('since', '?')}); lock file {path}"
             ) from None
+        except BaseException:
+            os.close(fd)
+            raise
+        # the file may have been removed by a run that held it and left no store (below)
+        # between our open and our flock: then this lock is on a file no one else sees; retry
+        try:
+            same = os.stat(path).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
         os.ftruncate(fd, 0)
         info = {"pid": os.getpid(), "host": platform.node(),
                 "since": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
@@ -142,10 +196,13 @@ def run_lock(store: Path):
         yield path
     finally:
         try:
-            os.ftruncate(fd, 0)
+            if created and not os.path.lexists(store):
+                os.unlink(path)  # nothing was written: nothing of this run remains
+            else:
+                os.ftruncate(fd, 0)  # the empty file is harmless and reused next time
         except OSError:
             pass
-        os.close(fd)  # releases the flock; the empty file is harmless and reused next time
+        os.close(fd)  # releases the flock
 
 
 # ---------------------------------------------------------------------------
@@ -386,10 +443,22 @@ def new_group(store: Path) -> SkeletonGroup:
     """The first step of every kind's skeleton: an empty root group at ``store`` (whatever was
     there removed: the caller decides whether that is allowed), and the group the kind
     declares its skeleton in (:class:`SkeletonGroup`), built and written to ``store`` by
-    :func:`finish_skeleton`."""
+    :func:`finish_skeleton`.
+
+    The store's :data:`STARTED_MARKER` is written (and synced) before anything else, so a run
+    killed at any point before the skeleton's record is in place leaves a store that the next
+    run recognises as its own interrupted skeleton and rebuilds (:func:`open_existing`)."""
     if store.exists():
         shutil.rmtree(store)
-    open_group(store, "w")  # on disk at once: from here on, an interrupted skeleton (rebuilt by the next run)
+    store.mkdir(parents=True)
+    marker = store / STARTED_MARKER
+    with open(marker, "w") as f:
+        json.dump({"started_by": "twolink pipeline", "pid": os.getpid(), "host": platform.node(),
+                   "since": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}, f)
+        f.flush()
+        os.fsync(f.fileno())
+    _fsync_path(store)  # the marker's entry durable before the group exists
+    open_group(store, "a")  # on disk at once ("a": the marker kept); from here on an interrupted skeleton
     return SkeletonGroup()
 
 
@@ -406,6 +475,10 @@ def _write_skeleton(g: SkeletonGroup, store: Path) -> None:
     tmp = store / "zarr.json.partial"
     tmp.write_bytes(root)
     os.replace(tmp, store / "zarr.json")
+    # the record in place: the store is recognised by it now, the start marker has done its work
+    # (the folder synced first, so no power loss leaves a store with neither)
+    _fsync_path(store)
+    (store / STARTED_MARKER).unlink(missing_ok=True)
 
 
 def finish_skeleton(g, scene, *, store: Path, dims, shape, chunks, head: dict | None = None,
@@ -494,24 +567,37 @@ def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
 
 def open_existing(store: Path) -> dict | None:
     """The pipeline record of an existing store (the Python view, of either format: the caller
-    checks ``format_version``), or None when the skeleton is absent or incomplete.
+    checks ``format_version``), or None where there is no store yet (nothing there, an empty
+    folder) or a skeleton the pipeline started and did not finish (:data:`STARTED_MARKER`; or
+    a record without ``skeleton_complete``): the caller builds it anew.
 
-    Raises :class:`StoreMismatch` when ``store`` holds something that is not a pipeline store.
+    Raises :class:`StoreMismatch` where ``store`` is not a Zarr store (a file, a folder of other
+    files: never touched, ``--overwrite`` or not), and :class:`StoreForeign` where it is a Zarr
+    store (or an unreadable one) that the pipeline did not write: no pipeline record and no
+    start marker (replaced only with ``--overwrite``).
     """
-    if not store.exists():
+    if not os.path.lexists(store):
         return None
-    if store.is_dir() and not any(store.iterdir()):
+    if not store.is_dir():
+        raise StoreMismatch(f"{store}: exists and is not a Zarr store (a file); refusing to touch it: "
+                            "choose another --store")
+    if not any(store.iterdir()):
         return None
+    meta = None
+    if (store / "zarr.json").is_file():
+        try:
+            meta = read_record(dict(open_group(store, "r").attrs))
+        except Exception:  # an unreadable group: ours only if the marker says so (below)
+            meta = None
+    if meta and meta.get("state", {}).get("skeleton_complete"):
+        return meta
+    if meta or (store / STARTED_MARKER).is_file():
+        return None  # a skeleton of ours, interrupted: rebuilt by the caller
     if not (store / "zarr.json").is_file():
-        raise StoreMismatch(f"{store}: exists and is not a Zarr store; refusing to touch it")
-    try:
-        g = open_group(store, "r")
-        meta = read_record(dict(g.attrs))
-    except Exception:  # an unreadable group is an interrupted skeleton
-        return None
-    if not meta or not meta.get("state", {}).get("skeleton_complete"):
-        return None
-    return meta
+        raise StoreMismatch(f"{store}: exists and is not a Zarr store (a folder of other files); refusing "
+                            "to touch it: choose another --store")
+    raise StoreForeign(f"{store}: a Zarr store the pipeline did not write (no pipeline record); refusing "
+                       "to replace it: rerun with --overwrite to replace it, or choose another --store")
 
 
 def _update_record(store: Path, update) -> None:
@@ -538,7 +624,10 @@ def record_run(store: Path, run: dict) -> None:
 
 
 def remove_partials(store: Path) -> int:
-    """Delete temporary files of writes interrupted by a kill (Zarr writes to *.partial then renames)."""
+    """Delete temporary files of writes interrupted by a kill (Zarr writes to *.partial then
+    renames), and a :data:`STARTED_MARKER` outliving the record of a complete skeleton (a kill
+    between the two)."""
+    (store / STARTED_MARKER).unlink(missing_ok=True)
     n = 0
     for p in store.rglob("*.partial"):
         p.unlink(missing_ok=True)
