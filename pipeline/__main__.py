@@ -94,10 +94,16 @@ def _parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="compute one scene into its Zarr store (resumes an interrupted run)")
     run.add_argument("scene", help="scene TOML file (e.g. my_scene.toml) or a shipped scene's name (e.g. quick)")
-    est = sub.add_parser("estimate", help="time a probe of each scene and print its projected run time")
+    est = sub.add_parser("estimate", help="time a probe of each scene (grid, optima, study; polishing "
+                                          "included) and print its projected run time")
     est.add_argument("scenes", nargs="+", help="scene TOML files or shipped scenes' names")
-    est.add_argument("--workers", type=int, default=None, help="parallel workers assumed (default: all cores)")
-    est.add_argument("--probe", type=int, default=32, help="points solved per scene (default 32)")
+    est.add_argument("--workers", type=_count, default=None, help="parallel workers assumed (default: all cores)")
+    est.add_argument("--probe", type=_count, default=8,
+                     help="chunks of each scene solved and timed at most (default 8; at least one of each "
+                          "cost class, e.g. each Kmax of an optima scene)")
+    est.add_argument("--probe-seconds", type=_seconds, default=10.0,
+                     help="no further chunk of a scene is probed once its probe took this many CPU seconds "
+                          "(default 10)")
     paper = sub.add_parser("paper", help="run every shipped scene, print the total time, build the report")
     paper.add_argument("--quick", action="store_true",
                        help="every figure's scene at reduced resolution (num / 4, step x 2), without the two "
@@ -172,11 +178,10 @@ def _run_one(scene, store, args, session=None) -> int:
 
 
 def _estimate(args) -> int:
-    import os
+    from ._estimate import estimate_scene
+    from ._schedule import usable_cores
 
-    from ._grid import calibrate_points_per_task
-
-    workers = args.workers or os.cpu_count() or 1
+    workers = args.workers or usable_cores()
     scenes = []
     for path in args.scenes:
         try:
@@ -184,17 +189,26 @@ def _estimate(args) -> int:
         except SceneError as exc:
             _error(exc)
             return EXIT_BAD_SCENE
-    total = 0.0
+    cores = min(workers, usable_cores())
+    total, probe = 0.0, 0.0
     for scene in scenes:
-        if getattr(scene, "kind", "grid") != "grid":
-            print(f"{scene.name:20s} {scene.n_points:>9d} {scene.kind} runs (no grid probe; see the scene file)", flush=True)
-            continue
-        _, rate = calibrate_points_per_task(scene, workers, n_probe=args.probe)
-        seconds = scene.n_points / (rate * workers)
-        total += seconds
-        print(f"{scene.name:20s} {scene.n_points:>9d} points  {rate:>9,.0f} solves/s per worker  "
-              f"~{seconds / 60:7.1f} min on {workers} workers (grid only, polishing not included)", flush=True)
-    print(f"{'total':20s} {sum(s.n_points for s in scenes):>9d} points  ~{total / 60:.1f} min", flush=True)
+        est = estimate_scene(scene, max_chunks=args.probe, budget_seconds=args.probe_seconds)
+        wall = est.wall_seconds(cores)
+        total += wall
+        probe += est.probe_seconds
+        chunks = est.parts[0]
+        print(f"{scene.name:20s} {est.points:>9d} {est.point_unit:13s} ~{wall / 60:7.1f} min on {workers} workers"
+              f"  ({scene.kind}: {chunks.probed} of {chunks.count} chunks timed, {chunks.probe_seconds:.1f} CPU-s, "
+              f"{chunks.points / max(chunks.core_seconds, 1e-9):,.1f} {est.point_unit}/s per core)", flush=True)
+        for part in est.parts[1:]:
+            line = (f"{part.probed} of {part.count} {part.unit} timed, {part.probe_seconds:.1f} CPU-s, "
+                    f"~{max(part.core_seconds / cores, part.longest_seconds) / 60:.1f} min" if part.probed
+                    else f"{part.count} {part.unit}, none probed (no valid point in the probed chunks)")
+            print(f"{'':20s}   + {part.name}: {line}", flush=True)
+    print(f"{'total':20s} {sum(s.n_points for s in scenes):>9d} {'':13s} ~{total / 60:7.1f} min on {workers} workers "
+          f"(projected from a timed probe of each scene: its chunks and polished cells solved here on one core, "
+          f"{probe:.0f} CPU-s; solving on free cores only: start-up, writes and scheduling add a few per cent, "
+          "a loaded machine more)", flush=True)
     return 0
 
 
