@@ -134,7 +134,15 @@ def _skeleton(scene, kind, folder: Path):
     return chunks, kind.pending_chunks(store)
 
 
-def _polish_cell(scene, r, chunks, index, solved) -> dict | None:
+def _solve(kind, scene, chunks, index) -> tuple[int, dict]:
+    """Chunk ``index`` of the layout ``chunks`` computed as a run's task computes it, nothing
+    written: its points, and its values (the first write's arrays, each of the chunk's region:
+    a grid chunk's outputs).  The one place the probe meets the kinds' task protocol."""
+    solved = kind.solve_chunk(scene, chunks, index)
+    return int(solved.points), solved.writes[0].values
+
+
+def _polish_cell(scene, r, chunks, index, values) -> dict | None:
     """A polish cell at the best point of the probed chunk ``index`` for reduction ``r`` (the
     run polishes from the best grid point of a cell), or None where the chunk has no valid
     point (or, for a reduction over subsets, none inside any subset)."""
@@ -142,8 +150,7 @@ def _polish_cell(scene, r, chunks, index, solved) -> dict | None:
     from ._reduce import objective
 
     region = chunk_region(index, scene.shape, chunks)
-    values = solved.writes[0].values[r.quantity].reshape(-1)
-    score = objective(r.statistic, values)
+    score = objective(r.statistic, values[r.quantity].reshape(-1))
     k = int(np.argmax(score))
     if not np.isfinite(score[k]):
         return None
@@ -196,10 +203,10 @@ def estimate_scene(scene, *, max_chunks: int = 8, budget_seconds: float = 10.0,
                 break
             c = float(kind.chunk_cost(scene, idx))
             t0 = clock()
-            solved = kind.solve_chunk(scene, chunks, idx)
+            n, values = _solve(kind, scene, chunks, idx)
             timed[c].append(clock() - t0)
-            points[c].append(int(solved.points))
-            solved_chunks.append((idx, solved))
+            points[c].append(n)
+            solved_chunks.append((idx, values))
         probe = clock() - t_start
         core = sum(len(classes[c]) * float(np.mean(timed[c])) for c in classes)
         n_points = int(sum(len(classes[c]) * float(np.mean(points[c])) for c in classes))
@@ -210,7 +217,7 @@ def estimate_scene(scene, *, max_chunks: int = 8, budget_seconds: float = 10.0,
                 continue
             from ._reduce import polish_cells
 
-            cells = [c for c in (_polish_cell(scene, r, chunks, idx, s) for idx, s in solved_chunks) if c][:max_cells]
+            cells = [c for c in (_polish_cell(scene, r, chunks, idx, v) for idx, v in solved_chunks) if c][:max_cells]
             count = _cells(scene, r)
             if not cells:
                 parts.append(PartEstimate(f"polish {r.name}", "cells", count, 0, 0.0, 0.0, 0.0))

@@ -4,8 +4,8 @@
 
     open_run        resolve store and scheduler; refuse, before anything is written, a cluster
                     that does not answer and a store that would be refused; hold the lock
-    prepare_store   refuse a store of a different scene, or of another chunk layout with chunks
-                    still to compute (``check_layout``), or (re)create the skeleton, or resume
+    prepare_store   refuse a store of a different scene, or (re)create the skeleton, or resume
+    check_layout    refuse chunks still to compute in a layout that is not the scene's
     expand          a compacted store with chunks to compute gets its task chunks back
     warm_up         compile the solver's kernels once, here, before work fans out
     compute_chunks  tasks of consecutive chunks without their done marker (each chunk whole)
@@ -116,7 +116,8 @@ def open_run(scene, store, scheduler, workers, session, progress, echo, overwrit
 
     Before the lock file or anything else is written, a dask.distributed scheduler must answer
     (``Scheduler.connect``, which also counts its workers) and the store must not be one that
-    :func:`resumable_record` refuses; the record is read again under the lock (``prepare_store``).
+    :func:`resumable_record` or :func:`check_layout` refuses; both are asked again under the
+    lock (``prepare_store``, ``run_scene``).
     Left by Ctrl-C (an exception that is not an error), the run's own worker processes are
     ended at once (``Scheduler.close(kill=True)``)."""
     store = Path(store) if store is not None else default_store(scene)
@@ -127,9 +128,12 @@ def open_run(scene, store, scheduler, workers, session, progress, echo, overwrit
     sched = Scheduler(name, workers, kind_of(scene).kernel_sets(scene)) if own else session
     try:
         sched.connect()  # a cluster that does not answer is refused here, nothing written
+        run = RunContext(scene, store, sched, sched.n_workers, progress, echo)
         early = resumable_record(scene, store, overwrite)
+        if early is not None and not overwrite:  # (with --overwrite, run_scene replaces it)
+            check_layout(run, kind_of(scene), early, kind_of(scene).pending_chunks(store))
         with run_lock(store):
-            yield RunContext(scene, store, sched, sched.n_workers, progress, echo), early
+            yield run, early
     except BaseException as exc:
         if own:
             sched.close(kill=not isinstance(exc, Exception))
@@ -160,8 +164,7 @@ def resumable_record(scene, store: Path, overwrite: bool) -> dict | None:
     (no store yet, an interrupted skeleton, or, with ``overwrite``, one that would be refused).
 
     Refused (:class:`StoreMismatch`) unless ``overwrite``: a Zarr store the pipeline did not
-    write (:class:`StoreForeign`), a store of another format version, engine or scene, or of
-    another chunk layout with chunks still to compute (:func:`check_layout`).  Refused
+    write (:class:`StoreForeign`), a store of another format version, engine or scene.  Refused
     even with ``overwrite``: a path that is not a Zarr store (a file, a folder of other files).
     Writes nothing."""
     try:
@@ -196,14 +199,6 @@ def resumable_record(scene, store: Path, overwrite: bool) -> dict | None:
             "replace it, or choose another --store")
     if engines != ours or old != scene.hash:
         return None  # overwrite: start over
-    want = kind_of(scene).chunk_layout(scene)
-    if want is not None and tuple(want) != tuple(int(c) for c in meta["layout"]["chunks"]):
-        try:
-            check_layout(scene, store, meta, kind_of(scene).pending_chunks(store))
-        except StoreMismatch:
-            if not overwrite:
-                raise
-            return None  # overwrite: start over
     return meta
 
 
@@ -232,17 +227,17 @@ def _shape(chunks) -> str:
     return " x ".join(str(int(c)) for c in chunks)
 
 
-def check_layout(scene, store: Path, meta: dict, pending) -> None:
+def check_layout(run: RunContext, kind: SceneKind, meta: dict, pending) -> None:
     """Refuse a store whose chunk layout is not the scene's (``kind.chunk_layout``) while chunks
-    remain to compute (``pending``): the store was started by an older pipeline, whose layout
-    came from a timing probe, or with another ``[execution] points_per_chunk``.  A store with
-    every chunk done is left as it is (nothing is computed in its layout)."""
-    want = kind_of(scene).chunk_layout(scene)
+    remain to compute: the store was started by an older pipeline, whose layout came from a
+    timing probe, or with another ``[execution] points_per_chunk``.  A store with every chunk
+    done is left as it is (nothing is computed in its layout)."""
+    want = kind.chunk_layout(run.scene)
     have = tuple(int(c) for c in meta["layout"]["chunks"])
     if want is None or not pending or tuple(want) == have:
         return
     raise StoreMismatch(
-        f"{store}: its chunks ({_shape(have)}) are not this scene's chunk layout ({_shape(want)}), so its "
+        f"{run.store}: its chunks ({_shape(have)}) are not this scene's chunk layout ({_shape(want)}), so its "
         f"{len(pending)} unfinished chunks cannot be resumed (a store started by an older pipeline, which chose "
         "chunks by a timing probe, or with another [execution] points_per_chunk); rerun with --overwrite to "
         "start over, or choose another --store")
@@ -499,8 +494,15 @@ def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None =
     with open_run(scene, store, scheduler, workers, session, progress, echo, overwrite) as (run, early):
         if early is None or not is_complete(early["state"]) or overwrite:
             run.scheduler.start()  # the workers start while this process prepares the store
-        meta = prepare_store(run, kind, overwrite)  # refuses (or replaces) another chunk layout too
+        meta = prepare_store(run, kind, overwrite)
         pending = kind.pending_chunks(run.store)
+        try:
+            check_layout(run, kind, meta, pending)
+        except StoreMismatch:
+            if not overwrite:
+                raise
+            meta = prepare_store(run, kind, overwrite, replace=True)
+            pending = kind.pending_chunks(run.store)
         if pending and meta.get("compacted_from"):
             expand(run.store)  # each task writes whole chunk files of its own again
             meta = store_meta(run.store)

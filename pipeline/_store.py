@@ -475,10 +475,6 @@ def _write_skeleton(g: SkeletonGroup, store: Path) -> None:
     tmp = store / "zarr.json.partial"
     tmp.write_bytes(root)
     os.replace(tmp, store / "zarr.json")
-    # the record in place: the store is recognised by it now, the start marker has done its work
-    # (the folder synced first, so no power loss leaves a store with neither)
-    _fsync_path(store)
-    (store / STARTED_MARKER).unlink(missing_ok=True)
 
 
 def finish_skeleton(g, scene, *, store: Path, dims, shape, chunks, head: dict | None = None,
@@ -503,6 +499,15 @@ def finish_skeleton(g, scene, *, store: Path, dims, shape, chunks, head: dict | 
                   "reductions_complete": bool(reductions_complete), "series_complete": bool(series_complete)},
     })
     _write_skeleton(g, Path(store))
+    _remove_started_marker(Path(store))
+
+
+def _remove_started_marker(store: Path) -> None:
+    """The skeleton's record in place: the store is recognised by it from now on, and its
+    :data:`STARTED_MARKER` has done its work (the folder synced first, so that no power loss
+    leaves a store with neither)."""
+    _fsync_path(store)
+    (store / STARTED_MARKER).unlink(missing_ok=True)
 
 
 def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
