@@ -162,6 +162,7 @@ def _run_one(scene, store, args, session=None) -> int:
         _error(exc)
         return EXIT_BAD_SCENE
     except (KeyboardInterrupt, Terminated) as exc:
+        _quiet_after_interrupt()
         # a progress bar's line is left open on a terminal: the message starts on a line of its own
         end = "\n" if sys.stderr.isatty() and not args.no_progress else ""
         what = "interrupted" if isinstance(exc, KeyboardInterrupt) else "terminated (SIGTERM)"
@@ -210,6 +211,15 @@ def _estimate(args) -> int:
           f"{probe:.0f} CPU-s; solving on free cores only: start-up, writes and scheduling add a few per cent, "
           "a loaded machine more)", flush=True)
     return 0
+
+
+def _quiet_after_interrupt() -> None:
+    """After Ctrl-C or SIGTERM the one line says it all: a zarr write the interrupt left
+    pending in its event loop is expected debris, not news ("Task was destroyed but it is
+    pending!" from asyncio's logger as the interpreter exits)."""
+    import logging
+
+    logging.getLogger("asyncio").setLevel(logging.CRITICAL)
 
 
 @contextmanager
@@ -267,6 +277,7 @@ def main(argv=None) -> int:
         try:
             return _main(args)
         except (KeyboardInterrupt, Terminated) as exc:  # outside a run (estimate, the paper's set-up)
+            _quiet_after_interrupt()
             interrupted = isinstance(exc, KeyboardInterrupt)
             print(f"{'interrupted' if interrupted else 'terminated (SIGTERM)'}: {args.command} stopped; rerun the "
                   "same command to resume", file=sys.stderr, flush=True)

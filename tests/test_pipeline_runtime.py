@@ -231,6 +231,46 @@ def test_workers_end_with_their_driver_and_the_run_resumes(reference, tmp_path, 
     assert_stores_equal(store, ref_store)
 
 
+_PARENT = textwrap.dedent("""
+    import subprocess, sys, time
+    grandchild = subprocess.Popen([sys.executable, "-c", sys.argv[1]])
+    print(grandchild.pid, flush=True)
+    time.sleep(600)
+""")
+_WATCHING = textwrap.dedent("""
+    import os, sys, time
+    from pipeline._schedule import watch_parent
+    if sys.argv[1] == "watch":
+        watch_parent(os.getppid(), death_signal=False, interval=0.2)
+    print("ready", flush=True)
+    time.sleep(600)
+""")
+
+
+@pytest.mark.parametrize("watch", [True, False])
+def test_the_portable_parent_watch_alone_ends_an_orphan(watch):
+    """The fallback of ``_schedule.watch_parent`` (no PR_SET_PDEATHSIG: a pool spawned outside
+    the main thread, or not Linux): a process polling its parent's pid exits within a few
+    seconds of its parent's SIGKILL.  Control (``watch`` False): the same process without the
+    watch lives on as an orphan (the defect of issue 45 item 3)."""
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    code = _WATCHING.replace("sys.argv[1]", repr("watch" if watch else "no"))
+    parent = subprocess.Popen([sys.executable, "-c", _PARENT, code], cwd=REPO, env=env, stdout=subprocess.PIPE,
+                              text=True)
+    grandchild = None
+    try:
+        grandchild = int(parent.stdout.readline())
+        assert parent.stdout.readline().strip() == "ready"  # the watch is set
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(timeout=30)
+        left = wait_gone([grandchild], timeout=5.0)
+        assert left == ([] if watch else [grandchild])
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+        kill_all([grandchild] if grandchild else [])
+
+
 # -- 4. the lock holder's record -----------------------------------------------------------------
 
 
