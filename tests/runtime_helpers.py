@@ -13,6 +13,13 @@ from pathlib import Path
 from pipeline_cases import REPO
 
 
+#: the environment of a run whose chunk writes each wait 2 s before their done marker (the
+#: tests' hook in ``_store.store_chunk``): on 2 workers the small scene's 8 chunks then take 8 s
+#: or more, so a signal sent once the first chunk is done reaches a run still computing, on a
+#: loaded machine too (at 0.4 s a run once finished before the test's SIGINT arrived)
+SLOW_WRITES = {"TWOLINK_PIPELINE_MARKER_DELAY": "2.0"}
+
+
 def finish_after(seconds: float) -> float:
     """A task: sleep ``seconds``, then return the wall clock (``time.time``) at its end."""
     time.sleep(seconds)
@@ -96,6 +103,7 @@ def wait_for_chunks(store: Path, proc: subprocess.Popen, at_least: int = 1, time
         n = sum(1 for p in marks.rglob("*") if p.is_file() and not p.name.endswith(".partial")) \
             if marks.exists() else 0
         if n >= at_least:
+            assert proc.poll() is None, "the run ended before it could be signalled"
             return n
         time.sleep(0.01)
     raise AssertionError(f"the run ended (or timed out) before {at_least} chunks were done: "

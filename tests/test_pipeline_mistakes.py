@@ -33,7 +33,7 @@ from pipeline import load_scene
 from pipeline._grid_kind import GRID
 from pipeline._store import create_skeleton, run_lock
 from pipeline_cases import cli, downgrade_to_format_1, small_scene_text, write_scene
-from runtime_helpers import children, kill_all, start_driver, wait_for_chunks, wait_gone
+from runtime_helpers import SLOW_WRITES, children, kill_all, start_driver, wait_for_chunks, wait_gone
 
 
 @dataclass(frozen=True)
@@ -197,7 +197,7 @@ def _snapshot(tmp: Path) -> dict[str, bytes | None]:
 def _signal_run(argv, sig: str, tmp: Path):
     """The run started, signalled once it has chunks done; (exit code, stderr), after checking
     that every process it started is gone."""
-    proc = start_driver(*argv, env_extra={"TWOLINK_PIPELINE_MARKER_DELAY": "0.4"})
+    proc = start_driver(*argv, env_extra=SLOW_WRITES)
     started = []
     try:
         wait_for_chunks(tmp / "s.zarr", proc)

@@ -26,8 +26,8 @@ from pipeline.__main__ import main
 from pipeline._schedule import Scheduler, Task, compute
 from pipeline._store import STARTED_MARKER, StoreForeign, lock_path, open_existing, run_lock
 from pipeline_cases import REPO, assert_stores_equal, cli, small_scene_text, write_scene
-from runtime_helpers import (ProgressTimes, children, finish_after, kill_all, start_driver, wait_for_chunks,
-                             wait_gone)
+from runtime_helpers import (SLOW_WRITES, ProgressTimes, children, finish_after, kill_all, start_driver,
+                             wait_for_chunks, wait_gone)
 
 
 @pytest.fixture(scope="module")
@@ -204,7 +204,7 @@ def test_workers_end_with_their_driver_and_the_run_resumes(reference, tmp_path, 
     path, ref_store = reference
     store = tmp_path / "s.zarr"
     args = ("run", path, "--store", store, "--scheduler", "processes", "--workers", "2", "--no-progress")
-    proc = start_driver(*args, env_extra={"TWOLINK_PIPELINE_MARKER_DELAY": "0.4"})
+    proc = start_driver(*args, env_extra=SLOW_WRITES)
     started = []
     try:
         wait_for_chunks(store, proc)
