@@ -163,9 +163,9 @@ def _start_worker(threads: int, kernel_sets: tuple[str, ...], parent_pid: int | 
     leaves Ctrl-C to it, sets its numba thread count, then loads the solver and its kernels once,
     before any task (so no task's timing pays for them)."""
     t0, c0 = time.perf_counter(), time.process_time()
-    if parent_pid is not None:
+    if parent_pid is not None:  # a pool's worker (not a test calling this in its own process)
         watch_parent(parent_pid, death_signal=death_signal)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver handles Ctrl-C and ends its workers
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver handles Ctrl-C and ends its workers
     set_numba_threads_env(threads)
     import pipeline  # noqa: F401  (the tasks' modules, imported once here)
 
