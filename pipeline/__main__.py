@@ -1,7 +1,8 @@
 """Command line: ``python -m pipeline run SCENE.toml``, ``estimate SCENE.toml...`` and ``paper``.
 
 Exit codes (every error is one line on stderr): 0 done; 1 the run failed part-way (an I/O
-error such as a full disk; the chunks done are kept, the same command resumes); 2 bad scene
+error such as a full disk, a worker process killed from outside; the chunks done are kept,
+the same command resumes); 2 bad scene
 file or arguments, or a dask scheduler that does not answer (nothing written); 3 store refused
 (a different scene or a Zarr store the pipeline did not write is there: ``--overwrite``
 replaces it; it is not a Zarr store; it cannot be written there; another run holds it;
@@ -18,6 +19,7 @@ import signal
 import sys
 import threading
 import time
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -171,6 +173,10 @@ def _run_one(scene, store, args, session=None) -> int:
     except OSError as exc:  # a full disk, a store removed under the run: what is done is kept
         where = f"{exc.filename}: " if exc.filename else ""
         _error(f"{where}{exc.strerror or exc}; {kept_chunks(scene, store).summary()}")
+        return EXIT_FAILED
+    except BrokenProcessPool:  # a worker killed from outside (the OOM killer, kill -9)
+        _error(f"{scene.name}: a worker process died (killed from outside, e.g. out of memory); "
+               f"{kept_chunks(scene, store).summary()}")
         return EXIT_FAILED
     if summary.timing:
         print(summary.timing_line(), flush=True)  # where the time went; the summary line last

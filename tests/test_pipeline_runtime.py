@@ -202,6 +202,9 @@ def test_workers_end_with_their_driver_and_the_run_resumes(reference, tmp_path, 
     terminal sends it) ends the run with exit 130 and one line counting the chunks kept.  The
     same command then resumes to the uninterrupted store."""
     path, ref_store = reference
+    # a Ctrl-C reaches a driver whose SIGINT is not ignored from the start (as a background job's
+    # is, which it keeps ignoring): a test that set it in this process would leave it ignored
+    assert signal.getsignal(signal.SIGINT) is not signal.SIG_IGN
     store = tmp_path / "s.zarr"
     args = ("run", path, "--store", store, "--scheduler", "processes", "--workers", "2", "--no-progress")
     proc = start_driver(*args, env_extra=SLOW_WRITES)
@@ -226,6 +229,38 @@ def test_workers_end_with_their_driver_and_the_run_resumes(reference, tmp_path, 
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(timeout=30)
         kill_all(started)  # orphans (the defect) must not outlive the test
+    resumed = cli(*args)
+    assert resumed.returncode == 0, resumed.stderr
+    assert_stores_equal(store, ref_store)
+
+
+def test_a_worker_killed_from_outside_ends_the_run_on_one_line(reference, tmp_path):
+    """A worker process killed from outside (the OOM killer; here kill -9 of one worker): on
+    d799bf7 a BrokenProcessPool traceback; now exit 1 and one line counting the chunks kept,
+    the other worker ended too, and the same command resumes to the uninterrupted store."""
+    path, ref_store = reference
+    store = tmp_path / "s.zarr"
+    args = ("run", path, "--store", store, "--scheduler", "processes", "--workers", "2", "--no-progress")
+    proc = start_driver(*args, env_extra=SLOW_WRITES)
+    started = []
+    try:
+        wait_for_chunks(store, proc)
+        started = children(proc.pid)
+        workers = [p for p in started if "resource_tracker" not in Path(f"/proc/{p}/cmdline").read_text()]
+        assert len(workers) == 2, started
+        os.kill(workers[0], signal.SIGKILL)
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 1, err
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and re.fullmatch(r"error: small: a worker process died \(killed from outside, e\.g\. "
+                                                r"out of memory\); [0-8] of 8 chunks kept; rerun the same command "
+                                                r"to resume", lines[0]), err
+        assert wait_gone(started, timeout=10.0) == []
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+        kill_all(started)
     resumed = cli(*args)
     assert resumed.returncode == 0, resumed.stderr
     assert_stores_equal(store, ref_store)
