@@ -145,7 +145,7 @@ def compute_motion(family: str, params: dict, *, rtol: float, method: str = "per
         raise RuntimeError(f"solver status {status}: {solver.status_reason(status, method)}")
     tn = np.asarray(res.tau[0], dtype=np.float64)
     un = np.asarray(res.u[0], dtype=np.float64)
-    ok = np.isfinite(tn) & np.isfinite(un)  # final grids may be padded
+    ok = np.isfinite(tn) & np.isfinite(un) & (tn < 1.0)  # final grids may be padded; tau = 1 closes the period
     tn, un = tn[ok], un[ok]
     order = np.argsort(tn)
     tn, un = tn[order], un[order]
