@@ -200,6 +200,7 @@ def build_report(stores, out, *, list_unrun: bool = True, audit: bool | None = N
         site.sections.append(Section(_anchor(used, "others"), "Other stores", "<h2>Other stores</h2>" + "\n".join(parts),
                                      "scene", children))
     have = {sd.name for sd in loaded}
+    site.list_unrun = list_unrun
     if list_unrun:
         for name, e in shipped.items():
             if name not in have:

@@ -149,6 +149,8 @@ class SiteBuilder:
         #: put in the title and as the header's first line
         self.title = "Intermittent sliding of a two-link body: reproduction report"
         self.reduced = ""
+        #: the shipped scenes without a store are listed (the header counts them)
+        self.list_unrun = True
         self.not_run: list[dict] = []
         self.n_figures = 0
         self.n_stores = 0
@@ -228,7 +230,7 @@ class SiteBuilder:
         loader = _LOADER % {"config": json.dumps(PLOT_CONFIG)}
         title = self.title + (" (reduced resolution)" if self.reduced else "")
         reduced = f"<p class='reduced'><b>Reduced resolution.</b> {esc(self.reduced)}</p>\n" if self.reduced else ""
-        not_run_count = f"; {len(self.not_run)} scene(s) not yet run" if self.front or self.not_run else ""
+        not_run_count = f"; {len(self.not_run)} scene(s) not yet run" if self.list_unrun else ""
         doc = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">

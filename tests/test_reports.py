@@ -33,7 +33,7 @@ def _cli(*args, cwd) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     """``out/`` holding the three tiny real stores and a synthetic store of every shipped scene;
-    the report built by ``python -m reports build`` with no store arguments (default: out/*.zarr)."""
+    the report built by ``python -m reports build`` with no store arguments (default: every store under out/)."""
     root = tmp_path_factory.mktemp("site")
     out = root / "out"
     out.mkdir()
