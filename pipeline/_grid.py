@@ -159,7 +159,24 @@ def _physics(solver, params: dict[str, np.ndarray]):
     return phys, scaled_period
 
 
+def fourier_kinematics(solver, params: dict[str, np.ndarray]):
+    """``solver.Fourier`` from a Fourier grid scene's parameters A0, A1.., B1.. (each shape (n,)
+    or a scalar): Kmax is the largest wavenumber given, a coefficient not given is 0."""
+    from ._grid_scene import fourier_wavenumber
+
+    K = fourier_wavenumber(params)
+    n = np.size(params["A0"])
+    zero = np.zeros(n)
+    A = np.column_stack([np.broadcast_to(np.asarray(params.get(f"A{k}", zero), dtype=np.float64), (n,))
+                         for k in range(K + 1)])
+    B = np.column_stack([np.broadcast_to(np.asarray(params.get(f"B{k}", zero), dtype=np.float64), (n,))
+                         for k in range(1, K + 1)]) if K else np.zeros((n, 0))
+    return solver.Fourier(A, B)
+
+
 def _kinematics(solver, family: str, params: dict[str, np.ndarray]):
+    if family == "fourier":
+        return fourier_kinematics(solver, params)
     A0 = params["A0"]
     A1 = params["A1_ratio"] * A0
     if family == "harmonic":

@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._scene import Axis, Execution, ParseContext, parameter_units, parse_axis, parse_value, scene_hash
+from ._scene import (FOURIER_COEFFICIENT, MAX_FOURIER_WAVENUMBER, Axis, Execution, ParseContext, parameter_units,
+                     parse_axis, parse_value, scene_hash)
 
 __all__ = [
     "DEFAULT_POINTS_PER_CHUNK",
@@ -49,7 +50,20 @@ _FRICTION_PRODUCTS = ("T2_mu_n", "T2_mu_s")
 FAMILY_PARAMETERS: dict[str, tuple[str, ...]] = {
     "harmonic": ("A0", "A1_ratio"),
     "powerlaw": ("A0", "A1_ratio", "duty_cycle", "closing_shape", "opening_shape"),
+    # phi = A0 + sum_k A_k cos(2 pi k tau) + B_k sin(2 pi k tau) (eq. Fourier): A0 is needed, the
+    # others are optional (0 where not given), and the largest k given is the motion's Kmax
+    "fourier": ("A0",),
 }
+#: Optional parameters of a family: any of them as an axis or in [fixed].
+FAMILY_OPTIONAL: dict[str, tuple[str, ...]] = {
+    "fourier": tuple(f"{c}{k}" for k in range(1, MAX_FOURIER_WAVENUMBER + 1) for c in "AB"),
+}
+
+
+def fourier_wavenumber(names) -> int:
+    """Kmax of a Fourier grid scene: the largest k of the coefficients A_k, B_k among ``names``
+    (0 when only A0 is given)."""
+    return max((int(m.group(2)) for n in names if (m := FOURIER_COEFFICIENT.match(n))), default=0)
 
 #: Defaults for parameters a scene may leave out (paper: delta = 1e-5, p = 0).
 _DEFAULTS = {"p": 0.0, "delta": 1e-5}
@@ -66,6 +80,8 @@ _LONG_NAMES = {
     "opening_shape": "opening power law: +g concave up (eq. rapidendo), -g concave down (eq. rapidbego), 1 linear",
     "p": "exponent p of the resistive force law (eq. frictionp)",
     "delta": "velocity regularisation delta (eq. delta)",
+    **{f"{c}{k}": f"Fourier {'cosine' if c == 'A' else 'sine'} coefficient {c}{k} of phi (eq. Fourier) [rad]"
+       for k in range(1, MAX_FOURIER_WAVENUMBER + 1) for c in "AB"},
 }
 
 #: Quantities a scene can store: solver outputs plus derived ones.
@@ -223,6 +239,13 @@ class Scene:
     def fixed_dict(self) -> dict[str, float]:
         return dict(self.fixed)
 
+    @property
+    def max_wavenumber(self) -> int | None:
+        """Kmax of a Fourier scene (the largest k of its coefficients A_k, B_k), else None."""
+        if self.family != "fourier":
+            return None
+        return fourier_wavenumber(list(self.dims) + [k for k, _ in self.fixed])
+
 
 # ---------------------------------------------------------------------------
 # Parsing
@@ -315,6 +338,25 @@ _TOP_KEYS = {
 }
 
 
+def _check_fourier_keys(ctx: ParseContext, table, section: str, allowed) -> None:
+    """A key of ``[axes]`` or ``[fixed]`` a Fourier grid scene does not take: one line saying
+    which coefficients exist (the generic message would list all 32 of them)."""
+    if not isinstance(table, dict):
+        return
+    for k in table:
+        if k in allowed:
+            continue
+        if k == "B0":
+            why = "there is no sine coefficient of wavenumber 0 (B1, B2, ...; A0 is the mean angle)"
+        elif (m := re.match(r"^[AB](\d+)$", k)) and int(m.group(1)) > MAX_FOURIER_WAVENUMBER:
+            why = f"wavenumber {int(m.group(1))} is above the largest, {MAX_FOURIER_WAVENUMBER}"
+        else:
+            why = (f"unknown key for family 'fourier' (allowed: A0, A1..A{MAX_FOURIER_WAVENUMBER}, "
+                   f"B1..B{MAX_FOURIER_WAVENUMBER} [rad], anisotropy_ratio and scaled_period or T2_mu_n and "
+                   "T2_mu_s, p, delta)")
+        raise ctx.err(f"{section}.{k}", why)
+
+
 def parse_grid_scene(doc: dict, ctx: "ParseContext", text: str) -> Scene:
     """Validate the parsed TOML ``doc`` of a grid scene (``[scene] kind = "grid"``, the
     default); ``text`` is kept as provenance.  Errors are :class:`SceneError` naming the key."""
@@ -329,8 +371,12 @@ def parse_grid_scene(doc: dict, ctx: "ParseContext", text: str) -> Scene:
     figure = ctx.string(head.get("figure", ""), "scene.figure")
     family = ctx.string(head["family"], "scene.family", tuple(FAMILY_PARAMETERS))
 
-    known = FAMILY_PARAMETERS[family] + _FRICTION_SCALED + _FRICTION_PRODUCTS + _PHYSICS
+    known = (FAMILY_PARAMETERS[family] + FAMILY_OPTIONAL.get(family, ()) + _FRICTION_SCALED + _FRICTION_PRODUCTS
+             + _PHYSICS)
     allowed = {k: _LONG_NAMES[k] for k in known}
+    if family == "fourier":
+        for section in ("axes", "fixed"):
+            _check_fourier_keys(ctx, doc.get(section, {}), section, allowed)
     axes_doc = ctx.table(doc["axes"], "axes", allowed)
     if not axes_doc:
         raise ctx.err("axes", "at least one axis is needed")
@@ -358,8 +404,9 @@ def parse_grid_scene(doc: dict, ctx: "ParseContext", text: str) -> Scene:
     def extreme(k, f):
         return f(axes[[a.name for a in axes].index(k)].values) if k in axes_doc else fixed[k]
 
-    # Cross-parameter domains: phi stays in [0, pi]; delta = 0 needs p > 0.
-    if extreme("A0", max) * (1 + extreme("A1_ratio", max)) > math.pi + 1e-12:
+    # Cross-parameter domains: phi stays in [0, pi] (Fourier motions may leave it: the paper's
+    # clapping convention); delta = 0 needs p > 0.
+    if family != "fourier" and extreme("A0", max) * (1 + extreme("A1_ratio", max)) > math.pi + 1e-12:
         raise ctx.err("axes.A1_ratio", "A0 (1 + A1/A0) exceeds pi: the angle phi would leave [0, pi]")
     if extreme("delta", min) == 0 and extreme("p", min) == 0:
         raise ctx.err("fixed.delta" if "delta" in fixed else "axes.delta", "delta = 0 needs p > 0")

@@ -85,11 +85,21 @@ _DOMAINS: dict[str, tuple[Any, str, str]] = {
 }
 
 
+#: The largest wavenumber K of a grid scene's Fourier coefficients A0..AK, B1..BK (``family =
+#: "fourier"``): each is a parameter, finite, any sign, in rad (eq. Fourier; phi may leave [0, pi]).
+MAX_FOURIER_WAVENUMBER = 16
+FOURIER_COEFFICIENT = re.compile(r"^(A|B)([1-9]\d*)$")
+for _k in range(1, MAX_FOURIER_WAVENUMBER + 1):
+    for _c in "AB":
+        _DOMAINS[f"{_c}{_k}"] = (math.isfinite, "must be a finite number [rad] (a Fourier coefficient)", "rad")
+
+
 def parameter_units(name: str) -> str:
     """Units of parameter ``name`` ("rad" for A0, "1" for the dimensionless ones and unknown names)."""
     return _DOMAINS[name][2] if name in _DOMAINS else "1"
 
 
+_FOURIER_NAMES = frozenset(k for k in _DOMAINS if FOURIER_COEFFICIENT.match(k))
 _PI_RE = re.compile(r"^\s*([-+]?\d*\.?\d*)\s*\*?\s*pi\s*(?:/\s*(\d+(?:\.\d*)?))?\s*$")
 _SHAPE_RE = re.compile(r"^\s*(up|down)\s*:\s*(\d+(?:\.\d*)?)\s*$")
 
@@ -268,7 +278,7 @@ def parse_value(ctx: ParseContext, name: str, obj, key) -> float:
     if name in ("closing_shape", "opening_shape"):
         v = parse_shape(ctx, obj, key)
     else:
-        v = ctx.number(obj, key, allow_pi=(name == "A0"))
+        v = ctx.number(obj, key, allow_pi=(name == "A0" or name in _FOURIER_NAMES))
     ok, why, _ = _DOMAINS[name]
     if not ok(v):
         raise ctx.err(key, f"value {v:g} outside the physical domain: {name} {why}")
@@ -328,7 +338,8 @@ def parse_axis(ctx: ParseContext, name: str, spec, key: str) -> Axis:
     bounds = spec[form]
     if not isinstance(bounds, list) or len(bounds) != 2:
         raise ctx.err(f"{key}.{form}", f"must be [lo, hi], got {bounds!r}")
-    lo, hi = (ctx.number(b, f"{key}.{form}", allow_pi=(name == "A0" and form == "range")) for b in bounds)
+    angle = name == "A0" or name in _FOURIER_NAMES
+    lo, hi = (ctx.number(b, f"{key}.{form}", allow_pi=(angle and form == "range")) for b in bounds)
     if hi < lo:
         raise ctx.err(f"{key}.{form}", f"reversed range [{lo:g}, {hi:g}]")
     if ("num" in spec) == ("step" in spec):

@@ -32,10 +32,11 @@ from pathlib import Path
 
 from ._causes import CAUSES, Cause, Evidence, explain, miss, parse_cause, tolerance_text
 from ._claim_values import COMPUTE, Measurement, NotComputed
+from ._labels import tex_html
 from ._site import esc
 
 __all__ = ["CLAIMS_FILE", "Claim", "AuditRow", "RegistryError", "load_claims", "evaluate_claims", "verdict", "audit_html",
-           "audit_counts", "cause_counts", "audit_summary", "write_audit_json", "VERDICTS", "CAUSES"]
+           "audit_counts", "cause_counts", "audit_sentence", "audit_summary", "write_audit_json", "VERDICTS", "CAUSES"]
 
 CLAIMS_FILE = Path(__file__).resolve().with_name("claims.toml")
 VERDICTS = ("agrees", "differs", "not run")
@@ -231,17 +232,60 @@ def evaluate_claims(claims, stores) -> list[AuditRow]:
 _CLASS = {"agrees": "v-agrees", "differs": "v-differs", "not run": "v-notrun"}
 
 
+def _verdict_items(rows) -> list[tuple[str, bool, str | None]]:
+    """(verdict, by construction, cause) per claim, from AuditRow objects or audit.json's dicts:
+    the one reading every count below is made from."""
+    items = []
+    for r in rows:
+        if isinstance(r, AuditRow):
+            items.append((r.verdict, bool(r.claim.by_construction), r.cause))
+        else:
+            items.append((r["verdict"], bool(r.get("by_construction")), r.get("cause")))
+    return items
+
+
 def audit_counts(rows) -> dict:
-    """Verdict counts, and ``by construction``: the agreeing claims that could not have differed
-    (counted apart from the reproductions)."""
-    out = {v: sum(r.verdict == v for r in rows) for v in VERDICTS}
-    out["by construction"] = sum(r.verdict == "agrees" and bool(r.claim.by_construction) for r in rows)
+    """Every count the audit prints, from ``rows`` (AuditRow objects or audit.json's list): per
+    verdict (``agrees`` includes the claims true ``by construction``), ``claims``,
+    ``reproduced`` (agree, not by construction), ``explained`` and ``unexplained`` (differ with
+    or without a cause that holds) and ``causes`` (differing claims per kind of CAUSES).  The
+    page (:func:`audit_html`) and the command line (:func:`audit_summary`) print these, through
+    the one sentence :func:`audit_sentence`."""
+    items = _verdict_items(rows)
+    out = {v: sum(verdict == v for verdict, _, _ in items) for v in VERDICTS}
+    out["by construction"] = sum(verdict == "agrees" and built for verdict, built, _ in items)
+    out["claims"] = len(items)
+    out["reproduced"] = out["agrees"] - out["by construction"]
+    out["causes"] = {k: sum(verdict == "differs" and cause == k for verdict, _, cause in items)
+                     for k in (*CAUSES, "unexplained")}
+    out["unexplained"] = out["causes"]["unexplained"]
+    out["explained"] = out["differs"] - out["unexplained"]
     return out
 
 
 def cause_counts(rows) -> dict:
     """Claims that differ, by cause (every kind of CAUSES, then ``unexplained``)."""
-    return {k: sum(r.verdict == "differs" and r.cause == k for r in rows) for k in (*CAUSES, "unexplained")}
+    return audit_counts(rows)["causes"]
+
+
+def _sentence_parts(n: dict) -> list[tuple[str, str]]:
+    """The audit's summary as (css class or "", text) pieces."""
+    by_cause = ", ".join(f"{k} {n['causes'][k]}" for k in CAUSES if n["causes"][k])
+    return [("", f"{n['claims']} claims of the paper's results: "),
+            ("v-agrees", f"{n['reproduced']} agree"),
+            ("", f" (and {n['by construction']} more true by construction, not counted as reproductions), "),
+            ("v-differs", f"{n['explained']} differ with a cause whose check and control hold"),
+            ("", (f" ({by_cause})" if by_cause else "") + ", "),
+            ("v-unexplained", f"{n['unexplained']} differ unexplained"),
+            ("", ", "),
+            ("v-notrun", f"{n['not run']} not run")]
+
+
+def audit_sentence(counts: dict, *, html: bool = False) -> str:
+    """The audit's summary sentence from :func:`audit_counts`: the same words and numbers on the
+    page (``html``: each verdict's count in its colour) and on the command line."""
+    return "".join(f"<span class='{cls}'>{esc(text)}</span>" if html and cls else (esc(text) if html else text)
+                   for cls, text in _sentence_parts(counts))
 
 
 def _cause_cell(r) -> str:
@@ -262,19 +306,18 @@ def _cause_cell(r) -> str:
 
 
 def _claim_notes(c) -> str:
-    notes = f"<div class='small'>the paper: “{esc(c.quote)}”</div>" if c.quote else ""
+    notes = f"<div class='small'>the paper: “{tex_html(c.quote)}”</div>" if c.quote else ""
     notes += f"<div class='small'>tolerance basis: {esc(c.basis)}</div>" if c.basis else ""
     if c.by_construction:
         notes += f"<div class='small'><b>true by construction</b> (not counted as a reproduction): {esc(c.by_construction)}</div>"
     return notes
 
 
-def audit_html(rows, figure_anchor=lambda label: f"fig-{label}") -> str:
+def audit_html(rows, figure_anchor=lambda label: f"fig-{label}", *, reduced: str = "") -> str:
     """The audit section (front page): a summary line, every differing claim with its cause,
-    evidence and control, and one table row per claim."""
+    evidence and control, and one table row per claim.  ``reduced``: a sentence saying the stores
+    are of reduced resolution (``paper --quick``), shown first."""
     n = audit_counts(rows)
-    causes = cause_counts(rows)
-    by_cause = ", ".join(f"{k} {causes[k]}" for k in CAUSES if causes[k])
     body, differing = [], []
     for r in rows:
         c, m = r.claim, r.measurement
@@ -298,38 +341,28 @@ def audit_html(rows, figure_anchor=lambda label: f"fig-{label}") -> str:
                              + (f"; control ({'passed' if r.evidence.control.get('passed') else 'FAILED'}): "
                                 f"{esc(r.evidence.control.get('result', ''))}"
                                 if r.evidence and r.evidence.control else "") + "</li>")
-    reproduced = n["agrees"] - n["by construction"]
     return (f"<section class='audit' id='audit'><h2>Reproduction audit</h2>"
-            f"<p><b>{len(rows)} quantitative claims</b> of the paper's results, each checked against the stores "
-            f"when this report was built: <span class='v-agrees'>{reproduced} agree</span> (and "
-            f"{n['by construction']} more true by construction, not counted as reproductions), "
-            f"<span class='v-differs'>{n['differs'] - causes['unexplained']} differ with a cause whose check and "
-            f"control hold</span>" + (f" ({esc(by_cause)})" if by_cause else "") + ", "
-            f"<span class='v-unexplained'>{causes['unexplained']} differ unexplained</span>, "
-            f"<span class='v-notrun'>{n['not run']} not run</span>. A cause counts only when its check meets its "
-            "kind's criterion and its negative control passes (<code>reports/CAUSES.md</code>); every tolerance "
-            "states its basis. The claims, their tolerances, causes and the reductions computing our values are in "
-            "<code>reports/claims.toml</code>; the table is also written as <code>audit.json</code> beside this "
-            "page.</p>"
+            + (f"<p class='warn reduced'><b>Reduced resolution.</b> {esc(reduced)}</p>" if reduced else "")
+            + f"<p class='audit-summary'><b>{audit_sentence(n, html=True)}</b>.</p>"
+            "<p>Each claim is checked against the stores when this report is built. A cause counts only when its "
+            "check meets its kind's criterion and its negative control passes (<code>reports/CAUSES.md</code>); "
+            "every tolerance states its basis. The claims, their tolerances, causes and the reductions computing our "
+            "values are in <code>reports/claims.toml</code>; the table is also written as <code>audit.json</code> "
+            "beside this page.</p>"
             + (f"<details open><summary><b>The {len(differing)} claims that differ</b>: cause, evidence and "
                f"control</summary><ul class='small'>{''.join(differing)}</ul></details>" if differing else "")
-            + "<table class='audit'><colgroup><col class='c-claim'><col class='c-paper'><col class='c-ours'>"
+            + "<div class='table-scroll'><table class='audit'><colgroup><col class='c-claim'><col class='c-paper'><col class='c-ours'>"
             "<col class='c-verdict'><col class='c-cause'><col class='c-reason'></colgroup>"
             "<tr><th>claim</th><th>paper</th><th>ours (from the stores)</th><th>verdict</th><th>cause</th>"
             "<th>reason</th></tr>"
-            + "".join(body) + "</table></section>")
+            + "".join(body) + "</table></div></section>")
 
 
-def audit_summary(path: Path) -> str:
-    """'N claims: a agree (b by construction), d differ (...; u unexplained), r not run (path)'
-    from an audit.json."""
+def audit_summary(path: Path, *, reduced: str = "") -> str:
+    """The audit's summary sentence (:func:`audit_sentence`, as on the page) from an audit.json,
+    then its path; ``reduced``: prefixed "reduced resolution: " when the stores were."""
     doc = json.loads(Path(path).read_text(encoding="utf-8"))
-    n = {v: sum(o["verdict"] == v for o in doc) for v in VERDICTS}
-    built = sum(o["verdict"] == "agrees" and bool(o.get("by_construction")) for o in doc)
-    causes = {k: sum(o["verdict"] == "differs" and o.get("cause") == k for o in doc) for k in (*CAUSES, "unexplained")}
-    by = ", ".join(f"{k} {causes[k]}" for k in CAUSES if causes[k])
-    return (f"{len(doc)} claims: {n['agrees']} agree ({built} by construction), {n['differs']} differ "
-            f"({by + '; ' if by else ''}{causes['unexplained']} unexplained), {n['not run']} not run ({path})")
+    return (("reduced resolution: " if reduced else "") + f"{audit_sentence(audit_counts(doc))} ({path})")
 
 
 def write_audit_json(rows, path: Path) -> Path:

@@ -5,12 +5,14 @@ Labels use Plotly's pseudo-HTML (<sub>, <sup>), which works in axis titles and h
 
 from __future__ import annotations
 
+import html
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["AxisSpec", "axis_spec", "param_label", "quantity_label", "format_value", "SIGNED"]
+__all__ = ["AxisSpec", "axis_spec", "param_label", "quantity_label", "format_value", "SIGNED", "tex_html"]
 
 _MU = "μ<sub>n</sub>μ<sub>s</sub>"
 
@@ -42,7 +44,13 @@ def param_label(name: str, p: float = 0.0) -> str:
         "exponent_set": "allowed exponents",
         "p": "p",
         "delta": "δ",
-    }.get(name, name)
+    }.get(name, _fourier_label(name))
+
+
+def _fourier_label(name: str) -> str:
+    """A<sub>k</sub> / B<sub>k</sub> for a Fourier coefficient's name ("A3"), else the name."""
+    m = re.match(r"^([AB])([1-9]\d*)$", name)
+    return f"{m.group(1)}<sub>{m.group(2)}</sub>" if m else name
 
 
 def quantity_label(name: str, p: float = 0.0) -> str:
@@ -95,7 +103,7 @@ def format_value(name: str, v: float) -> str:
         k = math.log2(v)
         if abs(2 * k - round(2 * k)) < 1e-9:
             return _pow2_text(v)
-    if name in ("A0",):
+    if name == "A0" or re.match(r"^[AB][1-9]\d*$", name):
         return f"{v:.4g} rad"
     return f"{v:.4g}"
 
@@ -144,3 +152,78 @@ def axis_spec(name: str, values, spacing: str | None = None, p: float = 0.0) -> 
         return AxisSpec(name, v, pos, title, "log2", tuple(float(t) for t in ticks),
                         tuple(f"2<sup>{t}</sup>" if t else "1" for t in ticks))
     return AxisSpec(name, v, v.copy(), title, "linear")
+
+
+# ---------------------------------------------------------------------------
+# The paper's LaTeX in quoted sentences, as plain Unicode HTML (the report is offline: no MathJax)
+# ---------------------------------------------------------------------------
+
+#: TeX commands the paper's sentences use, and their Unicode characters.
+TEX_SYMBOLS = {
+    "mu": "μ", "pi": "π", "phi": "φ", "varphi": "φ", "lambda": "λ", "tau": "τ", "delta": "δ", "gamma": "γ",
+    "eta": "η", "omega": "ω", "Omega": "Ω", "Pi": "Π", "alpha": "α", "beta": "β", "theta": "θ", "sigma": "σ",
+    "epsilon": "ε", "kappa": "κ", "Delta": "Δ", "Gamma": "Γ", "Lambda": "Λ", "nu": "ν", "rho": "ρ", "xi": "ξ",
+    "ll": "≪", "gg": "≫", "leq": "≤", "le": "≤", "geq": "≥", "ge": "≥", "neq": "≠", "approx": "≈", "sim": "∼",
+    "to": "→", "rightarrow": "→", "infty": "∞", "times": "×", "cdot": "·", "pm": "±", "propto": "∝",
+    "partial": "∂", "int": "∫", "sum": "∑", "sqrt": "√", "ldots": "…", "dots": "…", "cdots": "⋯",
+    "quad": " ", "qquad": "  ", ",": " ", ";": " ", "!": "", " ": " ", "%": "%", "&": "&", "_": "_",
+    "{": "{", "}": "}", "$": "$",
+}
+#: Commands whose braced argument is text (its braces dropped): \mbox{max} -> max.
+_TEX_TEXT = ("mbox", "text", "textrm", "mathrm", "mathit", "textit", "emph", "operatorname", "mathbf", "textbf")
+
+_TEX_TOKEN = re.compile(r"\\([A-Za-z]+|.)|([_^])|(\{)|(\})|(\$)|(~)|(--)|(.)", re.S)
+
+
+def _tex_argument(tokens, k) -> tuple[str, int]:
+    """(HTML of the argument starting at ``tokens[k]``: a braced group, a command or one
+    character; the index after it)."""
+    if k >= len(tokens):
+        return "", k
+    if tokens[k].group(3):
+        depth, j = 1, k + 1
+        while j < len(tokens) and depth:
+            depth += 1 if tokens[j].group(3) else -1 if tokens[j].group(4) else 0
+            j += 1
+        return _tex_render(tokens[k + 1:j - 1]), j
+    return _tex_render(tokens[k:k + 1]), k + 1
+
+
+def _tex_render(tokens, math: bool = True) -> str:
+    """HTML of ``tokens``; ``math``: inside ``$...$`` (where ``_``, ``^`` and braces act)."""
+    out, k = [], 0
+    while k < len(tokens):
+        t = tokens[k]
+        command, script = t.group(1), t.group(2)
+        if command is not None and command in _TEX_TEXT and k + 1 < len(tokens) and tokens[k + 1].group(3):
+            arg, k = _tex_argument(tokens, k + 1)
+            out.append(arg)
+            continue
+        if t.group(5):
+            math = not math
+        elif not math and (script or t.group(3) or t.group(4)):
+            out.append(html.escape(t.group(0)))
+        elif script:
+            tag = "sub" if script == "_" else "sup"
+            arg, k = _tex_argument(tokens, k + 1)
+            out.append(f"<{tag}>{arg}</{tag}>")
+            continue
+        elif command is not None:
+            out.append(html.escape(TEX_SYMBOLS.get(command, command)))
+        elif t.group(6):
+            out.append("\u00a0")
+        elif t.group(7):
+            out.append("–")
+        elif t.group(8) is not None:
+            out.append(html.escape(t.group(8)))
+        # (the braces of a bare group in math print nothing)
+        k += 1
+    return "".join(out)
+
+
+def tex_html(text) -> str:
+    """``text`` with the paper's LaTeX rendered as HTML: math (``$...$``) in Unicode with
+    ``<sub>``/``<sup>``, ``\\mbox{..}`` as text, ``~`` a no-break space, ``--`` an en dash; every
+    other character HTML-escaped.  ``$(\\mu_n \\mu_s)^{1/4}T \\to 0$`` -> ``(μ<sub>n</sub>
+    μ<sub>s</sub>)<sup>1/4</sup>T → 0``."""
+    return _tex_render(list(_TEX_TOKEN.finditer(str(text))), math=False)

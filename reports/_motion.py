@@ -17,6 +17,7 @@ with mu_n mu_s = 1 (the scaled problem the pipeline solves).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,6 +106,10 @@ class Motion:
 
 
 def _kinematics(solver, family: str, q: dict):
+    if family == "fourier":
+        from pipeline._grid import fourier_kinematics
+
+        return fourier_kinematics(solver, {k: np.array([float(v)]) for k, v in q.items()})
     A0 = np.array([q["A0"]])
     A1 = A0 * q["A1_ratio"]
     if family == "harmonic":
@@ -145,7 +150,7 @@ def compute_motion(family: str, params: dict, *, rtol: float, method: str = "per
         raise RuntimeError(f"solver status {status}: {solver.status_reason(status, method)}")
     tn = np.asarray(res.tau[0], dtype=np.float64)
     un = np.asarray(res.u[0], dtype=np.float64)
-    ok = np.isfinite(tn) & np.isfinite(un)  # final grids may be padded
+    ok = np.isfinite(tn) & np.isfinite(un) & (tn < 1.0)  # final grids may be padded; tau = 1 closes the period
     tn, un = tn[ok], un[ok]
     order = np.argsort(tn)
     tn, un = tn[order], un[order]
@@ -175,6 +180,7 @@ def compute_motion(family: str, params: dict, *, rtol: float, method: str = "per
 def params_text(params: dict, p: float = 0.0, sep: str = ", ") -> str:
     keys = [k for k in ("anisotropy_ratio", "scaled_period", "T2_mu_n", "T2_mu_s", "A0", "A1_ratio", "duty_cycle",
                         "closing_shape", "opening_shape") if k in params]
+    keys += sorted((k for k in params if re.match(r"^[AB][1-9]\d*$", k)), key=lambda k: (int(k[1:]), k[0]))
     return sep.join(f"{param_label(k, p)} = {format_value(k, params[k])}" for k in keys)
 
 

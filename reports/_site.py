@@ -33,19 +33,21 @@ main{padding:0 2em 3em 2em;max-width:1500px;box-sizing:border-box}
 nav#toc{background:#fff;border:1px solid #ddd;padding:.5em 1.5em;margin:1em 0}
 nav#toc ol ol{font-size:.92em}
 section.scene,section.figure,section.audit{background:#fff;border:1px solid #ddd;padding:.5em 1.5em 1.5em;
-  margin:1.5em 0;min-width:0;overflow-wrap:anywhere}
+  margin:1.5em 0;min-width:0;overflow-wrap:break-word}
+h1,h2,h3,h4,th,summary{overflow-wrap:normal;word-break:normal;hyphens:manual}
 section.figure>h2 .label{font-family:ui-monospace,monospace;font-weight:normal;color:#555;font-size:.8em}
 p.finding{font-size:1.05em;border-left:4px solid #1f3b73;padding-left:.7em}
 div.view{border-top:1px solid #eee;margin-top:1em}
 .table-scroll{overflow-x:auto;max-width:100%}
 table{border-collapse:collapse;margin:.5em 0;font-size:.9em}td,th{border:1px solid #ddd;padding:2px 8px;text-align:left}
 th{background:#f0f0f0}.num{text-align:right;font-variant-numeric:tabular-nums}
-table.audit{table-layout:fixed;width:100%;overflow-wrap:anywhere}table.audit td{vertical-align:top}
+table.audit{table-layout:fixed;width:100%;min-width:60em}table.audit td{vertical-align:top;overflow-wrap:anywhere}
 table.audit col.c-claim{width:27%}table.audit col.c-paper{width:10%}table.audit col.c-ours{width:17%}
-table.audit col.c-verdict{width:7%}table.audit col.c-cause{width:19%}table.audit col.c-reason{width:20%}
+table.audit col.c-verdict{width:6em}table.audit col.c-cause{width:19%}table.audit col.c-reason{width:auto}
 .v-agrees{color:#16691e;font-weight:bold}.v-differs{color:#b03a00;font-weight:bold}.v-notrun{color:#777;font-weight:bold}.v-unexplained{color:#8a0000;font-weight:bold}
 .small{font-size:.85em;color:#555}
 .note{color:#555;font-size:.9em}.warn{color:#a04000}.notrun{color:#777}
+header .reduced{background:#fff3d6;color:#5a3000;padding:.3em .6em;margin:.4em 0;border-radius:3px}
 .panel-error{color:#b00;border:1px solid #b00;padding:.5em;white-space:pre-wrap}
 details{margin:.5em 0}summary{cursor:pointer;color:#1f3b73}
 pre{white-space:pre-wrap}
@@ -142,7 +144,13 @@ class SiteBuilder:
     def __init__(self, out: Path):
         self.out = Path(out)
         self.sections: list[Section] = []
-        self.front: str = ""          # HTML above the table of contents (the audit)
+        self.front: str = ""          # HTML of the first section after the contents (the audit)
+        #: the page's title; ``reduced``: a sentence saying the stores are of reduced resolution,
+        #: put in the title and as the header's first line
+        self.title = "Intermittent sliding of a two-link body: reproduction report"
+        self.reduced = ""
+        #: the shipped scenes without a store are listed (the header counts them)
+        self.list_unrun = True
         self.not_run: list[dict] = []
         self.n_figures = 0
         self.n_stores = 0
@@ -220,21 +228,24 @@ class SiteBuilder:
                       + "<br>".join(esc(e) for e in self.errors) + "</p>")
         body = "\n".join(f"<section class='{s.css_class}' id='{s.anchor}'>{s.body}</section>" for s in self.sections)
         loader = _LOADER % {"config": json.dumps(PLOT_CONFIG)}
+        title = self.title + (" (reduced resolution)" if self.reduced else "")
+        reduced = f"<p class='reduced'><b>Reduced resolution.</b> {esc(self.reduced)}</p>\n" if self.reduced else ""
+        not_run_count = f"; {len(self.not_run)} scene(s) not yet run" if self.list_unrun else ""
         doc = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
-<title>Two-link sliding: reproduction report</title>
+<title>{esc(title)}</title>
 <style>{_CSS}</style>
 <script src="{PLOTLY_JS}" defer></script>
 </head><body>
-<header><h1>Intermittent sliding of a two-link body: reproduction report</h1>
-<div>Built {now} from {self.n_stores} store(s); {len(self.not_run)} scene(s) not yet run. Static and offline:
+<header><h1>{esc(title)}</h1>
+{reduced}<div>Built {now} from {self.n_stores} store(s){not_run_count}. Static and offline:
 every figure is interactive (hover for values and parameters, drag to zoom, double-click to reset) and is
 drawn when it scrolls into view.</div></header>
 <main>
 {errors}
-{self.front}
 {self._toc()}
+{self.front}
 {body}
 {not_run}
 </main>

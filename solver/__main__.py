@@ -21,65 +21,88 @@ class _UsageError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # one line, exit 2, no usage dump
-        raise _UsageError(message)
+    def error(self, message):  # one line, exit 2, no usage dump; "argument --x: ..." -> "--x: ..."
+        raise _UsageError(message.removeprefix("argument "))
 
 
-def _finite(name):
-    def convert(text):
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: not a number: {text!r}")
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{name}: must be finite, got {text}")
-        return value
-    return convert
+def _finite(text):
+    """A finite number (argparse names the option in the message)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
 
 
-def _float_list(name):
-    def convert(text):
-        return [_finite(name)(x) for x in text.split(",") if x.strip() != ""]
-    return convert
+def _float_list(text):
+    """Comma-separated finite numbers: '0.6,0.9,0,0.2'."""
+    try:
+        return [_finite(x) for x in text.split(",") if x.strip() != ""]
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers such as 0.6,0.9,0.2, got {text!r}") from None
 
 
-def _stroke(name):
-    """'down:10', 'up:3', or a bare exponent (1 is linear; a bare value means concave down)."""
-    def convert(text):
-        concavity, _, exponent = text.rpartition(":")
-        if concavity not in ("", "down", "up"):
-            raise argparse.ArgumentTypeError(f"{name}: concavity must be 'down' or 'up', got {concavity!r}")
-        value = _finite(name)(exponent)
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"{name}: exponent must be >= 1, got {value}")
-        return concavity == "up", value
-    return convert
+_STROKE_FORMS = "'down:G', 'up:G' or G (an exponent G >= 1; G alone is concave down, 1 linear)"
+
+
+def _stroke(text):
+    """'down:10', 'up:3', or a bare exponent (1 is linear; a bare value means concave down):
+    (concave_up, exponent)."""
+    concavity, _, exponent = text.rpartition(":")
+    try:
+        value = float(exponent)
+    except ValueError:
+        value = math.nan
+    if concavity not in ("", "down", "up") or not math.isfinite(value) or value < 1:
+        raise argparse.ArgumentTypeError(f"expected {_STROKE_FORMS}, got {text!r}")
+    return concavity == "up", value
 
 
 def build_parser():
     from ._version import VersionAction
 
-    parser = _Parser(prog="python -m solver", description=__doc__)
+    parser = _Parser(prog="python -m solver", description=__doc__,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action=VersionAction)
-    sub = parser.add_subparsers(dest="command", required=True)
-    pt = sub.add_parser("point", help="solve one parameter point and print JSON")
-    pt.error = parser.error
-    pt.add_argument("--family", required=True, choices=["harmonic", "powerlaw", "fourier"])
-    pt.add_argument("--A0", type=_finite("--A0"))
-    pt.add_argument("--A1", type=_finite("--A1"))
-    pt.add_argument("--tau0", type=_finite("--tau0"), help="duty cycle (powerlaw)")
-    pt.add_argument("--closing", type=_stroke("--closing"), default=(False, 1.0))
-    pt.add_argument("--opening", type=_stroke("--opening"), default=(False, 1.0))
-    pt.add_argument("--A", type=_float_list("--A"), help="A0,...,AK (fourier)")
-    pt.add_argument("--B", type=_float_list("--B"), default=[], help="B1,...,BK (fourier)")
-    pt.add_argument("--T", type=_finite("--T"), required=True)
-    pt.add_argument("--mu-n", dest="mu_n", type=_finite("--mu-n"), required=True)
-    pt.add_argument("--mu-s", dest="mu_s", type=_finite("--mu-s"), required=True)
-    pt.add_argument("--p", type=_finite("--p"), default=0.0)
-    pt.add_argument("--delta", type=_finite("--delta"), default=1e-5)
-    pt.add_argument("--method", choices=list(_solve.METHODS), default="periodic")
-    pt.add_argument("--rtol", type=_finite("--rtol"), default=1e-6)
-    pt.add_argument("--series", action="store_true", help="include tau and u(tau)")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    pt = sub.add_parser("point", help="solve one parameter point and print JSON",
+                        description="Solve one parameter point of eq. (Newtonu) and print one JSON object. "
+                                    "Angles in rad; the period T and friction coefficients as in the paper.")
+    pt.add_argument("--family", required=True, choices=["harmonic", "powerlaw", "fourier"],
+                    help="kinematic family of phi(tau): harmonic (--A0, --A1), powerlaw (--A0, --A1, --tau0, "
+                         "--closing, --opening) or fourier (--A, --B) (required)")
+    pt.add_argument("--A0", type=_finite, metavar="RAD",
+                    help="mean half-opening angle A0 [rad] (harmonic, powerlaw; required for them)")
+    pt.add_argument("--A1", type=_finite, metavar="RAD",
+                    help="amplitude A1 >= 0 [rad]: phi swings between A0 - A1 and A0 + A1 (harmonic, powerlaw; "
+                         "required for them)")
+    pt.add_argument("--tau0", type=_finite, metavar="TAU0",
+                    help="duty cycle tau0 in (0, 1), the closing phase's share of the period (powerlaw; required)")
+    pt.add_argument("--closing", type=_stroke, default=(False, 1.0), metavar="SHAPE",
+                    help=f"closing stroke's power law (powerlaw): {_STROKE_FORMS} (default: 1, linear)")
+    pt.add_argument("--opening", type=_stroke, default=(False, 1.0), metavar="SHAPE",
+                    help=f"opening stroke's power law (powerlaw): {_STROKE_FORMS} (default: 1, linear)")
+    pt.add_argument("--A", type=_float_list, metavar="A0,...,AK",
+                    help="cosine coefficients A0..AK [rad] (fourier; required)")
+    pt.add_argument("--B", type=_float_list, default=[], metavar="B1,...,BK",
+                    help="sine coefficients B1..BK [rad], one fewer than --A (fourier; default: none, K = 0)")
+    pt.add_argument("--T", type=_finite, required=True, help="period T > 0 (required)")
+    pt.add_argument("--mu-n", dest="mu_n", type=_finite, required=True, metavar="MU_N",
+                    help="normal friction coefficient mu_n > 0 (required)")
+    pt.add_argument("--mu-s", dest="mu_s", type=_finite, required=True, metavar="MU_S",
+                    help="tangential friction coefficient mu_s > 0 (required)")
+    pt.add_argument("--p", type=_finite, default=0.0,
+                    help="force-law exponent p in [0, 2): 0 Coulomb friction, else |v|^p (default: 0)")
+    pt.add_argument("--delta", type=_finite, default=1e-5,
+                    help="velocity regularisation delta >= 0, > 0 when p = 0 (default: 1e-5)")
+    pt.add_argument("--method", choices=list(_solve.METHODS), default="periodic",
+                    help="periodic: the engine; march: its independent check (default: periodic)")
+    pt.add_argument("--rtol", type=_finite, default=1e-6,
+                    help="target relative error of U and P, in (0, 1) (default: 1e-6)")
+    pt.add_argument("--series", action="store_true",
+                    help="also print tau and u(tau) at the final steps' nodes, tau = 0 .. 1 (default: off)")
     return parser
 
 

@@ -18,7 +18,8 @@ resume one computed by another version.
 Error norm.  For P (always > 0) the error is relative.  U can vanish (for example at
 isotropic friction and p = 1), so its error is measured relative to max(|U T|, 1e-3 V), with
 V = (1/4) int |dphi/dtau| dtau the deformation speed scale (``kinematic_speed``).
-``error_estimate`` is the larger of the two.
+``error_estimate_U`` and ``error_estimate_P`` are the two estimates; ``error_estimate``, the
+larger, is the one rtol bounds.
 """
 from __future__ import annotations
 
@@ -76,11 +77,18 @@ class SolveResult:
     scaled_efficiency : sqrt(mu_n mu_s) lambda; efficiency_upper_bound : 1/min(mu_n, mu_s);
     relative_efficiency : lambda / lambda_ub (eq. relefficiency);
     status (int8, 0 = converged; ``status_reason``), converged (bool),
-    error_estimate (relative, see module docstring), iterations (passes over the period for
-    ``periodic``, periods marched for ``march``, summed over grids), n_tau (steps per
-    period of the final step sequence);
-    u : u(tau) at the final steps' nodes (without tau = 1), shape (n_points, n_tau) where
-    every point has as many, else a list of arrays, or None;
+    error_estimate_U, error_estimate_P : the estimated error of U (relative to
+    max(|U T|, 1e-3 V)) and of P (relative), see the module docstring;
+    error_estimate : the larger of the two (the one ``rtol`` bounds; inf where none was
+    formed, 0 for NO_MOTION);
+    iterations (passes over the period for ``periodic``, periods marched for ``march``,
+    summed over grids), n_tau (steps per period of the final step sequence);
+    u : u(tau) at the final steps' nodes, the period closed: tau from 0 to 1 with u(1) =
+    u(0), n_tau + 1 values per point; shape (n_points, n_tau + 1) where every point has as
+    many, else a list of arrays (empty for a point that failed before any pass), or None
+    (``return_series`` False).  The nodes are the engine's step ends (order-5 steps, few
+    and long): a trapezoid over them is a second-order rule, not the engine's, and misses
+    int u by O(h^2) (about 1e-3 of it at rtol 1e-6); ``mean_u`` is int_0^1 u dtau to rtol.
     tau : those nodes, same shape, or None.
     force_evaluations : evaluations of F per point: ``periodic`` by phase (loose shooting,
     target passes, frozen-grid passes, estimates; shape (n_points, 4)), ``march`` in all
@@ -106,6 +114,8 @@ class SolveResult:
     status: np.ndarray
     converged: np.ndarray
     error_estimate: np.ndarray
+    error_estimate_U: np.ndarray
+    error_estimate_P: np.ndarray
     iterations: np.ndarray
     n_tau: np.ndarray
     mean_u: np.ndarray
@@ -217,7 +227,8 @@ def solve_periodic(kinematics, physics, *, method="periodic", rtol=1e-6, return_
     rtol : float
         Target relative error of U and P (see the module docstring for the norm).
     return_series : bool
-        Also return u(tau) on the final grid.
+        Also return u(tau) at the final grid's nodes, the period closed (tau = 0 .. 1 with
+        u(1) = u(0); ``SolveResult.u``, ``SolveResult.tau``).
     max_steps_per_period : int, optional
         Finest grid allowed (default 2^17).
     sweeps : array of int, optional
@@ -344,7 +355,9 @@ def _result(out, physics, method, start, keep_unconverged=False):
     int_u[still] = 0.0
     int_pi[still] = 0.0
     estimate = out["estimate"]
-    estimate[still] = 0.0
+    estimate_U, estimate_P = out["estimate_u"], out["estimate_p"]
+    for e in (estimate, estimate_U, estimate_P):
+        e[still] = 0.0
     outputs = _outputs(int_u, int_pi, physics)
     beyond = (status == CONVERGED) & ~_representable(outputs, int_u)
     if beyond.any():
@@ -356,12 +369,14 @@ def _result(out, physics, method, start, keep_unconverged=False):
         outputs[key][still] = np.nan
     u_arr = tau_arr = None
     if out["series"] is not None:
-        u_arr = [s[0] for s in out["series"]]
-        tau_arr = [s[1] for s in out["series"]]
+        # the period closed: tau = 1 appended with u(1) = u(0), so that the series covers [0, 1]
+        u_arr = [np.append(s[0], s[0][0]) if len(s[0]) else s[0] for s in out["series"]]
+        tau_arr = [np.append(s[1], 1.0) if len(s[1]) else s[1] for s in out["series"]]
         if len({len(s) for s in u_arr}) == 1:
             u_arr, tau_arr = np.array(u_arr), np.array(tau_arr)
     return SolveResult(
         **outputs, status=status, converged=status == CONVERGED, error_estimate=estimate,
+        error_estimate_U=estimate_U, error_estimate_P=estimate_P,
         iterations=out["iterations"], n_tau=out["n_tau"], u=u_arr, tau=tau_arr,
         seconds=time.perf_counter() - start, method=method,
         force_evaluations=out["evaluations"], start=out.get("start"), options=out.get("options"))

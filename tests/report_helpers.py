@@ -188,10 +188,11 @@ def build_store(tmp: Path, name: str) -> Path:
     return store
 
 
-def synthetic_store(store: Path, scene_file: Path) -> Path:
-    """A complete store of a shipped scene at its full resolution, filled with smooth synthetic
-    values instead of solver output (seconds instead of hours): the pipeline's own skeleton and
-    reductions, so the report sees exactly the real layout and sizes."""
+def synthetic_store(store: Path, scene_file: Path, *, quick: bool = False) -> Path:
+    """A complete store of a shipped scene at its full resolution (``quick``: its ``paper
+    --quick`` variant), filled with smooth synthetic values instead of solver output (seconds
+    instead of hours): the pipeline's own skeleton and reductions, so the report sees exactly
+    the real layout and sizes."""
     import warnings
 
     import numpy as np
@@ -201,7 +202,12 @@ def synthetic_store(store: Path, scene_file: Path) -> Path:
     from pipeline import _reduce, _store
     from pipeline._grid import scene_chunks
 
-    scene = pipeline.load_scene(scene_file)
+    if quick:
+        from pipeline.__main__ import quick_variant
+
+        scene = quick_variant(scene_file)
+    else:
+        scene = pipeline.load_scene(scene_file)
     if is_optima_scene(scene_file):
         return synthetic_optima_store(store, scene)
     if getattr(scene, "kind", "grid") != "grid":

@@ -769,8 +769,9 @@ def test_audit_json_and_front_page_carry_causes_controls_and_honest_counts(plane
     assert "1 differ with a cause whose check and control hold</span> (domain 1)" in html
     assert "1 differ unexplained</span>" in html and "The 2 claims that differ" in html
     assert "<b>control</b> (passed)" in html
-    assert "2 agree (1 by construction), 2 differ (domain 1; 1 unexplained), 0 not run" in audit_summary(
-        tmp_path / "audit.json")
+    assert ("4 claims of the paper's results: 1 agree (and 1 more true by construction, not counted as "
+            "reproductions), 1 differ with a cause whose check and control hold (domain 1), 1 differ unexplained, "
+            "0 not run") in audit_summary(tmp_path / "audit.json")
 
 
 def _ensemble(mult, n_starts):

@@ -90,9 +90,9 @@ def test_series_of_a_sweep_are_its_final_steps():
     kin, phys = _grid(4)
     n = len(kin)
     r = solver.solve_periodic(kin, phys, rtol=1e-5, sweeps=_runs(n, 8), return_series=True)
-    assert [len(u) for u in r.u] == list(r.n_tau)
+    assert [len(u) for u in r.u] == list(r.n_tau + 1)  # the period closed: tau = 1 too
     for u, tau in zip(r.u, r.tau):
-        assert tau[0] == 0.0 and np.all(np.diff(tau) > 0) and np.isfinite(u).all()
+        assert tau[0] == 0.0 and tau[-1] == 1.0 and np.all(np.diff(tau) > 0) and np.isfinite(u).all()
 
 
 @pytest.mark.parametrize("sweeps,what", [

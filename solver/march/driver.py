@@ -97,10 +97,11 @@ def richardson_error(d0, d1, d2):
 
 
 def _norm(err_u, err_pi, int_u, int_pi, vscale):
-    """e = max(err_u / max(|int u|, 1e-3 V), err_pi / |int Pi|)."""
+    """(e_u, e_p): err_u / max(|int u|, 1e-3 V) and err_pi / |int Pi| (the estimate e is the
+    larger)."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.maximum(err_u / np.maximum(np.abs(int_u), U_FLOOR_FRACTION * vscale),
-                          err_pi / np.abs(int_pi))
+        return (err_u / np.maximum(np.abs(int_u), U_FLOOR_FRACTION * vscale),
+                err_pi / np.abs(int_pi))
 
 
 def _hopeless(N, stiffness, mass, last_mass, threshold, max_steps):
@@ -174,6 +175,7 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
             error estimate), NaN elsewhere (``solve_periodic(keep_unconverged=True)``);
         status : int8 ``status`` code;
         estimate : e of the returned value (inf where none was formed);
+        estimate_u, estimate_p : its parts of int u and int Pi (``_norm``);
         n_tau : steps per period of the returned (or last tried) grid;
         iterations : periods marched, summed over grids;
         still : phi is constant (V = 0): nothing was solved (status NO_MOTION, NaN);
@@ -190,6 +192,8 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
     int_pi = np.full(n, np.nan)
     status = np.full(n, TOLERANCE_NOT_REACHED, dtype=np.int8)
     estimate = np.full(n, np.inf)
+    estimate_u = np.full(n, np.inf)
+    estimate_p = np.full(n, np.inf)
     n_tau = np.zeros(n, dtype=np.int64)
     iterations = np.zeros(n, dtype=np.int64)
     evaluations = np.zeros((n, 1), dtype=np.int64)
@@ -215,13 +219,16 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
         d0 = before[active] - earlier[active]
         d1 = last[active] - before[active]
         d2 = current - last[active]
-        e = _norm(richardson_error(d0[:, 0], d1[:, 0], d2[:, 0]),
-                  richardson_error(d0[:, 1], d1[:, 1], d2[:, 1]),
-                  iu, ip, vscale[active])
+        e_u, e_p = _norm(richardson_error(d0[:, 0], d1[:, 0], d2[:, 0]),
+                         richardson_error(d0[:, 1], d1[:, 1], d2[:, 1]),
+                         iu, ip, vscale[active])
+        e = np.maximum(e_u, e_p)
         scale_u = np.maximum(np.abs(iu), U_FLOOR_FRACTION * vscale[active])
         chatters = ok & (chatter_mass > CHATTER_SHARE * rtol * scale_u)
         e = np.where(ok & ~chatters, e, np.inf)
         estimate[active] = np.where(ok, e, estimate[active])
+        estimate_u[active] = np.where(ok, np.where(ok & ~chatters, e_u, np.inf), estimate_u[active])
+        estimate_p[active] = np.where(ok, np.where(ok & ~chatters, e_p, np.inf), estimate_p[active])
         # the kernel's failure, chatter, or (not yet known) the tolerance
         status[active] = np.where(~ok, st, np.where(chatters, UNSTABLE, TOLERANCE_NOT_REACHED))
         hopeless = chatters & _hopeless(N, stiffness, chatter_mass, last_mass[active],
@@ -247,6 +254,7 @@ def solve(kinematics, physics, rtol, max_steps, return_series):
     # the finest grid's values where only the tolerance was missed (its estimate is theirs)
     short = (status == TOLERANCE_NOT_REACHED) & np.isfinite(estimate)
     unconverged = np.where(short[:, None], last, np.nan)
-    return dict(int_u=int_u, int_pi=int_pi, status=status, estimate=estimate, n_tau=n_tau,
+    return dict(int_u=int_u, int_pi=int_pi, status=status, estimate=estimate, estimate_u=estimate_u,
+                estimate_p=estimate_p, n_tau=n_tau,
                 iterations=iterations, still=still, series=series, evaluations=evaluations,
                 unconverged=unconverged)

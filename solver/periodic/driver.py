@@ -78,6 +78,8 @@ class Outputs(NamedTuple):
     vscale: np.ndarray
     evaluations: np.ndarray
     start: np.ndarray
+    estimate_u: np.ndarray
+    estimate_p: np.ndarray
 
 
 @njit(cache=True, error_model="numpy")
@@ -85,7 +87,8 @@ def _new_outputs(n):
     return Outputs(np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
                    np.full(n, NON_FINITE, dtype=np.int8), np.zeros(n, dtype=np.int64),
                    np.zeros(n, dtype=np.int64), np.full(n, np.inf), np.full(n, np.nan),
-                   np.zeros((n, N_COSTS), dtype=np.int64), np.zeros(n, dtype=np.int8))
+                   np.zeros((n, N_COSTS), dtype=np.int64), np.zeros(n, dtype=np.int8),
+                   np.full(n, np.inf), np.full(n, np.inf))
 
 
 @njit(cache=True, error_model="numpy")
@@ -100,6 +103,8 @@ def _store(out, i, sol):
     out.vscale[i] = sol.vscale
     out.evaluations[i, :] = sol.evaluations
     out.start[i] = sol.start
+    out.estimate_u[i] = sol.estimate_u
+    out.estimate_p[i] = sol.estimate_p
 
 
 @njit(cache=True, error_model="numpy")
@@ -228,7 +233,8 @@ def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None, opti
 
     ``sweeps``: None (every point cold) or the offsets of ``solve_points``' runs; ``options``:
     an ``EngineOptions`` (None: the defaults).  Returns a
-    dict with int_u, int_pi, status, estimate, n_tau, iterations (passes over the period), still (phi
+    dict with int_u, int_pi, status, estimate (and its parts of int u and int Pi,
+    estimate_u and estimate_p), n_tau, iterations (passes over the period), still (phi
     constant: nothing solved), evaluations, start (``PointSolution.start``), options (the
     checked ``EngineOptions`` used) and, with ``return_series``, per point (u nodes, tau
     nodes)."""
@@ -244,6 +250,6 @@ def solve(kinematics, physics, rtol, max_steps, return_series, sweeps=None, opti
     out, series = solve_points(points, float(rtol), int(max_steps), runs, get_num_threads(),
                                return_series, options)
     return dict(int_u=out.int_u, int_pi=out.int_pi, status=out.status, estimate=out.estimate,
-                n_tau=out.n_steps, iterations=out.passes, still=out.vscale == 0.0,
+                estimate_u=out.estimate_u, estimate_p=out.estimate_p, n_tau=out.n_steps, iterations=out.passes, still=out.vscale == 0.0,
                 series=series, evaluations=out.evaluations, start=out.start, options=options)
 

@@ -80,7 +80,8 @@ class PointSolution(NamedTuple):
     evaluations of F by phase (COST_LOOSE, COST_ADAPTIVE, COST_FROZEN, COST_ESTIMATE);
     vscale : V = (1/4) int |dphi/dtau| dtau (``periodic.switching.stop_speed``; 0: phi is constant,
     nothing was solved); start : how the solve started (START_COLD, START_WARM,
-    START_WARM_REJECTED)."""
+    START_WARM_REJECTED); estimate_u, estimate_p : the estimate's two parts, int u's error
+    relative to its norm scale_u and int Pi's to scale_p (``estimate`` is the larger)."""
 
     int_u: float
     int_pi: float
@@ -92,6 +93,8 @@ class PointSolution(NamedTuple):
     evaluations: np.ndarray
     vscale: float
     start: int
+    estimate_u: float
+    estimate_p: float
 
 
 @njit(cache=True, error_model="numpy")
@@ -168,7 +171,8 @@ class Judged(NamedTuple):
     ``int_p``; the norm ``scale_u``, ``scale_p``; the global ``estimate`` (rtol's norm);
     each step's weighted error ``shares`` (N,); the steps next to turning points over their
     trap ceilings, ``trapped``, with those ceilings in ``trap_caps`` (N,, inf elsewhere);
-    the ``evaluations`` of F it made."""
+    the ``evaluations`` of F it made; the estimate's parts of int u and int Pi,
+    ``estimate_u`` and ``estimate_p`` (``estimate`` is the larger)."""
 
     int_u: float
     int_p: float
@@ -179,6 +183,8 @@ class Judged(NamedTuple):
     trap_caps: np.ndarray
     trapped: int
     evaluations: int
+    estimate_u: float
+    estimate_p: float
 
 
 @njit(cache=True, error_model="numpy")
@@ -215,7 +221,7 @@ def _judge(problem, W, N, atol, one_minus_M, residual):
     trapped, e = trapped_steps(code, params, phys, problem.stops, W, N, trap_caps,
                                problem.options.traps, problem.options.steps.accept_step)
     return Judged(int_u, int_p, scale_u, scale_p, estimate, shares, trap_caps, trapped,
-                  evaluations + e)
+                  evaluations + e, e_u / scale_u, e_p / scale_p)
 
 
 @njit(cache=True, error_model="numpy")
@@ -246,7 +252,7 @@ def _rounds(problem, start, W, evals, passes, start_kind):
     u0, h_first, model, atol = start.u0, start.h_first, start.model, start.atol
     scale_u, scale_p = start.scale_u, start.scale_p
     nan = math.nan
-    estimate = math.inf
+    estimate = estimate_u = estimate_p = math.inf
     N = 0
     failure = TOLERANCE_NOT_REACHED  # the reason of the last round's failure
     for _ in range(problem.options.point.max_rounds):
@@ -259,7 +265,7 @@ def _rounds(problem, start, W, evals, passes, start_kind):
         evals[COST_ADAPTIVE] += period_pass.evaluations
         if status != CONVERGED:
             return W, PointSolution(nan, nan, u0, status, N, passes, math.inf, evals, vscale,
-                                    start_kind)
+                                    start_kind, math.inf, math.inf)
         round_start = u0
         fn = frozen_newton(code, params, phys, u0, atol, W, N, tols.shooting, problem.bound,
                            problem.options)
@@ -269,13 +275,13 @@ def _rounds(problem, start, W, evals, passes, start_kind):
         residual = 0.0  # a shooting residual kept and counted (``_judge``)
         if fn.status != CONVERGED:
             failure = fn.status
-            estimate = math.inf
+            estimate = estimate_u = estimate_p = math.inf
             if math.isfinite(fn.restart_u0):
                 u0 = fn.restart_u0
                 continue
             if fn.status != NOT_PERIODIC:
                 return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals,
-                                        vscale, start_kind)
+                                        vscale, start_kind, estimate_u, estimate_p)
             # The frozen period map jumps over its fixed point (its bisection closed in on a
             # step of g, and its best u(0) is the round's start, so another round would
             # repeat this one): keep that start's solution unshifted and count its shooting
@@ -288,11 +294,11 @@ def _rounds(problem, start, W, evals, passes, start_kind):
             evals[COST_FROZEN] += e
             if status != CONVERGED:
                 return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals,
-                                        vscale, start_kind)
+                                        vscale, start_kind, estimate_u, estimate_p)
             g, one_minus_M = period_map(W, N, u0)
             if not (math.isfinite(g) and math.isfinite(one_minus_M) and one_minus_M != 0.0):
                 return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals,
-                                        vscale, start_kind)
+                                        vscale, start_kind, estimate_u, estimate_p)
             residual = g
         else:
             shift = g / one_minus_M
@@ -300,16 +306,16 @@ def _rounds(problem, start, W, evals, passes, start_kind):
             u0 += shift
         judged = _judge(problem, W, N, atol, one_minus_M, residual)
         evals[COST_ESTIMATE] += judged.evaluations
-        estimate = judged.estimate
+        estimate, estimate_u, estimate_p = judged.estimate, judged.estimate_u, judged.estimate_p
         scale_u, scale_p = judged.scale_u, judged.scale_p
         if estimate <= rtol and judged.trapped == 0:
             return W, PointSolution(judged.int_u, judged.int_p, u0, CONVERGED, N, passes,
-                                    estimate, evals, vscale, start_kind)
+                                    estimate, evals, vscale, start_kind, estimate_u, estimate_p)
         failure = TOLERANCE_NOT_REACHED
         model = _refinement_model(W, N, judged, tols, problem.options.steps)
         h_first = min(h_first, step_span(W, 0)[1])
     return W, PointSolution(nan, nan, u0, failure, N, passes, estimate, evals, vscale,
-                            start_kind)
+                            start_kind, estimate_u, estimate_p)
 
 
 @njit(cache=True, error_model="numpy")
@@ -431,7 +437,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit,
     evals = np.zeros(N_COSTS, dtype=np.int64)
     if vscale == 0.0:
         return W, PointSolution(0.0, 0.0, 0.0, NO_MOTION, 0, 0, 0.0, evals, vscale,
-                                START_COLD), no_orbit()
+                                START_COLD, 0.0, 0.0), no_orbit()
     problem = PointProblem(code, params, phys, point_stops, vscale,
                            tolerances(rtol, vscale, options.tolerances), max_steps,
                            u0_bound(vscale, u_guess, options.tolerances), options)
@@ -458,7 +464,7 @@ def solve_point(code, params, corners, phys, rtol, u_guess, max_steps, W, orbit,
     W, start, status, N, passes = _cold_start(problem, u_guess, W, evals)
     if status != CONVERGED:
         return W, PointSolution(math.nan, math.nan, start.u0, status, N, passes, math.inf,
-                                evals, vscale, verdict), no_orbit()
+                                evals, vscale, verdict, math.inf, math.inf), no_orbit()
     W, sol = _rounds(problem, start, W, evals, passes, verdict)
     return W, sol, _orbit_of(W, sol, problem)
 
