@@ -44,7 +44,8 @@ its cross-check (the order-5 engine, now ``periodic``, at rtol 1e-9), with the c
 seeds, settings and each set's largest disagreement (``freeze``; ``python -m solver.tools.honesty
 --freeze`` made it, in 2 h 20 min on 2 shared cores).  So the engine never checks itself,
 and a fresh clone judges in minutes.  A set whose generator changed is refused (its points'
-digest no longer matches) until it is frozen again.
+signature no longer matches within
+``SIGNATURE_RTOL``) until it is frozen again.
 
 With ``--reference-method METHOD`` every point is instead solved now by that engine (rtol
 ``--reference-rtol``, default 1e-9) and cross-checked by a second method (default the
@@ -593,10 +594,40 @@ def set_references(point_set, kinematics, physics, settings):
 
 
 def set_digest(kinematics, physics):
-    """Short hash of a set's points (kernel parameters and physics), stored with the frozen
-    references so that a changed generator is refused, not judged against stale values."""
+    """Short hash of a set's points (kernel parameters and physics), bit for bit: the record
+    of exactly which points were frozen (``freeze`` stores it beside ``set_signature``)."""
     return hashlib.sha256(np.ascontiguousarray(_fingerprint(kinematics, physics),
                                                dtype=np.float64).tobytes()).hexdigest()[:16]
+
+
+SIGNATURE_RTOL = 1e-12
+"""Tolerance of ``same_points``, relative to each column's sum of magnitudes: a point set's
+generator draws through ``exp``, ``**`` and trigonometric functions, whose last bits differ
+between CPUs and numpy builds (on 2026-12-06 all twelve sets' bit digests failed on one
+machine and held on another, same numpy 2.4.6), so equality is judged to 1e-12, far above
+rounding (~1e-16 per value, ~1e-14 summed over 2,000 points) and far below any change of a
+generator (a changed seed or range moves every column sum by O(1))."""
+
+
+def set_signature(kinematics, physics):
+    """Two numbers per fingerprint column (kernel parameters and physics) of a set's points,
+    shape (2, n_columns): the column sums of magnitudes and the column sums weighted by
+    cos(point index), so that a reordering or a change of any one point shows.  Compared
+    within ``SIGNATURE_RTOL`` by ``same_points``; stored with the frozen references."""
+    fingerprint = np.asarray(_fingerprint(kinematics, physics), dtype=np.float64)
+    weights = np.cos(np.arange(fingerprint.shape[0], dtype=np.float64))
+    return np.vstack([np.abs(fingerprint).sum(axis=0), weights @ fingerprint])
+
+
+def same_points(signature, stored):
+    """True where ``signature`` (``set_signature`` of today's points) equals the ``stored``
+    one within ``SIGNATURE_RTOL`` of each column's sum of magnitudes."""
+    signature = np.asarray(signature, dtype=np.float64)
+    stored = np.asarray(stored, dtype=np.float64)
+    if signature.shape != stored.shape:
+        return False
+    scale = np.maximum(np.abs(signature[0]), np.abs(stored[0]))
+    return bool(np.all(np.abs(signature - stored) <= SIGNATURE_RTOL * scale))
 
 
 def _git_commit():
@@ -643,6 +674,7 @@ def freeze(names, settings, path=REFERENCE_FILE):
         meta["sets"][name] = dict(
             seed=point_set.seed, points=len(kinematics), generator=point_set.generator,
             digest=set_digest(kinematics, physics),
+            signature=set_signature(kinematics, physics).tolist(),
             reference_seconds=ref.seconds, check_seconds=check.seconds,
             reference_failed=int(np.count_nonzero(~ref.converged)),
             check_failed=int(np.count_nonzero(~check.converged)),
@@ -662,7 +694,8 @@ def frozen_meta(path=REFERENCE_FILE):
 
 def frozen_references(point_set, kinematics, physics, path=REFERENCE_FILE):
     """The frozen (reference, check) ``Solves`` of the first len(kinematics) points of
-    ``point_set``.  Raises ValueError where the file lacks the set or holds other points."""
+    ``point_set``.  Raises ValueError where the file lacks the set or holds other points: judged by ``same_points`` on the stored ``set_signature`` (by the
+    bit digest where a file predates signatures)."""
     meta = frozen_meta(path)
     stored = meta["sets"].get(point_set.name)
     if stored is None:
@@ -670,7 +703,11 @@ def frozen_references(point_set, kinematics, physics, path=REFERENCE_FILE):
                          "(python -m solver.tools.honesty --freeze makes them)")
     full_kin, full_phys = point_set.sample(stored["points"])
     n = len(kinematics)
-    if set_digest(full_kin, full_phys) != stored["digest"] or n > stored["points"]:
+    if "signature" in stored:
+        same = same_points(set_signature(full_kin, full_phys), stored["signature"])
+    else:
+        same = set_digest(full_kin, full_phys) == stored["digest"]
+    if not same or n > stored["points"]:
         raise ValueError(f"--set: {point_set.name!r}'s points are not those of the frozen "
                          f"references in {path} (its generator changed, or more than "
                          f"{stored['points']} points)")
