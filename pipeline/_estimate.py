@@ -3,7 +3,7 @@
 The probe runs, in this process and on one core (one numba thread), a sample of the scene's
 own chunks through its kind's ``solve_chunk`` (the code a run's tasks execute, in the store's
 chunk layout, nothing written), and for a grid scene's polished reductions the polish of a
-few cells started from the best point of each probed chunk (``_reduce.polish_cells``, as the
+few cells started from the best point of each probed chunk (``pipeline.polish.polish_cells``, as the
 run's polish tasks call it).  Each part is projected as (its units) x (the probed mean per
 unit), summed over the kind's cost classes (``SceneKind.chunk_cost``: the optima's Kmax), and
 divided over the workers.  Before issue 45 only the grid points were probed: the optima,
@@ -215,7 +215,7 @@ def estimate_scene(scene, *, max_chunks: int = 8, budget_seconds: float = 10.0,
         for r in getattr(scene, "reductions", ()):
             if not getattr(r, "polish", False):
                 continue
-            from ._reduce import polish_cells
+            from .polish import polish_cells
 
             cells = [c for c in (_polish_cell(scene, r, chunks, idx, v) for idx, v in solved_chunks) if c][:max_cells]
             count = _cells(scene, r)

@@ -17,7 +17,8 @@ from ._grid import (chunk_region, chunk_sweeps, chunks_per_task, region_paramete
                     scene_chunks, solve_points)
 from ._grid_scene import Scene, parse_grid_scene
 from ._kind import RunContext, SceneKind, Step, tasks_by_count
-from ._reduce import grid_reduction, objective, polish_cells
+from ._reduce import grid_reduction, polish_starts
+from .polish import polish_cells
 from ._schedule import Progress, Task, compute, take_start_seconds
 from ._store import (ChunkWrite, SolvedChunk, create_skeleton, read_arrays, reduction_arrays, store_chunk,
                      write_arrays)
@@ -25,7 +26,7 @@ from ._store import (ChunkWrite, SolvedChunk, create_skeleton, read_arrays, redu
 #: points one task aims at (about 0.5-2 s of one core's solving at rtol 1e-4)
 TASK_POINTS = 1024
 
-__all__ = ["GRID", "GridKind", "compute_chunk", "compute_series", "reduce_grid", "solve_chunk"]
+__all__ = ["GRID", "GridKind", "compute_chunk", "compute_series", "reduce_grid", "solve_chunk", "write_polish_records"]
 
 
 def solve_chunk(scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> SolvedChunk:
@@ -87,8 +88,8 @@ def compute_series(store: str, scene: Scene) -> dict:
 
 
 def timed_polish(scene: Scene, r, cells: list[dict]) -> tuple[list[dict], dict]:
-    """``polish_cells`` in a task, with the task's timing (all of it solving: each evaluation is
-    a solver call)."""
+    """``pipeline.polish.polish_cells`` in a task, with the task's timing (all of it solving:
+    each evaluation is a solver call)."""
     t0, c0 = time.perf_counter(), time.process_time()
     records = polish_cells(scene, r, cells)
     seconds = time.perf_counter() - t0
@@ -96,66 +97,65 @@ def timed_polish(scene: Scene, r, cells: list[dict]) -> tuple[list[dict], dict]:
                      **take_start_seconds()}
 
 
+#: polish tasks per worker (a cell's polish calls the solver point by point, sequentially:
+#: more, smaller tasks balance the workers)
+POLISH_TASKS_PER_WORKER = 4
+
+
+def write_polish_records(r, rshape: tuple[int, ...], spec: dict, cells: list[dict], records: list[dict]) -> dict:
+    """The ``{r}_polished*`` arrays (``_store.reduction_arrays``) from one record per cell."""
+    base = f"{r.name}_polished"
+    pol = {name: np.full(rshape, fill, dtype=dtype) for name, (dtype, fill, _) in spec.items()
+           if name.startswith(base)}
+    for cell, rec in zip(cells, records):
+        pos = cell["pos"]
+        pol[f"{base}_status"][pos] = rec["status"]
+        pol[f"{base}_evaluations"][pos] = rec["evaluations"]
+        pol[f"{base}_uncertainty"][pos] = rec["uncertainty"]
+        for a in r.over:
+            pol[f"{base}_{a}_edge"][pos] = rec["edges"][a]
+        if rec["values"] is None:
+            continue  # failed: the value and arg-max stay NaN
+        v = rec["values"][r.quantity]
+        pol[base][pos] = abs(v) if r.statistic == "absmax" else v
+        if r.statistic == "absmax":
+            pol[f"{base}_signed"][pos] = v
+        for a in r.over:
+            pol[f"{base}_{a}"][pos] = rec["params"][a]
+        for q in r.report:
+            if q != r.quantity:
+                pol[f"{base}_{q}"][pos] = rec["values"][q]
+    return pol
+
+
 def reduce_grid(run: RunContext) -> list[dict]:
-    """Compute every reduction of the scene from the stored grid and write its arrays; the grid
-    optima of a polished reduction are refined in tasks (batches of cells).  The polish tasks'
-    timings."""
+    """Compute every reduction of the scene from the stored grid and write its arrays; a polished
+    reduction's cells (each from its best distinct grid basins, ``_reduce.polish_starts``) are
+    polished in tasks (batches of cells).  The polish tasks' timings."""
     scene, store, sched = run.scene, run.store, run.scheduler
     timings = []
     for r in scene.reductions:
         names = {r.quantity, *r.report}
         data = read_arrays(store, sorted(names))
-        arrays, flat = grid_reduction(scene, r, data)
+        arrays, _ = grid_reduction(scene, r, data)
         _, rshape, spec = reduction_arrays(scene, r)
-        out = {k: v for k, v in arrays.items()}
+        out = dict(arrays)
         if r.polish:
-            kept = [a for a in scene.axes if a.name not in r.over]
-            over_shape = tuple(scene.axis(a).size for a in r.over)
-            cells, where = [], []
-            for pos in np.ndindex(*rshape):
-                k = int(flat[pos])
-                if k < 0:
-                    continue
-                params = dict(scene.fixed)
-                for a, i in zip(kept, pos):
-                    params[a.name] = float(a.values[i])
-                for a, i in zip(r.over, np.unravel_index(k, over_shape)):
-                    params[a] = float(scene.axis(a).values[i])
-                subset = pos[-1] if r.subsets is not None else None
-                value = float(objective(r.statistic, np.array([arrays[r.name][pos]]))[0])
-                cells.append({"params": params, "subset": subset, "value": value})
-                where.append(pos)
-            # Batches of cells per task, so a task takes seconds.
-            # compass batches all cells of a task into each solver call: one task per worker;
-            # the scipy methods call the solver point by point: smaller tasks balance better.
-            per_worker = 1 if r.polish_method == "compass" else 4
-            n_tasks = max(1, min(len(cells), per_worker * run.n_workers))
+            cells = polish_starts(scene, r, data)
+            n_tasks = max(1, min(len(cells), POLISH_TASKS_PER_WORKER * run.n_workers))
             batches = [list(range(i, len(cells), n_tasks)) for i in range(n_tasks)] if cells else []
-            tasks = [Task(f"pipeline-polish-{r.name}-{j}", timed_polish, (scene, r, [cells[i] for i in b]))
+            tasks = [Task(f"pipeline-polish-{r.name}-{j}", timed_polish,
+                          (scene, r, [{k: cells[i][k] for k in ("starts", "subset")} for i in b]))
                      for j, b in enumerate(batches)]
             bar = Progress(len(tasks), len(cells) / max(1, len(tasks)), f"polish {r.name}", run.progress,
                            unit="tasks", rate_unit="optima/s")
             results = compute(tasks, sched, bar) if tasks else []
             timings += [t for _, t in results]
-            results = [records for records, _ in results]
-            pol = {name: np.full(rshape, fill, dtype=dtype) for name, (dtype, fill, _) in spec.items()
-                   if name.startswith(f"{r.name}_polished")}
-            base = f"{r.name}_polished"
-            for b, res in zip(batches, results):
-                for i, rec in zip(b, res):
-                    pos = where[i]
-                    v = rec["values"][r.quantity]
-                    pol[base][pos] = abs(v) if r.statistic == "absmax" else v
-                    if r.statistic == "absmax":
-                        pol[f"{base}_signed"][pos] = v
-                    for a in r.over:
-                        pol[f"{base}_{a}"][pos] = rec["params"][a]
-                    for q in r.report:
-                        if q != r.quantity:
-                            pol[f"{base}_{q}"][pos] = rec["values"][q]
-                    pol[f"{base}_status"][pos] = rec["status"]
-                    pol[f"{base}_evaluations"][pos] = rec["evaluations"]
-            out.update(pol)
+            ordered_cells, records = [], []
+            for b, (res, _) in zip(batches, results):
+                ordered_cells += [cells[i] for i in b]
+                records += res
+            out.update(write_polish_records(r, rshape, spec, ordered_cells, records))
         write_arrays(store, out)
     return timings
 

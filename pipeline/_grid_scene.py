@@ -103,7 +103,9 @@ DIAGNOSTICS: dict[str, str] = {
     "n_tau": "final tau-grid size",
 }
 _STATISTICS = ("max", "min", "absmax")
-_POLISH_METHODS = ("compass", "Nelder-Mead", "L-BFGS-B", "Powell")
+#: a polish's relative value tolerance in ``paper --quick`` (a smoke run, not a result)
+QUICK_POLISH_TOLERANCE = 1e-2
+_POLISH_METHODS = ("Powell", "Nelder-Mead", "compass")  # pipeline.polish.METHODS
 _SCHEDULERS = ("processes", "threads", "synchronous")
 
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -149,10 +151,13 @@ class Subsets:
 class Reduction:
     """A statistic of one stored quantity over some axes, with its arg-max parameters.
 
-    The result keeps the other axes (plus ``subsets.dim`` when given). With ``polish`` the best
-    grid point of every cell is refined by a bounded local optimiser over the continuous axes
-    in ``over``: "compass" (a compass search batched over cells, so each round is one solver
-    call) or one of scipy.optimize.minimize's "Nelder-Mead", "L-BFGS-B", "Powell" per cell.
+    The result keeps the other axes (plus ``subsets.dim`` when given). With ``polish`` every
+    cell is polished from its best ``polish_starts`` distinct grid basins by a bounded local
+    method over the continuous axes in ``over`` (``pipeline.polish``): "Powell" (default,
+    chosen by measurement, docs/validation.md), "Nelder-Mead" or "compass", each start until
+    the value changes by less than ``polish_tolerance`` (relative) or ``polish_max_evaluations``
+    solver calls (then the cell's status says "cap reached", never converged), at solver rtol
+    ``polish_rtol`` (default the grid's).
     """
 
     name: str
@@ -161,10 +166,12 @@ class Reduction:
     over: tuple[str, ...]
     report: tuple[str, ...] = ()
     polish: bool = False
-    polish_method: str = "compass"
+    polish_method: str = "Powell"
     polish_rtol: float | None = None
-    polish_max_evaluations: int = 200
+    polish_max_evaluations: int = 600
     subsets: Subsets | None = None
+    polish_tolerance: float = 1e-4
+    polish_starts: int = 3
 
 
 @dataclass(frozen=True)
@@ -239,6 +246,16 @@ class Scene:
     def fixed_dict(self) -> dict[str, float]:
         return dict(self.fixed)
 
+    def quick_variant(self) -> "Scene":
+        """The scene for ``pipeline paper --quick``: every polish to ``QUICK_POLISH_TOLERANCE``
+        (relative) and a quarter of its cap (the axes are reduced by ``__main__.quick_variant``)."""
+        from dataclasses import replace
+
+        reds = tuple(replace(r, polish_tolerance=max(r.polish_tolerance, QUICK_POLISH_TOLERANCE),
+                             polish_max_evaluations=max(1, r.polish_max_evaluations // 4)) if r.polish else r
+                     for r in self.reductions)
+        return replace(self, reductions=reds, science={**self.science, "reductions": [_reduction_json(r) for r in reds]})
+
     @property
     def max_wavenumber(self) -> int | None:
         """Kmax of a Fourier scene (the largest k of its coefficients A_k, B_k), else None."""
@@ -259,9 +276,11 @@ _REDUCTION_KEYS = {
     "over": "axes reduced",
     "report": "other quantities reported at the arg-max",
     "polish": "refine the grid optimum with a local optimiser",
-    "polish_method": "compass (batched, default), Nelder-Mead, L-BFGS-B or Powell",
+    "polish_method": "Powell (default), Nelder-Mead or compass",
     "polish_rtol": "solver rtol while polishing",
-    "polish_max_evaluations": "solver calls per polished optimum",
+    "polish_max_evaluations": "cap on solver calls per start (reached: status 1, not converged)",
+    "polish_tolerance": "relative value tolerance at which a start has converged (default 1e-4)",
+    "polish_starts": "distinct grid basins polished per cell (default 3)",
     "window": "nested windows of one axis",
     "exponent_sets": "nested sets of power-law exponents",
 }
@@ -279,13 +298,17 @@ def _parse_reduction(ctx: ParseContext, obj, key: str, dims, stored) -> Reductio
     over = ctx.names(obj["over"], f"{key}.over", dims)
     report = ctx.names(obj.get("report", []), f"{key}.report", stored, nonempty=False)
     polish = ctx.boolean(obj.get("polish", False), f"{key}.polish")
-    method = ctx.string(obj.get("polish_method", "compass"), f"{key}.polish_method", _POLISH_METHODS)
+    method = ctx.string(obj.get("polish_method", "Powell"), f"{key}.polish_method", _POLISH_METHODS)
     prtol = None
     if "polish_rtol" in obj:
         prtol = ctx.number(obj["polish_rtol"], f"{key}.polish_rtol")
         if not 0 < prtol <= 0.1:
             raise ctx.err(f"{key}.polish_rtol", f"must be in (0, 0.1], got {prtol:g}")
-    pmax = ctx.integer(obj.get("polish_max_evaluations", 200), f"{key}.polish_max_evaluations", lo=1)
+    pmax = ctx.integer(obj.get("polish_max_evaluations", 600), f"{key}.polish_max_evaluations", lo=1)
+    ptol = ctx.number(obj.get("polish_tolerance", 1e-4), f"{key}.polish_tolerance")
+    if not 0 < ptol < 1:
+        raise ctx.err(f"{key}.polish_tolerance", f"must be in (0, 1), got {ptol:g}")
+    pstarts = ctx.integer(obj.get("polish_starts", 3), f"{key}.polish_starts", lo=1)
     subsets = None
     if "window" in obj and "exponent_sets" in obj:
         raise ctx.err(key, "give at most one of window, exponent_sets")
@@ -323,7 +346,7 @@ def _parse_reduction(ctx: ParseContext, obj, key: str, dims, stored) -> Reductio
             parsed.append(vals)
         subsets = Subsets("exponent_sets", axes, "exponent_set", tuple(float(i) for i in range(len(parsed))),
                           sets=tuple(parsed))
-    return Reduction(name, quantity, statistic, over, report, polish, method, prtol, pmax, subsets)
+    return Reduction(name, quantity, statistic, over, report, polish, method, prtol, pmax, subsets, ptol, pstarts)
 
 
 _TOP_KEYS = {
@@ -535,7 +558,8 @@ def _reduction_array_names(r: Reduction) -> list[str]:
         names += [f"{base}_{a}" for a in r.over]
         names += [f"{base}_{q}" for q in r.report if q != r.quantity]
         if base != r.name:
-            names += [f"{base}_status", f"{base}_evaluations"]
+            names += [f"{base}_status", f"{base}_evaluations", f"{base}_uncertainty"]
+            names += [f"{base}_{a}_edge" for a in r.over]
     return names
 
 
@@ -544,7 +568,8 @@ def _reduction_json(r: Reduction) -> dict:
          "report": list(r.report), "polish": r.polish}
     if r.polish:
         d.update(polish_method=r.polish_method, polish_rtol=r.polish_rtol,
-                 polish_max_evaluations=r.polish_max_evaluations)
+                 polish_max_evaluations=r.polish_max_evaluations, polish_tolerance=r.polish_tolerance,
+                 polish_starts=r.polish_starts)
     if r.subsets is not None:
         s = r.subsets
         d["subsets"] = {"kind": s.kind, "axes": list(s.axes), "labels": list(s.labels), "center": s.center,

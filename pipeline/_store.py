@@ -338,11 +338,20 @@ def reduction_arrays(scene: Scene, r: Reduction) -> tuple[tuple[str, ...], tuple
                 continue
             arrays[f"{base}_{q}"] = (f8, np.nan, {"long_name": f"{q} at the optimum of {base}", "units": "1"})
         if kind == "polished":
+            from .polish import STATUS_MEANINGS
+
             arrays[f"{base}_status"] = (np.dtype(np.int8), NOT_COMPUTED,
-                                        {"long_name": f"solver status at the polished optimum of {r.name}",
-                                         "flag_meanings": status_meanings(scene.method)})
+                                        {"long_name": f"polish status of {r.name} (pipeline.polish.record)",
+                                         "flag_meanings": {str(NOT_COMPUTED): "not computed yet", **STATUS_MEANINGS}})
             arrays[f"{base}_evaluations"] = (np.dtype(np.int32), 0,
-                                             {"long_name": "solver calls spent polishing"})
+                                             {"long_name": "solver calls spent polishing (all starts)"})
+            arrays[f"{base}_uncertainty"] = (f8, np.nan, {
+                "long_name": f"relative convergence estimate of {base}: spread of the starts that reached "
+                             "the best basin, else the best start's last relative change", "units": "1"})
+            for ax in r.over:
+                arrays[f"{base}_{ax}_edge"] = (np.dtype(np.int8), 0, {
+                    "long_name": f"{ax} at the optimum of {base} on the polish domain's edge",
+                    "flag_meanings": {"-1": "lower end", "0": "interior", "1": "upper end"}})
     return dims, shape, arrays
 
 

@@ -65,7 +65,7 @@ points_per_task = 8
 
 
 def small_scene_text(rtol: float = 1e-3, polish: bool = False) -> str:
-    extra = "polish = true\npolish_max_evaluations = 12" if polish else ""
+    extra = "polish = true\npolish_max_evaluations = 200\npolish_rtol = 1e-6" if polish else ""
     return SMALL.replace("{rtol}", repr(rtol)).replace("{polish}", extra)
 
 
