@@ -26,8 +26,9 @@ def cell_record(space, starts: list[dict], results: list, subset) -> dict:
     Returns
     -------
     dict with ``params`` and ``values`` of the best point, ``evaluations`` (all starts),
-    ``status`` (0 converged, 1 cap reached by the best start or by any start that ended
-    within the tolerance-free comparison below it, 2 failed), ``uncertainty`` (the relative
+    ``status`` (0 converged: the best start met its value tolerance and no start reached the
+    cap; 1 cap reached by any start, or the best start stopped unconverged; 2 no start gave a
+    valid solve), ``uncertainty`` (the relative
     spread of the values of the starts that ended in the best one's basin, within one grid step
     of it along every free axis and on the same discrete values; where it alone ended there,
     its last relative change per iteration; NaN if unknown), ``edges`` ({axis: -1, 0, +1}) and
