@@ -44,7 +44,7 @@ EXIT_TERMINATED = 143  # 128 + SIGTERM
 #: cause checks of the reproduction audit, reports/claims.toml).
 PAPER_SCENES = ("quick", "harmonic_grid", "harmonic_diagonals", "harmonic_optimum", "duty_cycle",
                 "linear_two_phase", "exponent_sets", "power_law", "fourier_optima", "force_laws",
-                "linear_two_phase_box", "fourier_optima_edge", "exponent_sets_coarse", "exponent_sets_fine", "accuracy",
+                "fourier_optima_edge", "accuracy",
                 "stiffness")
 #: The shipped scene files: package data of :mod:`workflows`, found wherever it is installed.
 WORKFLOWS = _workflows.DIRECTORY

@@ -142,10 +142,15 @@ def reduce_grid(run: RunContext) -> list[dict]:
         out = dict(arrays)
         if r.polish:
             cells = polish_starts(scene, r, data)
-            n_tasks = max(1, min(len(cells), POLISH_TASKS_PER_WORKER * run.n_workers))
-            batches = [list(range(i, len(cells), n_tasks)) for i in range(n_tasks)] if cells else []
+            # a grid cell's subsets stay in one task, in order (pipeline.polish.polish_cells)
+            groups: dict = {}
+            for i, c in enumerate(cells):
+                groups.setdefault(c["group"], []).append(i)
+            members = list(groups.values())
+            n_tasks = max(1, min(len(members), POLISH_TASKS_PER_WORKER * run.n_workers))
+            batches = [[i for g in members[t::n_tasks] for i in g] for t in range(n_tasks)] if cells else []
             tasks = [Task(f"pipeline-polish-{r.name}-{j}", timed_polish,
-                          (scene, r, [{k: cells[i][k] for k in ("starts", "subset")} for i in b]))
+                          (scene, r, [{k: cells[i][k] for k in ("starts", "subset", "group")} for i in b]))
                      for j, b in enumerate(batches)]
             bar = Progress(len(tasks), len(cells) / max(1, len(tasks)), f"polish {r.name}", run.progress,
                            unit="tasks", rate_unit="optima/s")

@@ -105,7 +105,7 @@ DIAGNOSTICS: dict[str, str] = {
 _STATISTICS = ("max", "min", "absmax")
 #: a polish's relative value tolerance in ``paper --quick`` (a smoke run, not a result)
 QUICK_POLISH_TOLERANCE = 1e-2
-_POLISH_METHODS = ("Powell", "Nelder-Mead", "compass")  # pipeline.polish.METHODS
+_POLISH_METHODS = ("L-BFGS-B", "Powell", "Nelder-Mead", "compass")  # pipeline.polish.METHODS
 _SCHEDULERS = ("processes", "threads", "synchronous")
 
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -153,8 +153,8 @@ class Reduction:
 
     The result keeps the other axes (plus ``subsets.dim`` when given). With ``polish`` every
     cell is polished from its best ``polish_starts`` distinct grid basins by a bounded local
-    method over the continuous axes in ``over`` (``pipeline.polish``): "Powell" (default,
-    chosen by measurement, docs/validation.md), "Nelder-Mead" or "compass", each start until
+    method over the continuous axes in ``over`` (``pipeline.polish``): "L-BFGS-B" (default,
+    chosen by measurement, docs/validation.md), "Powell", "Nelder-Mead" or "compass", each start until
     the value changes by less than ``polish_tolerance`` (relative) or ``polish_max_evaluations``
     solver calls (then the cell's status says "cap reached", never converged), at solver rtol
     ``polish_rtol`` (default the grid's).
@@ -166,7 +166,7 @@ class Reduction:
     over: tuple[str, ...]
     report: tuple[str, ...] = ()
     polish: bool = False
-    polish_method: str = "Powell"
+    polish_method: str = "L-BFGS-B"
     polish_rtol: float | None = None
     polish_max_evaluations: int = 600
     subsets: Subsets | None = None
@@ -276,7 +276,7 @@ _REDUCTION_KEYS = {
     "over": "axes reduced",
     "report": "other quantities reported at the arg-max",
     "polish": "refine the grid optimum with a local optimiser",
-    "polish_method": "Powell (default), Nelder-Mead or compass",
+    "polish_method": "L-BFGS-B (default), Powell, Nelder-Mead or compass",
     "polish_rtol": "solver rtol while polishing",
     "polish_max_evaluations": "cap on solver calls per start (reached: status 1, not converged)",
     "polish_tolerance": "relative value tolerance at which a start has converged (default 1e-4)",
@@ -298,7 +298,7 @@ def _parse_reduction(ctx: ParseContext, obj, key: str, dims, stored) -> Reductio
     over = ctx.names(obj["over"], f"{key}.over", dims)
     report = ctx.names(obj.get("report", []), f"{key}.report", stored, nonempty=False)
     polish = ctx.boolean(obj.get("polish", False), f"{key}.polish")
-    method = ctx.string(obj.get("polish_method", "Powell"), f"{key}.polish_method", _POLISH_METHODS)
+    method = ctx.string(obj.get("polish_method", "L-BFGS-B"), f"{key}.polish_method", _POLISH_METHODS)
     prtol = None
     if "polish_rtol" in obj:
         prtol = ctx.number(obj["polish_rtol"], f"{key}.polish_rtol")

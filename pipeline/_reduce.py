@@ -105,9 +105,12 @@ def grid_reduction(scene: Scene, r: Reduction, data: dict[str, np.ndarray]) -> t
 
 def polish_starts(scene: Scene, r: Reduction, data: dict[str, np.ndarray]) -> list[dict]:
     """The cells a polish of ``r`` runs: per kept grid position (and subset) with a valid point,
-    ``{"pos": index into the reduction's shape, "subset": int | None, "starts": [params, ...]}``,
+    ``{"pos": index into the reduction's shape, "subset": int | None, "group": the kept position
+    (one per grid cell, shared by its subsets), "starts": [params, ...]}``,
     the starts the best ``r.polish_starts`` distinct grid basins inside the subset
-    (``pipeline.polish.distinct_starts``), each with every parameter of its point."""
+    (``pipeline.polish.distinct_starts``), then the best basin of every other subset that lies
+    inside this one (nested windows: the wider one starts from the narrower one's best too),
+    each with every parameter of its point."""
     from .polish import distinct_starts
 
     dims = scene.dims
@@ -121,10 +124,17 @@ def polish_starts(scene: Scene, r: Reduction, data: dict[str, np.ndarray]) -> li
     continuous = tuple(scene.axis(a).continuous for a in r.over)
     cells = []
     for kpos in np.ndindex(*kept_shape):
+        found = [distinct_starts(np.where(mask, o[kpos], -np.inf), continuous, r.polish_starts) for mask in masks]
         for j, mask in enumerate(masks):
-            block = np.where(mask, o[kpos], -np.inf)
+            flat = list(found[j])
+            # The best basin of another subset that lies inside this one starts here too: a wider
+            # window's best basin may be a grid neighbour of its edge and not a local maximum of
+            # the wider block, and its maximum must not fall below the narrower one's.
+            for other in found:
+                if other and other[0] not in flat and mask.reshape(-1)[other[0]]:
+                    flat.append(other[0])
             starts = []
-            for k in distinct_starts(block, continuous, r.polish_starts):
+            for k in flat:
                 params = dict(scene.fixed)
                 for a, i in zip(kept, kpos):
                     params[a.name] = float(a.values[i])
@@ -134,5 +144,5 @@ def polish_starts(scene: Scene, r: Reduction, data: dict[str, np.ndarray]) -> li
             if starts:
                 subset = j if r.subsets is not None else None
                 cells.append({"pos": kpos + ((j,) if r.subsets is not None else ()), "subset": subset,
-                              "starts": starts})
+                              "group": kpos, "starts": starts})
     return cells

@@ -21,6 +21,11 @@ def test_quick_paper_keeps_every_figure_and_leaves_out_only_the_studies():
 def test_quick_variant_keeps_three_points_per_axis_and_four_starts(tmp_path):
     scene = cli_main.quick_variant(cli_main.WORKFLOWS / "power_law.toml")
     assert scene.axis("A0").size == scene.axis("A1_ratio").size == 3  # num = 5 -> 3, not 1
+    # the polish of a quick run: loose tolerance, a quarter of the cap (issue 44), hashed apart
+    full = cli_main.load_scene(cli_main.WORKFLOWS / "power_law.toml")
+    (r,), (rf,) = scene.reductions, full.reductions
+    assert (r.polish_tolerance, r.polish_max_evaluations) == (1e-2, rf.polish_max_evaluations // 4)
+    assert scene.science["reductions"][0]["polish_tolerance"] == 1e-2
     optima = cli_main.quick_variant(cli_main.WORKFLOWS / "fourier_optima.toml")
     assert optima.n_starts == 4  # num = 12 starts -> 12 // 4 = 3 -> at least 4
 

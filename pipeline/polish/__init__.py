@@ -49,8 +49,11 @@ def polish_cells(scene, r, cells: list[dict], *, tolerance: float | None = None,
     Parameters
     ----------
     cells : list of dict
-        ``{"starts": [params, ...], "subset": int | None}``, the start points best first (every
-        parameter of each, ``starts.distinct_starts``); ``{"params": ...}`` alone is one start.
+        ``{"starts": [params, ...], "subset": int | None, "group": hashable}``, the start points
+        best first (every parameter of each, ``starts.distinct_starts``); ``{"params": ...}``
+        alone is one start.  Cells of one ``group`` (the subsets of one grid cell, in the order
+        of the subsets) are polished in order, each also from the earlier ones' optima that lie
+        in its domain (``PolishSpace.inside``).
     tolerance, max_evaluations, method, rtol :
         Override the scene's ``polish_tolerance``, ``polish_max_evaluations`` (per start),
         ``polish_method`` and polish rtol (for measurements and tests).
@@ -67,8 +70,16 @@ def polish_cells(scene, r, cells: list[dict], *, tolerance: float | None = None,
     rt = polish_rtol(scene, r) if rtol is None else rtol
     space = PolishSpace(scene, r)
     out = []
+    polished: dict = {}  # group -> arg-max of the cells of that group polished so far
     for cell in cells:
-        starts = cell.get("starts") or [cell["params"]]
+        starts = list(cell.get("starts") or [cell["params"]])
+        group = cell.get("group")
+        # The optimum of another subset of the same grid cell that lies in this one's domain
+        # (a narrower window, a smaller exponent set) starts here too: the maximum over a wider
+        # domain is then never below the narrower one's.
+        for p in polished.get(group, []) if group is not None else []:
+            if space.inside(p, cell["subset"]):
+                starts.append(p)
         bounds = space.bounds(cell["subset"])
         results = []
         for base in starts:
@@ -77,5 +88,8 @@ def polish_cells(scene, r, cells: list[dict], *, tolerance: float | None = None,
 
             results.append(maximise(fun, space.to_x(base), bounds, space.step, tolerance=tol,
                                     max_evaluations=cap, method=how))
-        out.append(cell_record(space, starts, results, cell["subset"]))
+        rec = cell_record(space, starts, results, cell["subset"])
+        if group is not None and rec["values"] is not None:
+            polished.setdefault(group, []).append(rec["params"])
+        out.append(rec)
     return out

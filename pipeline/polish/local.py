@@ -1,9 +1,11 @@
 """The local method of a polish: a bounded maximiser that stops on a relative value tolerance.
 
 ``maximise`` runs one start. It counts solver calls (each distinct point once), stops at the
-cap (a result that says so, never "converged"), and keeps the value after every iteration,
-whose last relative change is the run's own convergence estimate. The methods were chosen by
-measurement (docs/validation.md, "Polish method"): Powell (default), Nelder-Mead, compass.
+cap (a result that says so, never "converged"), and restarts the method from its best point
+until a whole run gains less than the tolerance; that last gain is the start's own
+convergence estimate. The methods were chosen by
+measurement (docs/validation.md, "Polish method"): L-BFGS-B (default: forward-difference
+gradients), Powell, Nelder-Mead, compass.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import numpy as np
 
 __all__ = ["LocalResult", "maximise", "METHODS"]
 
-METHODS = ("Powell", "Nelder-Mead", "compass")
+METHODS = ("L-BFGS-B", "Powell", "Nelder-Mead", "compass")
 
 
 @dataclass(frozen=True)
@@ -29,7 +31,8 @@ class LocalResult:
     evaluations : int  distinct points evaluated (solver calls)
     converged : bool  the method's value tolerance was met before the cap
     capped : bool  the cap stopped the run
-    last_change : float  relative change of the value over the last iteration (NaN if none)
+    last_change : float  relative change of the value over the last run (the restart that
+        confirmed convergence; compass: its last accepted move), NaN if none
     """
 
     x: np.ndarray
@@ -73,7 +76,7 @@ def _relative_change(history: list[float]) -> float:
 
 
 def maximise(fun, x0, bounds, step, *, tolerance: float, max_evaluations: int,
-             method: str = "Powell") -> LocalResult:
+             method: str = "L-BFGS-B") -> LocalResult:
     """Maximise ``fun`` from ``x0`` inside ``bounds``.
 
     Parameters
@@ -83,16 +86,27 @@ def maximise(fun, x0, bounds, step, *, tolerance: float, max_evaluations: int,
     x0 : ndarray, shape (n_free,)
     bounds : ndarray, shape (n_free, 2)
     step : ndarray, shape (n_free,)  the scale of a move (one grid spacing)
-    tolerance : relative value tolerance: the run has converged when one iteration changes
-        the value by less than ``tolerance`` times its size (Powell's ``ftol``; Nelder-Mead's
-        simplex spread; compass: a poll at 1/64 of a grid step that gains less).
+    tolerance : relative value tolerance: the run has converged when the method, restarted
+        from its best point, gains less than ``tolerance`` times the value in a whole run (each
+        run stops on the method's own test at that tolerance: Powell's and L-BFGS-B's ``ftol``,
+        Nelder-Mead's simplex spread); compass: a poll at 1/64 of a grid step that gains less.
     max_evaluations : cap on solver calls (``capped`` when reached).
     """
     from scipy.optimize import minimize
 
-    bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 2)
-    x0 = np.clip(np.asarray(x0, dtype=np.float64), bounds[:, 0], bounds[:, 1])
     step = np.asarray(step, dtype=np.float64)
+    # Every method works in units of one grid step (z = x / step): a first move, a difference
+    # quotient and a simplex then have the grid's scale on every axis (L-BFGS-B's first line
+    # search otherwise jumps a whole unit of x, across basins, to a corner of the box).
+    unit = np.where(step > 0, step, 1.0)
+    bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 2) / unit[:, None]
+    x0 = np.clip(np.asarray(x0, dtype=np.float64) / unit, bounds[:, 0], bounds[:, 1])
+    user_fun = fun
+
+    def fun(z):
+        return user_fun(z * unit)
+
+    step = np.ones_like(unit)
     f = _Counted(fun, bounds, max_evaluations)
     history: list[float] = []
     converged = capped = False
@@ -104,31 +118,42 @@ def maximise(fun, x0, bounds, step, *, tolerance: float, max_evaluations: int,
         elif method == "compass":
             converged = _compass(f, x0, v0, bounds, step, tolerance, history)
         else:
+            scale = max(abs(v0), 1e-300)  # the value in units of the start's: tolerances are relative
+
             def neg(x):
                 v = f(x)
-                return -v if np.isfinite(v) else 1e300
-
-            def callback(*args):
-                history.append(f.best[0])
+                return -v / scale if np.isfinite(v) else 1e300
 
             if method == "Powell":
                 opts = {"ftol": tolerance, "xtol": 1e-2, "maxfev": 10 ** 9, "direc": np.diag(step)}
             elif method == "Nelder-Mead":
-                simplex = [x0]
-                for j in range(len(x0)):
-                    e = x0.copy()
-                    e[j] = x0[j] + (step[j] if x0[j] + step[j] <= bounds[j, 1] else -step[j])
-                    simplex.append(e)
-                opts = {"maxfev": 10 ** 9, "initial_simplex": np.array(simplex),
-                        "xatol": 1e-3 * float(step.min()), "fatol": tolerance * max(abs(v0), 1e-300)}
+                opts = {"maxfev": 10 ** 9, "initial_simplex": _simplex(x0, bounds, step),
+                        "xatol": 1e-3 * float(step.min()), "fatol": tolerance}
+            elif method == "L-BFGS-B":
+                # gradients by forward differences of 1e-3 grid step (solver noise ~ rtol is far below)
+                opts = {"maxfun": 10 ** 9, "ftol": tolerance, "gtol": 0.0, "eps": 1e-3}
             else:
                 raise ValueError(f"unknown polish method {method!r} (one of {', '.join(METHODS)})")
-            try:
-                res = minimize(neg, x0, method=method, bounds=[tuple(b) for b in bounds], options=opts,
-                               callback=callback)
-                converged = bool(res.success)
-            except (ValueError, FloatingPointError):  # a failed optimiser run keeps its best point
-                converged = False
+            # Converged when a whole run restarted from the best point so far (fresh directions,
+            # simplex or Hessian) gains less than the tolerance: a run's own test stops too
+            # early on a curved ridge (Powell's line searches along stale directions gain little
+            # per iteration; L-BFGS-B's line search gives up on solver noise).
+            x = x0
+            while True:
+                before = f.best[0]
+                try:
+                    minimize(neg, x, method=method, bounds=[tuple(b) for b in bounds], options=opts)
+                except (ValueError, FloatingPointError):  # a failed optimiser run keeps its best point
+                    converged = False
+                    break
+                x = np.asarray(f.best[1], dtype=np.float64)
+                gain = (f.best[0] - before) / max(abs(f.best[0]), 1e-300)
+                history.append(f.best[0])
+                if before > -np.inf and not gain > tolerance:
+                    converged = True
+                    break
+                if method == "Nelder-Mead":
+                    opts["initial_simplex"] = _simplex(x, bounds, step)
     except _Capped:
         capped, converged = True, False
     value, x, record = f.best
@@ -136,9 +161,19 @@ def maximise(fun, x0, bounds, step, *, tolerance: float, max_evaluations: int,
         x = x0
     if not history or history[-1] != value:
         history.append(value)
-    return LocalResult(x=np.asarray(x), value=float(value), record=record, evaluations=len(f.cache),
+    return LocalResult(x=np.asarray(x) * unit, value=float(value), record=record, evaluations=len(f.cache),
                        converged=converged and np.isfinite(value), capped=capped,
                        last_change=_relative_change(history))
+
+
+def _simplex(x0, bounds, step) -> np.ndarray:
+    """Nelder-Mead's first simplex: ``x0`` and one grid step along each axis (inwards at a bound)."""
+    simplex = [x0]
+    for j in range(len(x0)):
+        e = x0.copy()
+        e[j] = x0[j] + (step[j] if x0[j] + step[j] <= bounds[j, 1] else -step[j])
+        simplex.append(e)
+    return np.array(simplex)
 
 
 def _compass(f, x, v, bounds, step, tolerance, history) -> bool:

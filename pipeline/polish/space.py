@@ -65,6 +65,18 @@ class PolishSpace:
         b = np.array([self.axis_bounds(a, subset) for a in self.free], dtype=np.float64).reshape(-1, 2)
         return np.where(self.log[:, None], np.log2(np.where(self.log[:, None], b, 1.0)), b)
 
+    def inside(self, params: dict, subset: int | None) -> bool:
+        """``params`` lies in the polish domain of ``subset``: the free axes inside the box, the
+        discrete ones in an exponent-set subset's set."""
+        b = self.bounds(subset)
+        x = self.to_x(params)
+        if np.any(x < b[:, 0] - 1e-12) or np.any(x > b[:, 1] + 1e-12):
+            return False
+        s = self.r.subsets
+        if s is not None and s.kind == "exponent_sets" and subset is not None:
+            return all(abs(params[a]) in s.sets[subset] for a in s.axes)
+        return True
+
     def edges(self, params: dict, subset: int | None) -> dict[str, int]:
         """Per ``over`` axis: -1 where ``params`` lies on the box's lower end, +1 on its upper
         end, 0 inside (within ``EDGE_FRACTION`` of a grid step; discrete axes: 0)."""
