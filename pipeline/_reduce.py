@@ -108,10 +108,12 @@ def polish_starts(scene: Scene, r: Reduction, data: dict[str, np.ndarray]) -> li
     ``{"pos": index into the reduction's shape, "subset": int | None, "group": the kept position
     (one per grid cell, shared by its subsets), "starts": [params, ...]}``,
     the starts the best ``r.polish_starts`` distinct grid basins inside the subset
-    (``pipeline.polish.distinct_starts``), then the best basin of every other subset that lies
+    (``pipeline.polish.distinct_starts``), the best point of each face of the box not within
+    one grid step of those (``pipeline.polish.face_starts``), then the best basin of every
+    other subset that lies
     inside this one (nested windows: the wider one starts from the narrower one's best too),
     each with every parameter of its point."""
-    from .polish import distinct_starts
+    from .polish import distinct_starts, face_starts
 
     dims = scene.dims
     over_pos = [dims.index(a) for a in r.over]
@@ -124,9 +126,11 @@ def polish_starts(scene: Scene, r: Reduction, data: dict[str, np.ndarray]) -> li
     continuous = tuple(scene.axis(a).continuous for a in r.over)
     cells = []
     for kpos in np.ndindex(*kept_shape):
-        found = [distinct_starts(np.where(mask, o[kpos], -np.inf), continuous, r.polish_starts) for mask in masks]
+        blocks = [np.where(mask, o[kpos], -np.inf) for mask in masks]
+        found = [distinct_starts(b, continuous, r.polish_starts) for b in blocks]
         for j, mask in enumerate(masks):
             flat = list(found[j])
+            flat += face_starts(blocks[j], continuous, flat)
             # The best basin of another subset that lies inside this one starts here too: a wider
             # window's best basin may be a grid neighbour of its edge and not a local maximum of
             # the wider block, and its maximum must not fall below the narrower one's.

@@ -241,6 +241,9 @@ def synthetic_store(store: Path, scene_file: Path, *, quick: bool = False) -> Pa
             if r.polish:
                 g[f"{r.name}_polished_status"][...] = 0
                 g[f"{r.name}_polished_evaluations"][...] = 7
+                if f"{r.name}_polished_uncertainty" in g:  # the polish record (issue 44)
+                    g[f"{r.name}_polished_uncertainty"][...] = 1e-5
+                    g[f"{r.name}_polished_{r.over[-1]}_edge"][...] = 1
         if scene.series is not None:
             tau = np.arange(scene.series.n_tau) / scene.series.n_tau
             g["series_u"][...] = np.sin(2 * np.pi * tau)[None, :] * np.ones((len(scene.series.points), 1))

@@ -83,3 +83,16 @@ def test_record_status_uncertainty_and_edges():
     failed = maximise(failing, np.array([0.5, 0.5]), bounds, space.step, tolerance=1e-4, max_evaluations=50)
     rec = cell_record(space, [{}], [failed], None)
     assert rec["status"] == FAILED and rec["values"] is None
+
+
+def test_face_starts_add_the_best_point_of_each_face_not_near_a_taken_start():
+    from pipeline.polish import face_starts
+
+    o = np.zeros((5, 5))
+    o[2, 2] = 9.0            # the interior basin (taken)
+    o[0, 3] = 2.0            # best of face axis0=0
+    o[4, 1], o[3, 0] = 1.0, 1.5   # best of face axis0=4 and of face axis1=0 (neighbours: one start)
+    taken = [2 * 5 + 2]
+    got = face_starts(o, (True, True), taken)
+    assert got[0] == 0 * 5 + 3 and 3 * 5 + 0 in got and 4 * 5 + 1 not in got
+    assert all(k != taken[0] for k in got)

@@ -159,6 +159,17 @@ def test_section_states_provenance_failures_and_errors(site):
     assert "2<sup>-4</sup>" in html and "λ/λ<sub>ub</sub>" in html and "A<sub>1</sub>/A<sub>0</sub>" in html
 
 
+def test_polished_reductions_say_status_uncertainty_and_edges(site):
+    """Issue 44, item 3: a polished reduction's summary and table say whether each maximum
+    converged, how well, and which domain ends its arg-max lies on."""
+    section = _view(site["html"], "scene-tiny_plane")
+    assert re.search(r"polish status: \d+ converged", section)
+    assert "relative uncertainty median" in section
+    assert "<th>uncertainty (relative)</th><th>on the domain's edge</th>" in section
+    synthetic = _view(site["html"], "scene-linear_two_phase")
+    assert "at its upper end in" in synthetic and "upper</td>" in synthetic
+
+
 def test_optima_section_has_motions_curves_and_outcomes(site):
     import pipeline
 

@@ -13,10 +13,10 @@ import numpy as np
 from .local import METHODS, LocalResult, maximise
 from .record import CAPPED, CONVERGED, FAILED, STATUS_MEANINGS, cell_record
 from .space import EDGE_FRACTION, PolishSpace
-from .starts import distinct_starts
+from .starts import distinct_starts, face_starts
 
 __all__ = ["polish_cells", "polish_rtol", "PolishSpace", "distinct_starts", "maximise", "LocalResult",
-           "cell_record", "METHODS", "STATUS_MEANINGS", "CONVERGED", "CAPPED", "FAILED", "EDGE_FRACTION",
+           "cell_record", "face_starts", "METHODS", "STATUS_MEANINGS", "CONVERGED", "CAPPED", "FAILED", "EDGE_FRACTION",
            "solve_objective"]
 
 
@@ -78,7 +78,7 @@ def polish_cells(scene, r, cells: list[dict], *, tolerance: float | None = None,
         # (a narrower window, a smaller exponent set) starts here too: the maximum over a wider
         # domain is then never below the narrower one's.
         for p in polished.get(group, []) if group is not None else []:
-            if space.inside(p, cell["subset"]):
+            if space.inside(p, cell["subset"]) and p not in starts:
                 starts.append(p)
         bounds = space.bounds(cell["subset"])
         results = []
