@@ -165,15 +165,18 @@ def _reduction_table(sd: SceneStore, red: dict) -> str:
     with np.errstate(divide="ignore", invalid="ignore"):
         gain = (pv - gv) / np.abs(gv)
     fin = np.isfinite(gain)
+    record = _polish_record(sd, red, dims, gv.shape)
     summary = (f"<p>Reduction <code>{esc(red['name'])}</code> ({label}): {gv.size} cells; polishing changed the "
                f"maximum by median {np.median(gain[fin]) * 100 if fin.any() else float('nan'):.3g} %, "
                f"at most {np.max(gain[fin]) * 100 if fin.any() else float('nan'):.3g} %; "
-               f"{int(np.count_nonzero(pst > 0))} polished optima failed; "
-               f"{int(pev.sum()) if pev is not None else '?'} solver calls spent polishing.</p>")
+               + (record["summary"] if record else f"{int(np.count_nonzero(pst > 0))} polished optima failed; ")
+               + f"{int(pev.sum()) if pev is not None else '?'} solver calls spent polishing.</p>")
     head = "".join(f"<th>{param_label(d, sd.p)}</th>" for d in dims)
     over = [a for a in red.get("over", []) if a in arrays["grid"]]
     head += "<th>grid max</th><th>polished max</th><th>change</th>"
     head += "".join(f"<th>grid / polished {param_label(a, sd.p)}</th>" for a in over) + "<th>polish status</th>"
+    if record:
+        head += "<th>uncertainty (relative)</th><th>on the domain's edge</th>"
     rows = []
     for ix in np.ndindex(*gv.shape):
         if len(rows) >= 60:
@@ -185,11 +188,46 @@ def _reduction_table(sd: SceneStore, red: dict) -> str:
             ga = float(sd.ds[arrays['grid'][a]].transpose(*dims).values[ix])
             pa = float(sd.ds[pol[a]].transpose(*dims).values[ix]) if a in pol else float("nan")
             cells += f"<td class='num'>{format_value(a, ga)} / {format_value(a, pa)}</td>"
-        cells += f"<td class='num'>{int(pst[ix])}</td>"
+        if record:
+            cells += f"<td>{esc(record['status_words'].get(str(int(pst[ix])), str(int(pst[ix]))))}</td>"
+            cells += f"<td class='num'>{fmt(record['uncertainty'][ix], 2)}</td><td>{esc(record['edge_text'](ix))}</td>"
+        else:
+            cells += f"<td class='num'>{int(pst[ix])}</td>"
         rows.append(f"<tr>{cells}</tr>")
     more = f" (first {len(rows)} of {gv.size})" if len(rows) < gv.size else ""
     return (summary + f"<details><summary>grid and polished maxima side by side{more}</summary>"
             + scroll_table(f"<table><tr>{head}</tr>{''.join(rows)}</table>") + "</details>")
+
+
+#: words of the polish statuses (pipeline.polish.record.STATUS_MEANINGS), short for a table
+_POLISH_STATUS = {"-1": "not computed", "0": "converged", "1": "cap reached (not converged)", "2": "failed"}
+
+
+def _polish_record(sd: SceneStore, red: dict, dims: list, shape: tuple) -> dict | None:
+    """The polish record of reduction ``red`` (issue 44: status, uncertainty, edges), or None
+    for a store written before it: a summary sentence, per-cell uncertainty and edge text."""
+    base = f"{red['name']}_polished"
+    if f"{base}_uncertainty" not in sd.ds:
+        return None
+    st = np.asarray(sd.ds[f"{base}_status"].transpose(*dims).values).astype(int)
+    unc = np.asarray(sd.ds[f"{base}_uncertainty"].transpose(*dims).values, dtype=np.float64)
+    edges = {a: np.asarray(sd.ds[f"{base}_{a}_edge"].transpose(*dims).values).astype(int)
+             for a in red.get("over", []) if f"{base}_{a}_edge" in sd.ds}
+    counts = {k: int(np.count_nonzero(st == int(k))) for k in _POLISH_STATUS}
+    words = ", ".join(f"{n} {_POLISH_STATUS[k]}" for k, n in counts.items() if n)
+    fu = unc[np.isfinite(unc)]
+    on_edge = [f"{param_label(a, sd.p)} at its lower end in {int(np.count_nonzero(e < 0))} cells, upper end in "
+               f"{int(np.count_nonzero(e > 0))}" for a, e in edges.items() if np.any(e != 0)]
+    summary = (f"polish status: {words}; relative uncertainty median {np.median(fu):.2g}, at most "
+               f"{np.max(fu):.2g}; " if fu.size else f"polish status: {words}; ")
+    summary += ("arg-max on the polish domain's edge: " + "; ".join(on_edge) + "; ") if on_edge else \
+        "no arg-max on the polish domain's edge; "
+
+    def edge_text(ix) -> str:
+        out = [f"{param_label(a, sd.p)} {'lower' if e[ix] < 0 else 'upper'}" for a, e in edges.items() if e[ix] != 0]
+        return ", ".join(out) or "interior"
+
+    return {"summary": summary, "uncertainty": unc, "status_words": _POLISH_STATUS, "edge_text": edge_text}
 
 
 # ---------------------------------------------------------------------------
