@@ -64,7 +64,8 @@ from ._store import (ChunkWrite, SolvedChunk, create_array, finish_skeleton, new
                      write_arrays)
 
 __all__ = ["OPTIMA", "OptimaKind", "distinct_optima", "fourier_samples", "STOP_CODES", "KIND_VERSION",
-           "create_optima_skeleton", "compute_optima_chunk", "reduce_optima"]
+           "create_optima_skeleton", "compute_optima_chunk", "reduce_optima", "accepted_starts",
+           "reflect_about_half_pi", "START_FLAGS"]
 
 #: starts one task aims at (``OptimaKind.chunks_per_task``)
 TASK_STARTS = 16
@@ -404,14 +405,11 @@ def compute_optima_chunk(store: str, scene: OptimaScene, chunks: tuple[int, ...]
 # the reduction over a whole store
 
 
-def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The kept distinct optima of every cell from the per-start arrays ``data`` (whole store)."""
-    specs = reduction_specs(scene)
-    n_r, n_k, n_p, _ = scene.shape
-    sizes = {"anisotropy_ratio": n_r, "max_wavenumber": n_k, "p": n_p, "rank": scene.keep.best,
-             "coefficient": scene.n_coefficients, "tau": scene.keep.n_tau}
-    out = {name: np.full(tuple(sizes[d] for d in dims), fill, dtype=dtype)
-           for name, (dims, dtype, fill, _) in specs.items()}
+def accepted_starts(scene: OptimaScene, data: dict[str, np.ndarray]) -> np.ndarray:
+    """The starts whose end may be an optimum, bool of the per-start shape: the stop reason
+    accepted (``keep.accept``) or the gradient norm below ``keep.accept_gradient_norm``, the
+    period not at its box, and certified (where the store has ``certified``).  The reduction
+    further drops starts at rest and without a finite efficiency."""
     accepted = np.isin(data["status"], [STOP_CODES[a] for a in scene.keep.accept])
     # converged to the objective's noise: gtol 1e-7 can lie below the rounding level of lambda
     # at stiff cells, where the search ends "no_progress" or "ill_conditioned" at the optimum
@@ -421,6 +419,18 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
         accepted &= data["period_at_bound"] != 1
     if "certified" in data:  # the frozen steps' optimum, not the engine's (issue 47): not kept
         accepted &= data["certified"] == 1
+    return accepted
+
+
+def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The kept distinct optima of every cell from the per-start arrays ``data`` (whole store)."""
+    specs = reduction_specs(scene)
+    n_r, n_k, n_p, _ = scene.shape
+    sizes = {"anisotropy_ratio": n_r, "max_wavenumber": n_k, "p": n_p, "rank": scene.keep.best,
+             "coefficient": scene.n_coefficients, "tau": scene.keep.n_tau}
+    out = {name: np.full(tuple(sizes[d] for d in dims), fill, dtype=dtype)
+           for name, (dims, dtype, fill, _) in specs.items()}
+    accepted = accepted_starts(scene, data)
     keep = scene.keep
     for cell in np.ndindex(n_r, n_k, n_p):
         ok = accepted[cell] & np.isfinite(data["relative_efficiency"][cell])
