@@ -793,7 +793,16 @@ def optimize_motion(family_template, physics_template, start=None, *, grid=None,
                and not check["grid_error"] <= opts.certify_tolerance):
             certify_rounds += 1
             fine_rtol = grid_rtol * 10.0 ** -certify_rounds
-            grid = descend(adaptive_grid(kin, phys, rtol=fine_rtol), fine_rtol, 1, False, gtol)
+            try:
+                grid = adaptive_grid(kin, phys, rtol=fine_rtol)
+            except RuntimeError:  # no converged solve to adapt the steps to: stays uncertified
+                break
+            try:
+                grid = descend(grid, fine_rtol, grid_rounds, False, gtol)
+            except RuntimeError:
+                # the steps could not be re-adapted where a round ended (e.g. a body nearly at
+                # rest): the state is that round's end on its own steps, judged as it is
+                pass
             if state.g is None:
                 break
             value, _, P, _, _ = _outputs(state.result)
