@@ -36,8 +36,11 @@ Reduction.  Per cell, the ten (``keep.best``) best *distinct* local optima by |l
 among the starts whose stop reason is accepted (``keep.accept``, default: gradient norm below
 gtol) or whose final gradient norm is below ``keep.accept_gradient_norm`` (default 0: off), and whose
 period did not end on its box (``period_at_bound``: T running off to 0 or infinity, the p -> 2
-regime, is no interior optimum even with a zero projected gradient), and whose phi(tau) moves
-(spans more than ``STILL_AMPLITUDE``: the zero-amplitude stationary point is no optimum).
+regime, is no interior optimum even with a zero projected gradient), which is certified
+(``certified``: its grid_error within ``optimizer.certify_tolerance``, issue 47: an optimum the
+frozen steps flatter is the frozen steps', not the engine's; ``solver.OptimizerOptions``), and
+whose phi(tau) moves (spans more than ``STILL_AMPLITUDE``: the zero-amplitude stationary point
+is no optimum).
 Every optimum is first put in the paper's orientation U < 0 by the reflection
 phi -> pi - phi (which maps U to -U and keeps P: "reflecting the motions about phi = pi/2
 takes U to -U").  Two optima are the same when their scaled periods agree to

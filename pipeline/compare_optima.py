@@ -2,8 +2,8 @@
 
     python -m pipeline.compare_optima BASE NEW [--control RESEED] [--rtol 1e-4] [--independent N]
 
-BASE and NEW are stores of one optima scene (kind "optima", version 2: the optima solved
-again by the engine), e.g. the baseline optimiser and a changed one.  Per cell (every
+BASE and NEW are stores of one optima scene (kind "optima", version 2 or later: the optima
+solved again by the engine; 3: certified), e.g. the baseline optimiser and a changed one.  Per cell (every
 coordinate but the start and the rank) it compares the best kept optimum, |lambda| /
 lambda_ub of rank 0, and the number of distinct optima kept, by issue 35's test: the best
 within ``rtol`` relative of BASE's or higher, the distinct optima within +-1 or 20 % of
@@ -75,7 +75,7 @@ class CellTable:
 
 
 def read_cells(store) -> CellTable:
-    """The cells of an optima store (KIND_VERSION 2): the best kept optimum's |lambda| /
+    """The cells of an optima store (KIND_VERSION 2 or later): the best kept optimum's |lambda| /
     lambda_ub and the number of distinct optima kept (multiplicity > 0)."""
     from ._store import read_arrays, store_meta
 
