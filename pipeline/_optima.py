@@ -36,8 +36,11 @@ Reduction.  Per cell, the ten (``keep.best``) best *distinct* local optima by |l
 among the starts whose stop reason is accepted (``keep.accept``, default: gradient norm below
 gtol) or whose final gradient norm is below ``keep.accept_gradient_norm`` (default 0: off), and whose
 period did not end on its box (``period_at_bound``: T running off to 0 or infinity, the p -> 2
-regime, is no interior optimum even with a zero projected gradient), and whose phi(tau) moves
-(spans more than ``STILL_AMPLITUDE``: the zero-amplitude stationary point is no optimum).
+regime, is no interior optimum even with a zero projected gradient), which is certified
+(``certified``: its grid_error within ``optimizer.certify_tolerance``, issue 47: an optimum the
+frozen steps flatter is the frozen steps', not the engine's; ``solver.OptimizerOptions``), and
+whose phi(tau) moves (spans more than ``STILL_AMPLITUDE``: the zero-amplitude stationary point
+is no optimum).
 Every optimum is first put in the paper's orientation U < 0 by the reflection
 phi -> pi - phi (which maps U to -U and keeps P: "reflecting the motions about phi = pi/2
 takes U to -U").  Two optima are the same when their scaled periods agree to
@@ -64,7 +67,8 @@ from ._store import (ChunkWrite, SolvedChunk, create_array, finish_skeleton, new
                      write_arrays)
 
 __all__ = ["OPTIMA", "OptimaKind", "distinct_optima", "fourier_samples", "STOP_CODES", "KIND_VERSION",
-           "create_optima_skeleton", "compute_optima_chunk", "reduce_optima"]
+           "create_optima_skeleton", "compute_optima_chunk", "reduce_optima", "accepted_starts",
+           "reflect_about_half_pi", "START_FLAGS"]
 
 #: starts one task aims at (``OptimaKind.chunks_per_task``)
 TASK_STARTS = 16
@@ -84,11 +88,23 @@ START_FLOATS = {
     "gradient_norm": "projected gradient norm at the end (variables: coefficients, log T)",
     "condition_number": "condition number of the last difference Hessian (nan if none)",
     "seconds": "wall time of the optimisation [s]",
+    "cpu_seconds": "CPU time of the optimisation (its thread), the per-start cost compared by "
+                   "compare_optima [s]",
 }
 START_INTS = {
     "iterations": "accepted optimiser steps (all grid rounds)",
     "gradient_evaluations": "adjoint gradient evaluations",
+    "solves": "periodic solves of the search (line-search trials and gradients' solves)",
+    "coarse_iterations": "accepted steps of the coarse stage (optimizer.fidelity; 0 without one)",
+    "certify_rounds": "searches on finer steps that certification took (0: none was needed)",
     "n_steps": "steps of the final fixed tau grid",
+}
+#: per-start flags (int8; -1 not computed)
+START_FLAGS = {
+    "certified": "1: grid_error <= optimizer.certify_tolerance (the frozen steps' optimum is the "
+                 "engine's to that tolerance); only certified starts are kept; 0: not",
+    "at_rest": "1: phi(tau) spans no more than STILL_AMPLITUDE (the zero-amplitude stationary "
+               "point, no optimum); 0: a motion",
 }
 
 
@@ -266,6 +282,9 @@ def create_optima_skeleton(store: Path, scene: OptimaScene) -> None:
                  fill=NOT_COMPUTED, dims=DIMS,
                  attrs={"long_name": "1: ill-conditioned (Hessian condition above threshold, or the period "
                                      "at its bound: p near 2); 0: no; -1 not computed"})
+    for name, text_ in START_FLAGS.items():
+        create_array(g, name, shape=scene.shape, chunks=chunks, dtype=np.int8, fill=NOT_COMPUTED,
+                     dims=DIMS, attrs={"long_name": text_})
     for name, text_ in START_FLOATS.items():
         create_array(g, name, shape=scene.shape, chunks=chunks, dtype=np.float64, fill=np.nan,
                      dims=DIMS, attrs={"long_name": text_, "units": _units(text_)})
@@ -301,16 +320,20 @@ def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: fl
     A[0, :2] = a0, a1
     template = solver.Fourier(A, np.zeros((1, kmax)))
     opt = scene.optimizer
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     try:
         res = solver.optimize_motion(template, physics, objective=opt.objective, power=opt.power,
                               direction=opt.direction or None,
                               gtol=opt.gtol, max_iterations=opt.max_iterations,
-                              grid_rtol=opt.grid_rtol, grid_rounds=opt.grid_rounds)
+                              grid_rtol=opt.grid_rtol, grid_rounds=opt.grid_rounds,
+                              certify_tolerance=opt.certify_tolerance,
+                              certify_rounds=opt.certify_rounds, fidelity=opt.fidelity,
+                              fidelity_gtol=opt.fidelity_gtol)
     except (RuntimeError, ValueError, FloatingPointError, ZeroDivisionError) as exc:
         print(f"optima: ratio {ratio:g} Kmax {kmax} p {p:g} start ({a0:.4f}, {a1:.4f}): "
               f"{type(exc).__name__}: {exc}", file=sys.stderr)
-        return {"status": STOP_CODES["error"], "seconds": time.perf_counter() - t0}
+        return {"status": STOP_CODES["error"], "seconds": time.perf_counter() - t0,
+                "cpu_seconds": time.thread_time() - c0}
     lam_ub = 1.0 / min(float(physics.mu_n[0]), float(physics.mu_s[0]))
     full = np.zeros(scene.n_coefficients)
     k_largest = max(scene.max_wavenumbers)
@@ -329,8 +352,12 @@ def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: fl
         "relative_efficiency": res.engine_efficiency / lam_ub,
         "grid_efficiency": res.efficiency, "grid_error": res.grid_error,
         "gradient_norm": res.gradient_norm, "condition_number": res.condition_number,
-        "seconds": time.perf_counter() - t0, "iterations": res.iterations,
-        "gradient_evaluations": res.gradient_evaluations, "n_steps": res.n_steps,
+        "seconds": time.perf_counter() - t0, "cpu_seconds": time.thread_time() - c0,
+        "iterations": res.iterations, "gradient_evaluations": res.gradient_evaluations,
+        "solves": res.solves, "coarse_iterations": res.coarse_iterations,
+        "certify_rounds": res.certify_rounds, "n_steps": res.n_steps,
+        "certified": int(res.certified),
+        "at_rest": int(np.ptp(fourier_samples(full, scene.keep.n_tau)) <= STILL_AMPLITUDE),
         "coefficients": full,
     }
 
@@ -351,6 +378,8 @@ def solve_optima_chunk(scene: OptimaScene, chunks: tuple[int, ...], index: tuple
                                           dtype=np.int8),
               "period_at_bound": np.array([r.get("period_at_bound", 0) for r in records],
                                           dtype=np.int8)}
+    for name in START_FLAGS:
+        values[name] = np.array([r.get(name, 0) for r in records], dtype=np.int8)
     for name in START_FLOATS:
         values[name] = np.array([r.get(name, np.nan) for r in records], dtype=np.float64)
     for name in START_INTS:
@@ -379,6 +408,23 @@ def compute_optima_chunk(store: str, scene: OptimaScene, chunks: tuple[int, ...]
 # the reduction over a whole store
 
 
+def accepted_starts(scene: OptimaScene, data: dict[str, np.ndarray]) -> np.ndarray:
+    """The starts whose end may be an optimum, bool of the per-start shape: the stop reason
+    accepted (``keep.accept``) or the gradient norm below ``keep.accept_gradient_norm``, the
+    period not at its box, and certified (where the store has ``certified``).  The reduction
+    further drops starts at rest and without a finite efficiency."""
+    accepted = np.isin(data["status"], [STOP_CODES[a] for a in scene.keep.accept])
+    # converged to the objective's noise: gtol 1e-7 can lie below the rounding level of lambda
+    # at stiff cells, where the search ends "no_progress" or "ill_conditioned" at the optimum
+    accepted |= (data["status"] >= 0) & (data["status"] != STOP_CODES["error"]) & (
+        data["gradient_norm"] <= scene.keep.accept_gradient_norm)
+    if "period_at_bound" in data:  # a zero projected gradient with T on its box: not an optimum
+        accepted &= data["period_at_bound"] != 1
+    if "certified" in data:  # the frozen steps' optimum, not the engine's (issue 47): not kept
+        accepted &= data["certified"] == 1
+    return accepted
+
+
 def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The kept distinct optima of every cell from the per-start arrays ``data`` (whole store)."""
     specs = reduction_specs(scene)
@@ -387,13 +433,7 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
              "coefficient": scene.n_coefficients, "tau": scene.keep.n_tau}
     out = {name: np.full(tuple(sizes[d] for d in dims), fill, dtype=dtype)
            for name, (dims, dtype, fill, _) in specs.items()}
-    accepted = np.isin(data["status"], [STOP_CODES[a] for a in scene.keep.accept])
-    # converged to the objective's noise: gtol 1e-7 can lie below the rounding level of lambda
-    # at stiff cells, where the search ends "no_progress" or "ill_conditioned" at the optimum
-    accepted |= (data["status"] >= 0) & (data["status"] != STOP_CODES["error"]) & (
-        data["gradient_norm"] <= scene.keep.accept_gradient_norm)
-    if "period_at_bound" in data:  # a zero projected gradient with T on its box: not an optimum
-        accepted &= data["period_at_bound"] != 1
+    accepted = accepted_starts(scene, data)
     keep = scene.keep
     for cell in np.ndindex(n_r, n_k, n_p):
         ok = accepted[cell] & np.isfinite(data["relative_efficiency"][cell])
@@ -426,7 +466,7 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
 STILL_AMPLITUDE = 1e-3
 
 PER_START = ("status", "U", "efficiency", "relative_efficiency", "scaled_period", "gradient_norm",
-             "period_at_bound", "coefficients")
+             "period_at_bound", "certified", "coefficients")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -23,8 +23,11 @@ KIND = "optima"
 #: version of the optima kind's array layout and of what its per-start values mean (checked
 #: by readers beside FORMAT_VERSION, and part of the scene's hash: a store of another version
 #: is never resumed).  2: U, P, efficiency, objective are the engine's at the final motion
-#: (``solver.OptimizeResult.engine_*``), the fixed grid's in grid_efficiency, with grid_error
-KIND_VERSION = 2
+#: (``solver.OptimizeResult.engine_*``), the fixed grid's in grid_efficiency, with grid_error.
+#: 3: every optimum certified (issue 47: searched again on finer steps where its grid_error
+#: exceeds ``optimizer.certify_tolerance``; only certified starts kept), with the per-start
+#: certified, at_rest, cpu_seconds, solves, coarse_iterations, certify_rounds
+KIND_VERSION = 3
 DIMS = ("anisotropy_ratio", "max_wavenumber", "p", "start")
 #: optimiser stop reasons as the int8 ``status`` of a start; -1 not computed
 STOP_CODES = {"gradient_tolerance": 0, "max_iterations": 1, "line_search_failed": 2,
@@ -36,7 +39,8 @@ _TOP_KEYS = {
     "axes": "anisotropy_ratio, max_wavenumber, p",
     "fixed": "delta",
     "starts": "num, seed, scaled_period",
-    "optimizer": "objective, power, gtol, max_iterations, grid_rtol, grid_rounds",
+    "optimizer": "objective, power, gtol, max_iterations, grid_rtol, grid_rounds, certify_tolerance, "
+                 "certify_rounds, fidelity, fidelity_gtol",
     "keep": "best, n_tau, phi_tolerance, period_tolerance, accept",
     "quick": "overrides for `pipeline paper --quick`: max_wavenumber, p, starts, max_iterations",
     "execution": "starts_per_task, scheduler, workers, store (not hashed)",
@@ -58,6 +62,10 @@ class Optimizer:
     max_iterations: int = 300
     grid_rtol: float = 1e-4
     grid_rounds: int = 3
+    certify_tolerance: float = 1e-4
+    certify_rounds: int = 2
+    fidelity: float = 1.0
+    fidelity_gtol: float = 1e-2
 
 
 @dataclass(frozen=True)
@@ -145,7 +153,11 @@ _OPTIMIZER_KEYS = {"objective": "efficiency, speed or speed_at_power",
                    "direction": "start (keep the start's sign; default) or negative (minimise, as the paper)",
                    "power": "target mean power of speed_at_power (mu_n mu_s = 1)",
                    "gtol": "gradient-norm tolerance", "max_iterations": "steps per grid round",
-                   "grid_rtol": "rtol of the adaptive tau grid", "grid_rounds": "grid re-adaptations"}
+                   "grid_rtol": "rtol of the adaptive tau grid", "grid_rounds": "grid re-adaptations",
+                   "certify_tolerance": "largest grid_error of a certified optimum",
+                   "certify_rounds": "searches on steps 10x, 100x finer where it is exceeded",
+                   "fidelity": "coarse stage: grid_rtol x this far from an optimum (1: none)",
+                   "fidelity_gtol": "gradient norm that ends the coarse stage"}
 _KEEP_KEYS = {"best": "distinct optima kept per cell", "n_tau": "phi samples per period",
               "phi_tolerance": "max |dphi| [rad] of equal optima",
               "period_tolerance": "relative scaled-period difference of equal optima",
@@ -216,7 +228,14 @@ def _build(ctx: ParseContext, doc: dict, text: str) -> OptimaScene:
         gtol=_positive(ctx, opt.get("gtol", 1e-7), "optimizer.gtol", 1.0),
         max_iterations=ctx.integer(opt.get("max_iterations", 300), "optimizer.max_iterations", lo=1),
         grid_rtol=_positive(ctx, opt.get("grid_rtol", 1e-4), "optimizer.grid_rtol", 0.1),
-        grid_rounds=ctx.integer(opt.get("grid_rounds", 3), "optimizer.grid_rounds", lo=1))
+        grid_rounds=ctx.integer(opt.get("grid_rounds", 3), "optimizer.grid_rounds", lo=1),
+        certify_tolerance=_positive(ctx, opt.get("certify_tolerance", 1e-4),
+                                    "optimizer.certify_tolerance", 1.0),
+        certify_rounds=ctx.integer(opt.get("certify_rounds", 2), "optimizer.certify_rounds", lo=0),
+        fidelity=ctx.number(opt.get("fidelity", 1.0), "optimizer.fidelity"),
+        fidelity_gtol=_positive(ctx, opt.get("fidelity_gtol", 1e-2), "optimizer.fidelity_gtol", 1.0))
+    if not 1.0 <= optimizer.fidelity <= 1e4:
+        raise ctx.err("optimizer.fidelity", f"must be in [1, 1e4], got {optimizer.fidelity:g}")
 
     kp = ctx.table(doc.get("keep", {}), "keep", _KEEP_KEYS)
     accept = ctx.names(kp.get("accept", ["gradient_tolerance"]), "keep.accept",
@@ -260,7 +279,10 @@ def _build(ctx: ParseContext, doc: dict, text: str) -> OptimaScene:
         "starts": {"num": n_starts, "seed": seed, "scaled_period": start_period},
         "optimizer": {"objective": objective, "direction": direction, "power": power, "gtol": optimizer.gtol,
                       "max_iterations": optimizer.max_iterations,
-                      "grid_rtol": optimizer.grid_rtol, "grid_rounds": optimizer.grid_rounds},
+                      "grid_rtol": optimizer.grid_rtol, "grid_rounds": optimizer.grid_rounds,
+                      "certify_tolerance": optimizer.certify_tolerance,
+                      "certify_rounds": optimizer.certify_rounds, "fidelity": optimizer.fidelity,
+                      "fidelity_gtol": optimizer.fidelity_gtol},
         "keep": {"best": keep.best, "n_tau": keep.n_tau, "phi_tolerance": keep.phi_tolerance,
                  "period_tolerance": keep.period_tolerance, "accept": list(accept),
                  "accept_gradient_norm": keep.accept_gradient_norm},

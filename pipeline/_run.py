@@ -192,6 +192,13 @@ def resumable_record(scene, store: Path, overwrite: bool) -> dict | None:
             f"{store}: computed by {label(engines)}; this solver is {label(ours)}: results "
             "of two engines are never mixed in one store; rerun with --overwrite to start "
             "over, or choose another --store")
+    have, want = meta.get("kind_version"), getattr(scene, "science", {}).get("kind_version")
+    if want is not None and have != want and not overwrite:
+        # what the per-start values mean changed (e.g. optima's 3: certified optima): name it
+        raise StoreMismatch(
+            f"{store}: a {meta.get('kind')} store of kind_version {have}; this pipeline writes kind_version "
+            f"{want}, whose values mean something else; rerun with --overwrite to start over, or choose "
+            "another --store")
     if old != scene.hash and not overwrite:
         raise StoreMismatch(
             f"{store}: built from a different scene ({meta['provenance']['scene_file']}, hash "

@@ -21,7 +21,7 @@ from ._site import esc, provenance_table, scroll_table
 __all__ = ["optima_section", "KIND_VERSION"]
 
 #: version of the optima layout this report reads (pipeline._optima.KIND_VERSION)
-KIND_VERSION = 2
+KIND_VERSION = 3
 #: marker symbols per Kmax as in the paper: squares, plusses, triangles, crosses
 _SYMBOLS = ["square", "cross-thin-open", "triangle-up", "x-thin-open", "diamond", "circle"]
 _STOP_NAMES = ("gradient_tolerance", "max_iterations", "line_search_failed", "ill_conditioned",

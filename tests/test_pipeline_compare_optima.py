@@ -109,3 +109,48 @@ def test_the_command_on_a_small_store(tmp_path):
     assert bad.returncode == 2 and bad.stderr.startswith("new:") and len(bad.stderr.strip().splitlines()) == 1
     rtol = _run(store, store, "--rtol", "2")
     assert rtol.returncode == 2 and rtol.stderr.startswith("--rtol")
+
+
+def test_cost_ratios_and_basins_on_a_small_store(tmp_path):
+    """Issue 47: per-start CPU ratios with their spread on the same starts, and the basin test
+    calibrated by a control.  A copy whose cpu_seconds are halved gives median and total 0.5;
+    a copy in which one start ends at another motion (its A_1 doubled) moves one start between
+    BASE's kept optima and fails the basin test against a control that moves none (the
+    negative control); BASE against itself moves none and passes.  The independent check
+    (scipy BFGS on the engine's lambda) agrees with BASE's single optimum and not with the
+    displaced one."""
+    import zarr
+
+    from pipeline import run_scene
+    from pipeline.compare_optima import judge_starts, read_starts
+    from test_pipeline_optima import tiny
+
+    store = tmp_path / "a.zarr"
+    run_scene(tiny(), store, progress=False)
+    base = read_starts(store)
+    assert base.cost_name == "cpu_seconds" and np.all(base.cost > 0)
+    same = judge_starts(base, base, base)
+    assert same["cost"]["median"] == 1.0 and same["moved"] == 0 and same["switched"] == 0
+    assert same["basins_pass"] and not same["cost_target_met"]
+    changed = tmp_path / "b.zarr"
+    shutil.copytree(store, changed)
+    cpu = zarr.open_array(str(changed), path="cpu_seconds", mode="r+")
+    cpu[...] = 0.5 * cpu[...]
+    c = zarr.open_array(str(changed), path="coefficients", mode="r+")
+    values = c[...]
+    kept = int(base.kept_start[1, 0, 0, 0])
+    values[1, 0, 0, kept, 1] *= 2.0
+    c[...] = values
+    new = judge_starts(base, read_starts(changed), base)
+    assert new["cost"]["median"] == pytest.approx(0.5) and new["cost"]["total"] == pytest.approx(0.5)
+    assert new["cost"]["min"] == pytest.approx(0.5) and new["cost"]["max"] == pytest.approx(0.5)
+    assert new["cost_target_met"]
+    assert new["switched"] == 1 and new["moved"] == 1 and new["control_moved"] == 0
+    assert not new["basins_pass"]
+    # the independent check: scipy from BASE's optimum gains nothing (issue 47: 1e-5), from
+    # the displaced one (the kept start's A_1 doubled; the stored reduction still names it) a lot
+    from pipeline.compare_optima import independent_check
+    assert base.cells.distinct[1, 0, 0] == 1  # ratio 16, Kmax 1: a single optimum
+    ours = independent_check(base, 1)
+    assert ours["cells"] == 1 and abs(ours["worst"]) <= 1e-5
+    assert independent_check(read_starts(changed), 1)["worst"] > 1e-3

@@ -171,6 +171,9 @@ def test_reduction_orients_optima_backwards_and_skips_unconverged():
      "optimizer.power"),
     (("best = 3", "best = 3\nsimilar = 1"), "keep.similar"),
     (("kind = \"optima\"", "kind = \"optimum\""), "scene.kind"),
+    (("max_iterations = 60", "max_iterations = 60\ncertify_tolerance = 0"), "optimizer.certify_tolerance"),
+    (("max_iterations = 60", "max_iterations = 60\ncertify_rounds = -1"), "optimizer.certify_rounds"),
+    (("max_iterations = 60", "max_iterations = 60\nfidelity = 0.5"), "optimizer.fidelity"),
 ])
 def test_bad_optima_scene_names_the_key(edit, key):
     with pytest.raises(SceneError) as info:
@@ -300,3 +303,48 @@ def test_a_start_ending_at_rest_is_no_optimum():
     for cell in np.ndindex(*scene.shape[:3]):
         kept = set(out["optimum_start"][cell][out["optimum_start"][cell] >= 0].tolist())
         assert 0 not in kept and 1 in kept
+
+
+def test_the_store_holds_certified_optima_and_their_cost(tmp_path):
+    """Issue 47: every start stores certified, at_rest, cpu_seconds, solves, coarse_iterations,
+    certify_rounds; no kept optimum has a grid error above the scene's certify_tolerance (1e-4);
+    and the reduction keeps no uncertified start, even the best of its cell (the control)."""
+    scene = tiny()
+    store = tmp_path / "tiny.zarr"
+    run_scene(scene, store, progress=False)
+    ds = _open(store)
+    done = ds.status.values != STOP_CODES["error"]
+    for name in ("certified", "at_rest"):
+        assert set(np.unique(ds[name].values[done])) <= {0, 1}
+    assert np.all(ds.cpu_seconds.values[done] > 0) and np.all(ds.solves.values[done] > 0)
+    assert np.all(ds.coarse_iterations.values == 0)  # fidelity off by default
+    assert np.all((ds.certify_rounds.values >= 0) & (ds.certify_rounds.values <= 2))
+    np.testing.assert_array_equal(ds.certified.values[done] == 1, ds.grid_error.values[done] <= 1e-4)
+    kept = ds.optimum_start.values
+    assert (kept >= 0).any()
+    for cell in np.ndindex(kept.shape[:3]):
+        starts = kept[cell][kept[cell] >= 0]
+        assert np.all(ds.grid_error.values[cell][starts] <= 1e-4)
+    data = {k: ds[k].values.copy() for k in ("status", "U", "efficiency", "relative_efficiency",
+                                             "scaled_period", "gradient_norm", "period_at_bound",
+                                             "certified", "coefficients")}
+    best = int(kept[0, 0, 0, 0])
+    data["certified"][0, 0, 0, best] = 0
+    assert best not in reduce_optima(scene, data)["optimum_start"][0, 0, 0]
+
+
+def test_a_store_of_the_former_kind_version_is_refused_by_name(tmp_path):
+    """A store whose per-start values mean something else (kind_version 2: uncertified optima)
+    is not resumed; the refusal names the kind version, not just "a different scene"."""
+    from pipeline._attrs import read_record, record_text
+    import zarr
+
+    scene = tiny()
+    store = tmp_path / "tiny.zarr"
+    run_scene(scene, store, progress=False)
+    g = zarr.open_group(str(store), mode="r+")
+    record = read_record(dict(g.attrs))
+    assert record["kind_version"] == 3
+    g.attrs["pipeline"] = record_text({**record, "kind_version": 2})
+    with pytest.raises(StoreMismatch, match="kind_version 2.*kind_version 3"):
+        run_scene(scene, store, progress=False)
