@@ -117,3 +117,82 @@ def agreement(scene, r, cell, record) -> Agreement:
     rel = (second - pol) / max(abs(pol), 1e-300) if np.isfinite(pol) else np.inf
     return Agreement({k: v for k, v in cell.items() if k != "starts"}, pol, second, float(rel),
                      r.polish_tolerance, int(record["status"]), int(record["evaluations"]), calls)
+
+
+def _kept_cells(scene, r, n: int) -> list[dict]:
+    """``n`` kept grid positions of ``r`` spread evenly over the scene's kept grid (C order)."""
+    kept = [a for a in scene.axes if a.name not in r.over]
+    total = int(np.prod([a.size for a in kept], dtype=np.int64))
+    picks = np.unique(np.linspace(0, total - 1, min(n, total)).round().astype(int))
+    out = []
+    for k in picks:
+        idx = np.unravel_index(int(k), tuple(a.size for a in kept))
+        out.append({a.name: float(a.values[i]) for a, i in zip(kept, idx)})
+    return out
+
+
+def main(argv=None) -> int:
+    class Parser(argparse.ArgumentParser):
+        def error(self, message):  # one line, exit 2
+            print(f"{self.prog}: {message}", file=sys.stderr)
+            raise SystemExit(2)
+
+    parser = Parser(prog="python -m pipeline.compare_polish", description=__doc__.split("\n\n")[1])
+    parser.add_argument("scene", help="scene TOML file or a shipped scene's name (a grid scene with a polished reduction)")
+    parser.add_argument("--cells", type=int, default=4, help="kept grid cells per polished reduction, spread evenly (4)")
+    parser.add_argument("--truncate", type=int, default=None, metavar="K",
+                        help="cap every start at K solves (the negative control: the check must fail)")
+    args = parser.parse_args(argv)
+    from pathlib import Path
+
+    from ._registry import load_scene
+    from ._scene import SceneError
+
+    path = Path(args.scene)
+    if not path.is_file():
+        from .__main__ import WORKFLOWS
+
+        path = WORKFLOWS / f"{args.scene}.toml"
+    if not path.is_file():
+        print(f"scene: {args.scene} is neither a file nor a shipped scene", file=sys.stderr)
+        return 2
+    if args.cells < 1:
+        print(f"--cells: {args.cells} is not >= 1", file=sys.stderr)
+        return 2
+    if args.truncate is not None and args.truncate < 1:
+        print(f"--truncate: {args.truncate} is not >= 1", file=sys.stderr)
+        return 2
+    try:
+        scene = load_scene(path)
+    except SceneError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    reductions = [r for r in getattr(scene, "reductions", ()) if r.polish]
+    if not reductions:
+        print(f"scene: {scene.name} has no polished reduction", file=sys.stderr)
+        return 2
+    overrides = {"max_evaluations": args.truncate} if args.truncate else {}
+    rows = []
+    for r in reductions:
+        for where in _kept_cells(scene, r, args.cells):
+            one = cell_scene(scene, **where)
+            data = solve_grid(one, [r.quantity, *r.report])
+            for cell, rec in polish_cell(one, r, data, **overrides):
+                a = agreement(one, r, cell, rec)
+                rows.append(a)
+                label = ", ".join(f"{k} {v:g}" for k, v in where.items())
+                sub = f", subset {cell['subset']}" if cell["subset"] is not None else ""
+                print(f"  {r.name}: {label}{sub}: polished {a.polished:.7g} (status {a.status}, {a.evaluations} solves), "
+                      f"second {a.second:.7g} ({a.second_evaluations} solves): {a.relative:+.1e} -> "
+                      f"{'agrees' if a.agrees else 'DIFFERS'}")
+    failed = sum(not a.agrees for a in rows)
+    verdict = {"scene": scene.name, "cells": len(rows), "differ": failed,
+               "worst": max((a.relative for a in rows), default=float("nan")),
+               "truncated": args.truncate, "verdict": "pass" if not failed else "fail"}
+    print(f"{len(rows)} cells, {failed} differ from the second method by more than the polish tolerance -> {verdict['verdict']}")
+    print(json.dumps(verdict))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -81,3 +81,23 @@ def test_a_truncated_polish_fails_the_same_check(cells):
     failed = sum(not a.agrees for a in rows)
     print(f"truncated polish: {failed} of {len(rows)} cells fail the agreement check")
     assert failed > 0
+
+
+def test_compare_polish_cli_passes_a_polish_and_fails_a_truncated_one(tmp_path, capsys):
+    """``python -m pipeline.compare_polish`` on the small harmonic scene: every cell agrees; with
+    ``--truncate 1`` (the grid point itself) it says fail; a bad argument is one line, exit 2."""
+    import json
+
+    from pipeline.compare_polish import main
+    from pipeline_cases import small_scene_text, write_scene
+
+    scene = write_scene(tmp_path, small_scene_text(polish=True))
+    assert main([str(scene), "--cells", "4"]) == 0
+    ok = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert (ok["cells"], ok["verdict"]) == (4, "pass")
+    assert main([str(scene), "--cells", "4", "--truncate", "1"]) == 0
+    bad = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert bad["verdict"] == "fail" and bad["differ"] >= 1
+    with pytest.raises(SystemExit) as exc:
+        main([str(scene), "--cells", "x"])
+    assert exc.value.code == 2 and len(capsys.readouterr().err.strip().splitlines()) == 1
