@@ -30,7 +30,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from ._causes import CAUSES, Cause, Evidence, explain, miss, parse_cause, tolerance_text
+from ._causes import CAUSES, Cause, Evidence, control_word, explain, miss, parse_cause, tolerance_text
 from ._claim_values import COMPUTE, Measurement, NotComputed
 from ._labels import tex_html
 from ._site import esc
@@ -298,10 +298,11 @@ def _cause_cell(r) -> str:
     else:
         ctrl = ev.control
         control = ("" if ctrl is None else
-                   f"<div class='small'><b>control</b> ({'passed' if ctrl.get('passed') else 'FAILED'}): "
+                   f"<div class='small'><b>control</b> ({control_word(ctrl)}): "
                    f"{esc(ctrl.get('what', ''))}. {esc(ctrl.get('result', ''))}</div>")
         check = (f"<div class='small'><b>evidence</b> (<code>{esc(ev.check)}</code>: "
-                 f"{'criterion met' if ev.holds else 'criterion not met'}): {esc(ev.result)}</div>{control}")
+                 f"{'cannot judge' if not ev.judged else 'criterion met' if ev.holds else 'criterion not met'}): "
+                 f"{esc(ev.result)}</div>{control}")
     return f"<b class='cause-{esc(r.cause)}'>{esc(r.cause)}</b>{why}{check}"
 
 
@@ -338,7 +339,7 @@ def audit_html(rows, figure_anchor=lambda label: f"fig-{label}", *, reduced: str
                              f", paper {esc(c.paper_value)}"
                              + (f"; evidence: {esc(r.evidence.result)}" if r.evidence else
                                 f"; no cause registered; what the data say: {esc(r.reason)}")
-                             + (f"; control ({'passed' if r.evidence.control.get('passed') else 'FAILED'}): "
+                             + (f"; control ({control_word(r.evidence.control)}): "
                                 f"{esc(r.evidence.control.get('result', ''))}"
                                 if r.evidence and r.evidence.control else "") + "</li>")
     return (f"<section class='audit' id='audit'><h2>Reproduction audit</h2>"

@@ -507,13 +507,16 @@ def _row(claim, stores):
 # -- resolution ---------------------------------------------------------------------------------
 
 
-def _levels(factors, extents=None):
-    """Stores lvl0, lvl1, ... of one computation at rising resolution: the maximum times ``factors``."""
+def _levels(factors, extents=None, same_grid=False):
+    """Stores lvl0, lvl1, ... of one computation at rising resolution (A0 sampled at 5, 9, 17, ...
+    points of one range; ``same_grid``: all at 9, as ``paper --quick`` reduces the levels): the
+    maximum times ``factors``."""
     rng = np.random.default_rng(11)
     value = rng.uniform(0.1, 1.0, (9, 7))
     stores = {}
     for k, f in enumerate(factors):
-        a0 = None if extents is None or extents[k] is None else extents[k]
+        a0 = np.linspace(0, 1.5708, 9 if same_grid else 4 * 2 ** k + 1)
+        a0 = a0 if extents is None or extents[k] is None else extents[k]
         stores[f"lvl{k}"] = _plane_store(f"lvl{k}", value * f, a0_coords=a0)
     levels = [{"label": f"level {k}", "resolution": f"{4 * 2 ** k} points", "override": {"scene": f"lvl{k}"}}
               for k in range(len(factors))]
@@ -558,6 +561,54 @@ def test_converges_fails_when_the_levels_diverge_or_change_domain():
     # fewer than three levels cannot show convergence
     row = _row(_with_cause(claim, _cause("resolution", "converges", levels=levels[1:])), stores)
     assert row.cause == "unexplained" and "could not run" in row.evidence.result
+
+
+def test_a_resolution_series_on_identical_inputs_cannot_judge():
+    """Issue 44 item 5: ``paper --quick`` reduced the three exponent_sets levels to one grid, every
+    array was equal, and the audit printed "converging … control (passed)". Levels that read
+    identical inputs (the same grid, the same polish) are "cannot judge": the check does not hold
+    and its control neither passed nor failed. Negative control: the same values on three
+    different grids of one domain are judged."""
+    from reports._audit import audit_html
+
+    stores, levels, top = _levels([1.0, 1.0, 1.0], same_grid=True)
+    claim = _with_cause(_stat_claim({"value": 2 * top, "tolerance": 0.01}, scene="lvl2"),
+                        _cause("resolution", "converges", levels=levels))
+    row = _row(claim, stores)
+    assert row.verdict == "differs" and row.cause == "unexplained"
+    assert not row.evidence.judged and not row.evidence.holds and row.evidence.control["passed"] is None
+    assert "cannot judge" in row.evidence.result and "identical inputs" in row.evidence.result
+    page = audit_html([row])
+    assert "control</b> (cannot judge)" in page and "(passed)" not in page and "criterion met" not in page
+    assert row.evidence.to_json()["judged"] is False
+    # the same values on three grids of one domain: a refinement took place, so it is judged
+    # (it settled at ours, which does not reach the paper: not shown, and the control passed)
+    stores, levels, top = _levels([1.0, 1.0, 1.0])
+    row = _row(_with_cause(claim, _cause("resolution", "converges", levels=levels)), stores)
+    assert row.evidence.judged and row.evidence.control["passed"] is True and row.cause == "unexplained"
+    # a grid level and a polished level on one grid are two computations (the polish is the refinement)
+    stores, levels, top = _levels([0.98, 1.0, 1.0], same_grid=True)
+    for sd in stores.values():
+        sd.science["reductions"][0]["polish"] = True
+    levels[0]["override"] = {"scene": "lvl0", "grid": True}
+    levels[1]["override"] = {"scene": "lvl1"}
+    stores["lvl2"].science["reductions"][0]["polish_max_evaluations"] = 200
+    row = _row(_with_cause(claim, _cause("resolution", "converges", levels=levels)), stores)
+    assert row.evidence.judged, row.evidence.result
+
+
+def test_a_cross_check_on_one_grid_cannot_judge():
+    """Issue 44 item 5 for cross-checks: two sides on one grid are "cannot judge" (control passed
+    None, printed so), not a FAILED control and never a passed one."""
+    from reports._audit import audit_html
+
+    rng = np.random.default_rng(9)
+    value = rng.uniform(0.1, 1.0, (9, 7))
+    claim = _with_cause(_stat_claim({"value": 5.0, "tolerance": 0.1}),
+                        _cause("cross-check", "cross_check", label="twin", override={"scene": "twin"}))
+    row = _row(claim, {"plane": _plane_store("plane", value), "twin": _plane_store("twin", value)})
+    assert row.cause == "unexplained" and not row.evidence.judged and row.evidence.control["passed"] is None
+    assert "cannot judge" in row.evidence.result and "control</b> (cannot judge)" in audit_html([row])
 
 
 def test_a_check_that_ignores_the_paper_fails_its_control():
