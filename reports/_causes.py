@@ -31,7 +31,7 @@ import numpy as np
 
 from ._claim_values import COMPUTE, Measurement, NotComputed, is_optima, scene_store
 
-__all__ = ["CAUSES", "CHECKS", "KIND_CHECK", "RULES", "Cause", "Evidence", "control_word", "explain", "miss",
+__all__ = ["CAUSES", "CHECKS", "KIND_CHECK", "RULES", "Cause", "Evidence", "control_word", "explain", "merge_args", "miss",
            "parse_cause", "reflect", "tolerance_text"]
 
 CAUSES = ("domain", "convention", "resolution", "cross-check", "reading", "defect")
@@ -199,6 +199,10 @@ def _merge(base: dict, override: dict) -> dict:
         else:
             out[k] = {kk: vv for kk, vv in v.items() if kk != "replace"} if isinstance(v, dict) else copy.deepcopy(v)
     return out
+
+
+#: the public name of :func:`_merge` (a claim's ``beside`` and causes merge their overrides alike)
+merge_args = _merge
 
 
 def _measure(stores, claim, compute=None, args=None, override=None) -> tuple[Measurement, dict]:

@@ -822,7 +822,7 @@ def test_audit_json_and_front_page_carry_causes_controls_and_honest_counts(plane
     assert "<b>control</b> (passed)" in html
     assert ("4 claims of the paper's results: 1 agree (and 1 more true by construction, not counted as "
             "reproductions), 1 differ with a cause whose check and control hold (domain 1), 1 differ unexplained, "
-            "0 not run") in audit_summary(tmp_path / "audit.json")
+            "0 cannot judge, 0 not run") in audit_summary(tmp_path / "audit.json")
 
 
 def _ensemble(mult, n_starts):
