@@ -42,7 +42,7 @@ KIND_CHECK = {"resolution": "converges", "domain": "restricted", "cross-check": 
 
 #: the shared rules a tolerance or a reading's threshold may cite (CAUSES.md, "Shared rules")
 RULES = ("printed", "figure", "most", "all", "grid", "angle", "words", "half", "much", "flat", "except", "trend",
-         "judgement")
+         "limit", "judgement")
 
 
 @dataclass(frozen=True)

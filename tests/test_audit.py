@@ -102,6 +102,9 @@ def test_registry_names_existing_scenes_reductions_roles_and_dimensions():
                 elif key in c.args and src is not c.args:  # a monotone gain: its axis is in both sides
                     named.add(c.args[key])
             assert named <= dims, (c.id, named - dims)
+            if "tau0_window" in src:  # the paper's τ0 domain (issue 44): only a reduction over τ0 has windows
+                assert "duty_cycle" in next(r["over"] for r in scenes[src["scene"]]["reductions"]
+                                            if r["name"] == src["reduction"]), c.id
 
 
 def test_figures_follow_the_papers_label_order():
