@@ -1099,3 +1099,182 @@ def test_switched_is_the_best_motions_value_over_that_with_its_law_changed():
     bad = Claim(**{**claim.__dict__, "args": {**claim.args, "change": {"closing_shape": 3.0}}})
     bad = Claim(**{**bad.__dict__, "args": {**bad.args, "at": {"anisotropy_ratio": 0.015625, "opening_shape": 3.0}}})
     assert _row(bad, stores).verdict == "not run"
+
+
+# ---------------------------------------------------------------------------
+# Issue 44: the polish record, the paper's τ0 window, beside, cannot judge, the limit rule
+# ---------------------------------------------------------------------------
+
+
+def _record_store(status=None, uncertainty=1e-5, edge_upper_at_wide=True):
+    """A polished reduction "best" over (duty_cycle, A0) on the plane, repeated on the τ0 windows
+    0.45 and 0.49 (``duty_cycle_halfwidth``), with its polish record (contract44 names): the wider
+    window's optimum sits at τ0 = 0.99, on the upper edge, and is 20 % higher."""
+    ratios, periods, windows = 2.0 ** np.arange(-2, 3), 2.0 ** np.arange(-3, 4, 2), [0.45, 0.49]
+    dims = ("anisotropy_ratio", "scaled_period", "duty_cycle_halfwidth")
+    rng = np.random.default_rng(3)
+    base = rng.uniform(0.1, 1.0, (5, 4))
+    value = np.stack([base, 1.2 * base], axis=-1)
+    tau0 = np.stack([np.full(base.shape, 0.9), np.full(base.shape, 0.99)], axis=-1)
+    edge = np.zeros(value.shape, dtype=np.int8)
+    if edge_upper_at_wide:
+        edge[..., 1] = 1
+    st = np.zeros(value.shape, dtype=np.int8) if status is None else status
+    ds = xr.Dataset({"best": (dims, 0.99 * value), "best_polished": (dims, value),
+                     "best_polished_duty_cycle": (dims, tau0), "best_duty_cycle": (dims, tau0),
+                     "best_polished_A0": (dims, np.full(value.shape, 0.7)), "best_A0": (dims, np.full(value.shape, 0.7)),
+                     "best_polished_status": (dims, st),
+                     "best_polished_uncertainty": (dims, np.full(value.shape, uncertainty)),
+                     "best_polished_duty_cycle_edge": (dims, edge),
+                     "best_polished_A0_edge": (dims, np.zeros(value.shape, dtype=np.int8))},
+                    coords={"anisotropy_ratio": ratios, "scaled_period": periods, "duty_cycle_halfwidth": windows,
+                            "duty_cycle": np.linspace(0.01, 0.99, 5), "A0": np.linspace(0.02, 1.5708, 5)})
+    red = {"name": "best", "quantity": "q", "statistic": "absmax", "over": ["duty_cycle", "A0"], "polish": True}
+    return {"lin": _store("lin", ds, [red])}, base, value
+
+
+def test_the_paper_tau0_window_is_read_and_the_wider_one_quoted_beside():
+    """P2: ``tau0_window = 0.45`` reads the paper's domain; ``beside`` quotes the wider window
+    without a verdict of its own; a store without windows is "not run" (never read on the
+    other domain)."""
+    stores, base, value = _record_store()
+    claim = Claim(id="t", figure="EtaOptt0", claim="c", paper_value="p", expect={"value": float(base.max()),
+                  "tolerance": 1e-9}, compute="stat", basis="printed: test",
+                  args={"scene": "lin", "reduction": "best", "tau0_window": 0.45, "statistic": "max"},
+                  beside=({"label": "wider", "override": {"tau0_window": 0.49}},))
+    row = _row(claim, stores)
+    assert row.verdict == "agrees" and row.measurement.value == pytest.approx(base.max())
+    assert f"beside, wider: {1.2 * base.max():.3g}" in row.reason
+    # negative control: the wider window is not the paper's value
+    wide = Claim(**{**claim.__dict__, "args": {**claim.args, "tau0_window": 0.49}})
+    assert _row(wide, stores).verdict == "differs"
+    # a store without the window dimension: not run, naming the missing window
+    plain = _plane_store("lin", np.ones((9, 7)))
+    row = _row(claim, {"lin": plain})
+    assert row.verdict == "not run" and "no τ0 window 0.45" in row.reason
+
+
+def test_a_polished_optimum_that_did_not_converge_cannot_be_judged():
+    """P1: a selected cell with ``_polished_status`` ≠ 0 makes the claim "cannot judge", naming
+    the status; converged cells are judged. Counted apart in the audit's sentence."""
+    from reports._audit import audit_counts
+
+    status = np.zeros((5, 4, 2), dtype=np.int8)
+    status[4, 3, 0] = 1  # cap reached at the largest ratio, longest period, paper's window
+    stores, base, value = _record_store(status=status)
+    claim = _stat_claim({"min": 0.0}, scene="lin", tau0_window=0.45)
+    row = _row(claim, stores)
+    assert row.verdict == "cannot judge" and "cap reached" in row.reason and "1 of 20" in row.reason
+    assert audit_counts([row])["cannot judge"] == 1
+    # negative control: the same claim on cells that converged is judged
+    row = _row(_stat_claim({"min": 0.0}, scene="lin", tau0_window=0.45,
+                           ranges={"anisotropy_ratio": [0.0, 2.0]}), stores)
+    assert row.verdict == "agrees"
+    # a share over cells: the unconverged cell also makes it cannot judge
+    row = _row(_stat_claim({"min": 0.0}, scene="lin", tau0_window=0.45, **{"statistic": "fraction",
+                                                                          "test": {"min": 0.0}}), stores)
+    assert row.verdict == "cannot judge"
+
+
+def test_the_polish_uncertainty_is_the_error_estimate_and_edges_are_named():
+    """P1: the error estimate of a polished value is its uncertainty times |value| (a miss within
+    it is said to be within our error); an arg-max flagged on an edge is named in the verdict."""
+    stores, base, value = _record_store(uncertainty=0.01)
+    cell = {"anisotropy_ratio": 1.0, "scaled_period": 0.5}
+    v = float(base[2, 1])
+    claim = _stat_claim({"value": v * 1.004, "tolerance": 1e-9}, scene="lin", tau0_window=0.45, at=cell,
+                        statistic="only")
+    row = _row(claim, stores)
+    assert row.verdict == "differs" and row.measurement.error_value == pytest.approx(0.01 * v)
+    assert "polish uncertainty" in row.measurement.error and "error estimate" in row.reason, row.reason
+    # negative control: a miss beyond the uncertainty is a difference in the data
+    far = _row(_stat_claim({"value": v * 1.1, "tolerance": 1e-9}, scene="lin", tau0_window=0.45, at=cell,
+                           statistic="only"), stores)
+    assert "a difference in the data" in far.reason
+    # P6: a maximum over the periods at our longest period is said to be a supremum
+    peak = _row(_stat_claim({"value": 99.0, "tolerance": 1e-9}, scene="lin", tau0_window=0.45), stores)
+    assert any("supremum over our period range" in e for e in peak.measurement.edges) == (
+        int(np.unravel_index(np.argmax(base), base.shape)[1]) in (0, 3))
+    wide = _row(_stat_claim({"value": 0.5, "tolerance": 1e-9}, scene="lin", tau0_window=0.49,
+                            role="duty_cycle"), stores)
+    assert any("upper end of the polish domain" in e for e in wide.measurement.edges), wide.measurement.edges
+    paper = _row(_stat_claim({"value": 0.9, "tolerance": 1e-9}, scene="lin", tau0_window=0.45, role="duty_cycle"),
+                 stores)
+    assert not any("polish domain" in e for e in paper.measurement.edges)
+    # a gain of two polished values: the two relative uncertainties add
+    g = Claim(id="g", figure="EtaOptt0", claim="c", paper_value="p", expect={"value": 1.0, "tolerance": 1e-9},
+              compute="gain", basis="printed: test",
+              args={"numerator": {"scene": "lin", "reduction": "best", "tau0_window": 0.49, "statistic": "max"},
+                    "denominator": {"scene": "lin", "reduction": "best", "tau0_window": 0.45, "statistic": "max"}})
+    m = _row(g, stores).measurement
+    assert m.value == pytest.approx(1.2) and m.error_value == pytest.approx(0.02 * 1.2)
+
+
+def test_a_claim_the_paper_does_not_locate_cannot_be_judged_and_shows_our_value():
+    """P5: ``cannot_judge`` gives the verdict "cannot judge" with the reason and our value, even
+    where the value would agree (it is not a way to hide a difference) or differ."""
+    stores, base, value = _record_store()
+    for expect in ({"value": float(base.max()), "tolerance": 1e-9}, {"value": 99.0, "tolerance": 1e-9}):
+        claim = Claim(**{**_stat_claim(expect, scene="lin", tau0_window=0.45).__dict__,
+                         "cannot_judge": "the corner is not stated"})
+        row = _row(claim, stores)
+        assert row.verdict == "cannot judge" and row.reason.startswith("the corner is not stated")
+        assert f"ours {base.max():.3g}" in row.reason and row.to_json()["cannot_judge"]
+
+
+def _speed_store(exponents):
+    """Best speed per (ratio, period) ~ T^a on periods 2^-3 .. 2^4 (a peak at 2^1), one line per
+    exponent a (ratios 1, 2, ...)."""
+    periods = 2.0 ** np.arange(-3, 5)
+    rows = []
+    for a in exponents:
+        rise = periods ** a
+        fall = rise[5] * (periods / periods[5]) ** -1.0
+        rows.append(np.where(periods <= periods[5], rise, fall))
+    v = np.asarray(rows)[:, :, None, None] * np.ones((1, 1, 2, 2))
+    ds = xr.Dataset({"scaled_speed": (("anisotropy_ratio", "scaled_period", "A0", "A1_ratio"), v)},
+                    coords={"anisotropy_ratio": 2.0 ** np.arange(len(exponents)), "scaled_period": periods,
+                            "A0": [0.5, 1.0], "A1_ratio": [0.3, 0.6]})
+    return {"h": _store("h", ds)}
+
+
+def test_the_limit_rule_reads_the_sequence_toward_the_limit():
+    """Rule limit: speeds ~ T^a toward T → 0 fall geometrically, their Aitken limit is 0 and the
+    sentence holds at every ratio, although at the shortest period (2^-3) the value is still
+    above a tenth of the peak for a = 0.5 (what the old one-value reading failed). Negative
+    controls: a speed that levels off at a constant (half the peak) as T → 0, and one that rises
+    toward T → 0."""
+    from reports._claim_values import aitken_limit, limit
+
+    assert aitken_limit(4.0, 2.0, 1.0) == pytest.approx(0.0)
+    assert aitken_limit(1.5, 1.25, 1.125) == pytest.approx(1.0)
+    assert aitken_limit(1.0, 2.0, 1.5) != aitken_limit(1.0, 2.0, 1.5)  # NaN: the steps change sign
+    args = {"scene": "h", "quantity": "scaled_speed", "absolute": True, "peak_over": ["A0", "A1_ratio"],
+            "along": "scaled_period", "toward": "min"}
+    m = limit(_speed_store([0.5, 1.0, 2.0]), **args)
+    assert m.value == 1.0 and "3 of 3 lines" in m.where
+    periods = 2.0 ** np.arange(-3, 5)
+    st = _speed_store([1.0, 1.0])
+    v = st["h"].ds["scaled_speed"].values.copy()
+    v[1, :3] = (v[1, 5, 0, 0] * (0.5 + 0.05 * periods[:3]))[:, None, None]  # levels off at half the peak
+    st["h"].ds["scaled_speed"].values[:] = v
+    assert limit(st, **args).value == 0.5
+    rising = _speed_store([-0.5])
+    assert limit(rising, **args).value == 0.0
+
+
+def test_where_best_reads_a_role_at_the_cell_of_another_roles_maximum():
+    """burst-A1 (REREADING44 #19): A1/A0 at the cell of the peak relative efficiency of a regime,
+    against brute force; a cell elsewhere (a negative control) gives another value."""
+    stores, base, value = _record_store()
+    ds = stores["lin"].ds
+    a0 = np.arange(base.size * 2, dtype=float).reshape(value.shape)
+    ds["best_polished_A0"] = (ds["best_polished"].dims, a0)
+    m = stat(stores, scene="lin", reduction="best", role="A0", tau0_window=0.45, where_best="value",
+             ranges={"anisotropy_ratio": [1.5, np.inf]})
+    sub = base[3:]
+    i, j = np.unravel_index(np.argmax(sub), sub.shape)
+    assert m.value == a0[3 + i, j, 0] and "at the largest value" in m.where
+    low = stat(stores, scene="lin", reduction="best", role="A0", tau0_window=0.45, where_best="value",
+               ranges={"anisotropy_ratio": [0.0, 0.6]})
+    assert low.value != m.value
