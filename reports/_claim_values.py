@@ -931,6 +931,9 @@ def harmonic_phi_span(stores, *, scene, reduction, statistic="max", **select_arg
         a, _ = select(arr, **select_args)
         return a.isel(dict(zip(a.dims, np.unravel_index(index, a.shape)))) if a.size > 1 else a
     m.edges = _edges(sd, reduction, cell_sel)
+    status, _ = polish_record(sd, reduction)
+    if polished and status is not None:  # the polish record (issue 44): the optimum read must have converged
+        m.cannot_judge = _status_words(cell_sel(status))
     return m
 
 

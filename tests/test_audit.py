@@ -1278,3 +1278,24 @@ def test_where_best_reads_a_role_at_the_cell_of_another_roles_maximum():
     low = stat(stores, scene="lin", reduction="best", role="A0", tau0_window=0.45, where_best="value",
                ranges={"anisotropy_ratio": [0.0, 0.6]})
     assert low.value != m.value
+
+
+def test_harmonic_phi_span_reads_the_polish_status_of_its_cell():
+    """EtaA0A1.upper-left-phi (REREADING44 #2): the span of the optimum of the cell selected is
+    "cannot judge" when that cell's polish did not converge, judged when it did."""
+    from reports._claim_values import harmonic_phi_span
+
+    stores, base, value = _record_store()
+    ds = stores["lin"].ds
+    ds["best_polished_A1_ratio"] = (ds["best_polished"].dims, np.full(value.shape, 0.5))
+    stores["lin"].science["reductions"][0]["over"] = ["A0", "A1_ratio"]
+    ds = ds.assign_coords(A1_ratio=np.linspace(0.02, 0.98, 5))
+    stores["lin"].ds = ds
+    args = {"scene": "lin", "reduction": "best", "at": {"duty_cycle_halfwidth": 0.45, "anisotropy_ratio": 1.0,
+                                                         "scaled_period": 0.5}, "statistic": "only"}
+    m = harmonic_phi_span(stores, **args)
+    assert m.value == pytest.approx((0.35, 1.05)) and not m.cannot_judge
+    st = ds["best_polished_status"].values.copy()
+    st[2, 1, 0] = 2
+    ds["best_polished_status"].values[:] = st
+    assert "solve failed" in harmonic_phi_span(stores, **args).cannot_judge
