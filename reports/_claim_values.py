@@ -479,8 +479,18 @@ def _failures(da, excluded: int = 0) -> tuple:
 # ---------------------------------------------------------------------------
 
 
-#: ``{r}_polished_status`` (contract of issue 44): 0 converged, 1 cap reached, 2 solve failed
-POLISH_STATUS = {0: "converged", 1: "cap reached, not converged", 2: "solve failed or no valid start"}
+#: ``{r}_polished_status`` (contract of issue 44): -1 not computed, 0 converged, 1 cap reached,
+#: 2 no valid solve; the store's own ``flag_values`` / ``flag_meanings`` attributes name them when present
+POLISH_STATUS = {-1: "not computed", 0: "converged", 1: "cap reached, not converged", 2: "solve failed or no valid start"}
+
+
+def _worst_status(a, dims):
+    """``a`` (a status array) reduced over ``dims`` to the status of largest magnitude: a peak or a
+    location reads every cell of those dimensions, so any cell not converged (-1, 1, 2) shows."""
+    for d in dims:
+        a = a.reduce(lambda x, axis: np.take_along_axis(
+            x, np.expand_dims(np.argmax(np.abs(x), axis=axis), axis), axis).squeeze(axis), dim=d)
+    return a
 
 
 def polish_record(sd, reduction):
@@ -490,14 +500,25 @@ def polish_record(sd, reduction):
     return (sd.ds[st] if st in sd.ds else None), (sd.ds[un] if un in sd.ds else None)
 
 
+def _status_names(status) -> dict:
+    names = dict(POLISH_STATUS)
+    values, meanings = status.attrs.get("flag_values"), status.attrs.get("flag_meanings")
+    if values is not None and meanings:
+        words = meanings.split() if isinstance(meanings, str) else list(meanings)
+        if len(words) == len(np.atleast_1d(values)):
+            names.update({int(k): str(w).replace("_", " ") for k, w in zip(np.atleast_1d(values), words)})
+    return names
+
+
 def _status_words(status) -> str:
     """Why the data cannot decide, from the selected polish statuses ("" when all are 0)."""
+    names = _status_names(status)
     v = np.asarray(status.values).ravel()
     v = v[np.isfinite(v.astype(np.float64))].astype(int)
     bad = v[v != 0]
     if not bad.size:
         return ""
-    kinds = ", ".join(f"{int((bad == k).sum())} {POLISH_STATUS.get(int(k), f'status {int(k)}')}"
+    kinds = ", ".join(f"{int((bad == k).sum())} {names.get(int(k), f'status {int(k)}')}"
                       for k in sorted(set(bad.tolist())))
     return (f"cannot judge: {bad.size} of {v.size} selected polished optima did not converge ({kinds}; "
             "_polished_status ≠ 0)")
@@ -555,9 +576,12 @@ def _selected(stores, scene, *, reduction=None, role="value", quantity=None, abs
             a = _location_along(a, location_along)
         return a
 
-    def sel_cells(arr):  # the record of the cells a peak or a location reads: the worst / largest
+    def sel_cells(arr, status=False):  # the record of the cells a peak or a location reads: worst / largest
         a, _ = select(arr, at=at, cells=cells, ranges=ranges, exclude=exclude, exclude_ranges=exclude_ranges)
-        for d in [*peak_over, *([location_along] if location_along else [])]:
+        dims = [*peak_over, *([location_along] if location_along else [])]
+        if status:
+            return _worst_status(a, dims)
+        for d in dims:
             a = a.max(d)
         return a
 
@@ -568,7 +592,7 @@ def _selected(stores, scene, *, reduction=None, role="value", quantity=None, abs
     status = uncertainty = None
     if polished and reduction is not None:
         st, un = polish_record(sd, reduction)
-        status = sel_cells(st) if st is not None else None
+        status = sel_cells(st, status=True) if st is not None else None
         uncertainty = sel_cells(un) if un is not None else None
     return _Source(sd, sel(da), sel, grid, polished, excluded, status, uncertainty)
 

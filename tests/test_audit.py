@@ -1174,6 +1174,15 @@ def test_a_polished_optimum_that_did_not_converge_cannot_be_judged():
     row = _row(_stat_claim({"min": 0.0}, scene="lin", tau0_window=0.45, **{"statistic": "fraction",
                                                                           "test": {"min": 0.0}}), stores)
     assert row.verdict == "cannot judge"
+    # a peak over the periods reads every period: -1 (not computed) beside 0s still shows, and the
+    # store's flag_meanings name it
+    status[4, 3, 0] = -1
+    stores, base, value = _record_store(status=status)
+    stores["lin"].ds["best_polished_status"].attrs.update(flag_values=[-1, 0, 1, 2],
+                                                          flag_meanings="not_computed converged cap_reached failed")
+    row = _row(_stat_claim({"min": 0.0}, scene="lin", tau0_window=0.45, statistic="only",
+                           at={"anisotropy_ratio": 4.0}, peak_over=["scaled_period"]), stores)
+    assert row.verdict == "cannot judge" and "1 not computed" in row.reason
 
 
 def test_the_polish_uncertainty_is_the_error_estimate_and_edges_are_named():
