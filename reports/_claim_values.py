@@ -602,9 +602,12 @@ def _apply_record(m: Measurement, *sources, index=None) -> None:
     polished optimum did not converge; the error estimate from the relative uncertainties (of
     cell ``index`` of a single source, else the largest over the selected cells, summed over the
     sides of a ratio) where every source stores one."""
-    why = [w for w in (_status_words(s.status) for s in sources if s.status is not None) if w]
-    if why:
-        m.cannot_judge = "; ".join(why)
+    why = [(s.sd.name, w) for s, w in ((s, _status_words(s.status)) for s in sources if s.status is not None) if w]
+    if len(why) == 1:
+        m.cannot_judge = why[0][1]
+    elif why:  # the sides of a ratio: one sentence, each side named
+        m.cannot_judge = "cannot judge: " + "; ".join(
+            f"side {k + 1} ({name}): {w.removeprefix('cannot judge: ')}" for k, (name, w) in enumerate(why))
     if not sources or any(s.uncertainty is None for s in sources) or not isinstance(m.value, float):
         return
     rel = 0.0
