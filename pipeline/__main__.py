@@ -40,12 +40,12 @@ EXIT_REFUSED = 3
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a process ended by Ctrl-C
 EXIT_TERMINATED = 143  # 128 + SIGTERM
 
-#: Shipped scenes in the order ``paper`` runs them (the four before the studies exist for
-#: cause checks of the reproduction audit, reports/claims.toml).
+#: Shipped scenes in the order ``paper`` runs them (fourier_optima_edge exists for a cause
+#: check of the reproduction audit, reports/claims.toml; opt_all_params_panel for the stated
+#: parameters of figure OptAllParamsMotions, issue 44).
 PAPER_SCENES = ("quick", "harmonic_grid", "harmonic_diagonals", "harmonic_optimum", "duty_cycle",
-                "linear_two_phase", "exponent_sets", "power_law", "fourier_optima", "force_laws",
-                "fourier_optima_edge", "accuracy",
-                "stiffness")
+                "linear_two_phase", "exponent_sets", "power_law", "opt_all_params_panel", "fourier_optima", "force_laws",
+                "fourier_optima_edge", "accuracy", "stiffness")
 #: The shipped scene files: package data of :mod:`workflows`, found wherever it is installed.
 WORKFLOWS = _workflows.DIRECTORY
 

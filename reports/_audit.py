@@ -9,7 +9,13 @@ here holds a result. Verdicts:
 * **differs** — it is not, and the reason says what the data show (an optimum on the edge of
   the scanned domain, a grid coarser than the claim's precision, failed points, or a
   difference beyond our error estimate);
+* **cannot judge** — the data cannot decide the claim: the region it speaks of is not stated
+  by the paper (``cannot_judge`` in ``claims.toml``), or a polished optimum it reads did not
+  converge (``_polished_status`` ≠ 0); our value is still shown (issue 44, ``reports/CAUSES.md``);
 * **not run** — the store the claim needs is missing, or lacks the cells it needs.
+
+A claim may carry ``beside``: the same computation on another domain (e.g. the wider τ0 window
+beside the paper's), shown in the reason without a verdict of its own.
 
 A claim that differs may carry a *cause* (:mod:`reports._causes`, criteria in
 ``reports/CAUSES.md``): its kind's check, registered with the claim in ``claims.toml`` and run on
@@ -30,7 +36,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from ._causes import CAUSES, Cause, Evidence, explain, miss, parse_cause, tolerance_text
+from ._causes import CAUSES, Cause, Evidence, control_word, explain, merge_args, miss, parse_cause, tolerance_text
 from ._claim_values import COMPUTE, Measurement, NotComputed
 from ._labels import tex_html
 from ._site import esc
@@ -39,7 +45,7 @@ __all__ = ["CLAIMS_FILE", "Claim", "AuditRow", "RegistryError", "load_claims", "
            "audit_counts", "cause_counts", "audit_sentence", "audit_summary", "write_audit_json", "VERDICTS", "CAUSES"]
 
 CLAIMS_FILE = Path(__file__).resolve().with_name("claims.toml")
-VERDICTS = ("agrees", "differs", "not run")
+VERDICTS = ("agrees", "differs", "cannot judge", "not run")
 _EXPECT_KEYS = ({"value", "tolerance"}, {"value", "factor"}, {"range", "tolerance"}, {"min"}, {"max"}, {"min", "max"})
 
 
@@ -62,6 +68,8 @@ class Claim:
     basis: str = ""
     by_construction: str = ""
     quote: str = ""
+    cannot_judge: str = ""
+    beside: tuple = ()
 
     @property
     def scenes(self) -> list[str]:
@@ -101,7 +109,7 @@ class AuditRow:
                 "evidence": self.evidence.to_json() if self.evidence else None,
                 "control": self.evidence.to_json()["control"] if self.evidence else None,
                 "basis": self.claim.basis, "by_construction": self.claim.by_construction or None,
-                "quote": self.claim.quote or None}
+                "quote": self.claim.quote or None, "cannot_judge": self.claim.cannot_judge or None}
 
 
 def _json_number(v):
@@ -134,8 +142,22 @@ def load_claims(path: Path | str = CLAIMS_FILE) -> list[Claim]:
         out.append(Claim(id=cid, figure=c["figure"], claim=c["claim"], paper_value=str(c["paper_value"]),
                          expect=dict(c["expect"]), compute=c["compute"], args=dict(c["args"]), cause=cause,
                          basis=str(c["basis"]), by_construction=str(c.get("by_construction", "")),
-                         quote=str(c.get("quote", ""))))
+                         quote=str(c.get("quote", "")), cannot_judge=str(c.get("cannot_judge", "")),
+                         beside=_parse_beside(cid, c.get("beside"))))
     return out
+
+
+def _parse_beside(cid: str, doc) -> tuple:
+    """``beside = { label, override }`` (or an array of such tables) of a claim: the same
+    computation with ``override`` merged into its arguments, quoted beside the verdict."""
+    if doc is None:
+        return ()
+    out = []
+    for b in (doc if isinstance(doc, list) else [doc]):
+        if not isinstance(b, dict) or "label" not in b or not isinstance(b.get("override"), dict):
+            raise RegistryError(f"claim {cid}: beside needs label and override (a table)")
+        out.append({"label": str(b["label"]), "override": dict(b["override"])})
+    return tuple(out)
 
 
 # ---------------------------------------------------------------------------
@@ -165,6 +187,10 @@ def verdict(claim: Claim, m: Measurement) -> tuple[str, str]:
         notes.append("at the domain edge: " + "; ".join(m.edges))
     if m.failed[0] and m.failed[1]:
         notes.append(f"{m.failed[0]} of {m.failed[1]} selected cells have no valid value")
+    why_not = claim.cannot_judge or m.cannot_judge
+    if why_not:  # the data cannot decide it: said, with our value, and not counted as agrees or differs
+        return "cannot judge", "; ".join([why_not, f"ours {_num(m.value)} ({claim.tolerance_text()} would "
+                                          f"{'hold' if short == 0 else 'not hold'})"] + notes)
     if math.isnan(short):
         return "differs", "; ".join([f"no valid value ({m.where})"] + notes)
     if short == 0:
@@ -196,6 +222,19 @@ def verdict(claim: Claim, m: Measurement) -> tuple[str, str]:
     return "differs", "; ".join(reasons)
 
 
+def _beside_text(c: Claim, by_name) -> str:
+    """The claim's computation on each ``beside`` domain, in words (no verdict of its own)."""
+    out = []
+    for b in c.beside:
+        try:
+            mb = COMPUTE[c.compute](by_name, **merge_args(c.args, b["override"]))
+        except NotComputed as exc:
+            out.append(f"beside, {b['label']}: not computed ({exc})")
+            continue
+        out.append(f"beside, {b['label']}: {_num(mb.value)} ({mb.where})")
+    return "; ".join(out)
+
+
 def evaluate_claims(claims, stores) -> list[AuditRow]:
     """One row per claim against ``stores`` (SceneStore objects; the first store of a scene name
     is used)."""
@@ -215,6 +254,8 @@ def evaluate_claims(claims, stores) -> list[AuditRow]:
             rows.append(AuditRow(c, "not run", str(exc), None))
             continue
         v, reason = verdict(c, m)
+        if c.beside:
+            reason += "; " + _beside_text(c, by_name)
         row = AuditRow(c, v, reason, m)
         if v == "differs":
             row.cause, row.evidence = explain(c.cause, by_name, c, m)
@@ -229,7 +270,7 @@ def evaluate_claims(claims, stores) -> list[AuditRow]:
 # Output
 # ---------------------------------------------------------------------------
 
-_CLASS = {"agrees": "v-agrees", "differs": "v-differs", "not run": "v-notrun"}
+_CLASS = {"agrees": "v-agrees", "differs": "v-differs", "cannot judge": "v-notrun", "not run": "v-notrun"}
 
 
 def _verdict_items(rows) -> list[tuple[str, bool, str | None]]:
@@ -278,6 +319,8 @@ def _sentence_parts(n: dict) -> list[tuple[str, str]]:
             ("", (f" ({by_cause})" if by_cause else "") + ", "),
             ("v-unexplained", f"{n['unexplained']} differ unexplained"),
             ("", ", "),
+            ("v-notrun", f"{n['cannot judge']} cannot judge"),
+            ("", ", "),
             ("v-notrun", f"{n['not run']} not run")]
 
 
@@ -298,10 +341,11 @@ def _cause_cell(r) -> str:
     else:
         ctrl = ev.control
         control = ("" if ctrl is None else
-                   f"<div class='small'><b>control</b> ({'passed' if ctrl.get('passed') else 'FAILED'}): "
+                   f"<div class='small'><b>control</b> ({control_word(ctrl)}): "
                    f"{esc(ctrl.get('what', ''))}. {esc(ctrl.get('result', ''))}</div>")
         check = (f"<div class='small'><b>evidence</b> (<code>{esc(ev.check)}</code>: "
-                 f"{'criterion met' if ev.holds else 'criterion not met'}): {esc(ev.result)}</div>{control}")
+                 f"{'cannot judge' if not ev.judged else 'criterion met' if ev.holds else 'criterion not met'}): "
+                 f"{esc(ev.result)}</div>{control}")
     return f"<b class='cause-{esc(r.cause)}'>{esc(r.cause)}</b>{why}{check}"
 
 
@@ -338,7 +382,7 @@ def audit_html(rows, figure_anchor=lambda label: f"fig-{label}", *, reduced: str
                              f", paper {esc(c.paper_value)}"
                              + (f"; evidence: {esc(r.evidence.result)}" if r.evidence else
                                 f"; no cause registered; what the data say: {esc(r.reason)}")
-                             + (f"; control ({'passed' if r.evidence.control.get('passed') else 'FAILED'}): "
+                             + (f"; control ({control_word(r.evidence.control)}): "
                                 f"{esc(r.evidence.control.get('result', ''))}"
                                 if r.evidence and r.evidence.control else "") + "</li>")
     return (f"<section class='audit' id='audit'><h2>Reproduction audit</h2>"

@@ -31,8 +31,8 @@ import numpy as np
 
 from ._claim_values import COMPUTE, Measurement, NotComputed, is_optima, scene_store
 
-__all__ = ["CAUSES", "CHECKS", "KIND_CHECK", "RULES", "Cause", "Evidence", "explain", "miss", "parse_cause",
-           "reflect", "tolerance_text"]
+__all__ = ["CAUSES", "CHECKS", "KIND_CHECK", "RULES", "Cause", "Evidence", "control_word", "explain", "merge_args", "miss",
+           "parse_cause", "reflect", "tolerance_text"]
 
 CAUSES = ("domain", "convention", "resolution", "cross-check", "reading", "defect")
 
@@ -42,7 +42,7 @@ KIND_CHECK = {"resolution": "converges", "domain": "restricted", "cross-check": 
 
 #: the shared rules a tolerance or a reading's threshold may cite (CAUSES.md, "Shared rules")
 RULES = ("printed", "figure", "most", "all", "grid", "angle", "words", "half", "much", "flat", "except", "trend",
-         "judgement")
+         "limit", "judgement")
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,12 @@ class Evidence:
     holds : the kind's criterion is met
     result : the outcome in words (printed in the audit row)
     numbers : the numbers compared, by name (written to audit.json)
-    control : the kind's negative control: {"what", "passed", "result", "numbers"}
+    control : the kind's negative control: {"what", "passed", "result", "numbers"}; ``passed`` is
+        None when the check cannot judge
+    judged : False when the check's inputs cannot decide anything (the levels of a resolution
+        series or the two sides of a cross-check read identical inputs, e.g. ``paper --quick``
+        reducing every level to one grid): the check neither holds nor has a control that passed
+        ("cannot judge", issue 44 item 5)
     """
 
     check: str
@@ -70,6 +75,7 @@ class Evidence:
     result: str
     numbers: dict = field(default_factory=dict)
     control: dict | None = None
+    judged: bool = True
 
     @property
     def shown(self) -> bool:
@@ -82,7 +88,7 @@ class Evidence:
             ctrl = {k: (_plain(v) if k == "numbers" else v) for k, v in self.control.items()}
             if "numbers" in ctrl:
                 ctrl["numbers"] = {k: _plain(v) for k, v in self.control["numbers"].items()}
-        return {"check": self.check, "holds": self.holds, "result": self.result,
+        return {"check": self.check, "holds": self.holds, "judged": self.judged, "result": self.result,
                 "numbers": {k: _plain(v) for k, v in self.numbers.items()}, "control": ctrl}
 
 
@@ -95,6 +101,23 @@ def _plain(v):
         v = float(v)
         return v if math.isfinite(v) else None
     return v
+
+
+def control_word(control: dict | None) -> str:
+    """How a check's control came out, in one word: "passed", "FAILED", or "cannot judge" (its
+    ``passed`` is None: the check's inputs were identical, issue 44 item 5)."""
+    if control is None:
+        return ""
+    passed = control.get("passed")
+    return "cannot judge" if passed is None else ("passed" if passed else "FAILED")
+
+
+def _cannot_judge(check: str, why: str, numbers: dict) -> Evidence:
+    """The evidence of a check whose inputs cannot decide anything: it does not hold, and its
+    control neither passed nor failed."""
+    words = f"cannot judge: {why}"
+    return Evidence(check, False, words, numbers, judged=False,
+                    control={"what": "none: the check's inputs are identical", "passed": None, "result": words})
 
 
 def _arg_scenes(a: dict) -> set:
@@ -176,6 +199,10 @@ def _merge(base: dict, override: dict) -> dict:
         else:
             out[k] = {kk: vv for kk, vv in v.items() if kk != "replace"} if isinstance(v, dict) else copy.deepcopy(v)
     return out
+
+
+#: the public name of :func:`_merge` (a claim's ``beside`` and causes merge their overrides alike)
+merge_args = _merge
 
 
 def _measure(stores, claim, compute=None, args=None, override=None) -> tuple[Measurement, dict]:
@@ -319,6 +346,23 @@ def _grid(stores, a: dict) -> list:
     return out
 
 
+def _inputs(stores, a: dict) -> list:
+    """What a computation reads, per source: the grid it samples (:func:`_grid`), whether it
+    reads the grid optimum or the polished one, and the polish's settings (method, budget,
+    tolerance: every ``polish*`` key of the reduction) — two levels of a resolution series with
+    the same inputs are the same computation, whatever their labels or store files."""
+    out = []
+    srcs = ([a] if "scene" in a else []) + [a[s] for s in ("numerator", "denominator", "base", "partial", "full")
+                                           if isinstance(a.get(s), dict)]
+    for src, grid in zip(srcs, _grid(stores, a)):
+        sd = scene_store(stores, src["scene"])
+        red = next((r for r in sd.reductions if r.get("name") == src.get("reduction")), {})
+        polish = tuple(sorted((k, str(v)) for k, v in red.items() if k.startswith("polish")))
+        polished = bool(red.get("polish")) and not src.get("grid")
+        out.append((grid, polished, polish if polished else ()))
+    return out
+
+
 def _rtol(sd) -> float:
     """The solver tolerance of a store's values (the τ-grid rtol of an optima store)."""
     if is_optima(sd):
@@ -363,16 +407,24 @@ def converges(stores, claim, m, *, levels: list, paper_level: int | None = None,
     with ``paper_evidence``) reaches the paper's accepted set."""
     if len(levels) < 3:
         raise ValueError("a resolution cause needs three or more levels")
-    vals, words, domains, rtols = [], [], [], []
+    vals, words, domains, rtols, inputs = [], [], [], [], []
     for lv in levels:
         m2, a = _measure(stores, claim, lv.get("compute"), lv.get("args"), lv.get("override"))
         if isinstance(m2.value, tuple):
             raise ValueError("a resolution series needs a scalar value")
         vals.append(m2.value)
         domains.append(_domain(stores, a))
+        inputs.append(_inputs(stores, a))
         rtols += [_rtol(scene_store(stores, sc)) for sc, _ in _reductions_of(a)]
         words.append(f"{lv['label']} ({lv['resolution']}): {_num(m2.value)}")
     ours = m.value
+    same = [(levels[i]["label"], levels[j]["label"]) for i in range(len(levels)) for j in range(i + 1, len(levels))
+            if inputs[i] == inputs[j]]
+    if same:  # e.g. paper --quick reducing every level to one grid: no refinement took place
+        return _cannot_judge("converges", "; ".join(f"{x} and {y}" for x, y in same) + " read identical inputs (the "
+                             "same grid and the same polish): no refinement took place, so no convergence can be "
+                             "shown or refuted. " + "; ".join(words) + ".",
+                             {"levels": vals, "ours": ours, "identical_levels": [list(p) for p in same]})
     is_level = any(math.isclose(v, ours, rel_tol=1e-12, abs_tol=1e-15) for v in vals)
     same_domain = all(dm == domains[0] for dm in domains)
     # the noise floor: each value is within its solver's rtol, a ratio within twice that
@@ -474,6 +526,12 @@ def cross_check(stores, claim, m, *, label: str, compute=None, args=None, overri
     shared_store = bool(paths_a & paths_b) or bool(_arg_scenes(own) & _arg_scenes(a))
     shared_grid = any(g in grids_b for g in grids_a)
     independent = not shared_store and not shared_grid
+    if not independent:  # one store or one grid on both sides: an agreement of a computation with itself
+        return _cannot_judge("cross_check", f"{label}: the two sides read "
+                             + " and ".join(w for w, f in (("the same store", shared_store), ("the same grid", shared_grid))
+                                            if f) + f" ({', '.join(sorted(paths_a))} | {', '.join(sorted(paths_b))}): "
+                             f"their agreement ({_num(m.value)} and {_num(m2.value)}) is no second computation",
+                             {"ours": m.value, "second": m2.value, "independent": False})
     va = list(m.value) if isinstance(m.value, tuple) else [m.value]
     vb = list(m2.value) if isinstance(m2.value, tuple) else [m2.value]
     ea, eb = m.error_value, m2.error_value

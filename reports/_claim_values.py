@@ -14,6 +14,10 @@ They are built from a few small steps over labelled arrays (``xarray.DataArray``
     points, stacked along ``cell``), ``ranges`` (inclusive [lo, hi] per dimension), ``exclude``;
 ``grid``
     true: the grid optimum even where a polished one is stored;
+``tau0_window``
+    the half-width of the τ0 window |τ0 − 0.5| ≤ h of a reduction repeated over τ0 windows
+    (``duty_cycle_halfwidth``): 0.45 is the paper's domain τ0 ∈ [0.05, 0.95] (issue 44); a store
+    without that window raises NotComputed (never read on another domain);
 ``peak_over``
     the maximum over dimensions (the paper's "peak" over periods);
 ``location_along``
@@ -24,6 +28,11 @@ They are built from a few small steps over labelled arrays (``xarray.DataArray``
     instead of the value).
 
 A selection the store does not hold raises :class:`NotComputed` (the claim is "not run").
+
+The polish record (issue 44): where a polished reduction stores ``{r}_polished_status``,
+``{r}_polished_uncertainty`` and ``{r}_polished_{axis}_edge``, a selected cell whose status is
+not 0 makes the measurement ``cannot_judge``, the error estimate of a polished value is its
+uncertainty (relative) times |value|, and an arg-max on an edge of the polish domain is named.
 """
 
 from __future__ import annotations
@@ -56,6 +65,8 @@ class Measurement:
         the sampling explains a miss only on that side
     neighbours : for a located coordinate, the coordinates one grid step either side
     failed : (cells without a valid value, cells selected)
+    cannot_judge : why the data cannot decide the claim (a selected polished optimum that did not
+        converge: ``_polished_status`` ≠ 0), "" when they can
     """
 
     value: object
@@ -69,6 +80,7 @@ class Measurement:
     neighbours: list = field(default_factory=list)
     coarse_side: str = ""
     failed: tuple = (0, 0)
+    cannot_judge: str = ""
 
 
 # ---------------------------------------------------------------------------
@@ -345,6 +357,17 @@ def _edges(sd, reduction, cell_sel) -> tuple:
     """Continuous arg-max axes of ``reduction`` at an end of their scanned range in the cell."""
     out = []
     for ax in _continuous_argmax_axes(sd, reduction):
+        flag = f"{reduction}_polished_{ax}_edge"
+        if flag in sd.ds:  # the polish record says which end of the polish domain (issue 44)
+            try:
+                f = float(np.asarray(cell_sel(sd.ds[flag]).values).ravel()[0])
+                arg = float(np.asarray(cell_sel(grid_role_array(sd, reduction, ax)[0]).values).ravel()[0])
+            except (NotComputed, IndexError, ValueError):
+                continue
+            if f:
+                out.append(f"{axis_name(ax)} at the {'lower' if f < 0 else 'upper'} end of the polish domain "
+                           f"({arg:.3g}; {flag})")
+            continue
         try:
             arg_da, _, _ = grid_role_array(sd, reduction, ax)
             arg = float(np.asarray(cell_sel(arg_da).values).ravel()[0])
@@ -363,6 +386,18 @@ def _edge_shares(sd, reduction, sel) -> tuple:
     cells have their optimum at an end of the scanned range (said in the verdict)."""
     out = []
     for ax in _continuous_argmax_axes(sd, reduction):
+        flag = f"{reduction}_polished_{ax}_edge"
+        if flag in sd.ds:  # the polish record (issue 44)
+            try:
+                f = np.asarray(sel(sd.ds[flag]).values, dtype=np.float64).ravel()
+            except (NotComputed, IndexError, ValueError, KeyError):
+                continue
+            f = f[np.isfinite(f)]
+            for end, sign in (("lower", -1), ("upper", 1)):
+                k = int(np.sum(f == sign))
+                if k:
+                    out.append(f"{axis_name(ax)} at the {end} end of the polish domain in {k} of {f.size} cells")
+            continue
         try:
             arg = np.asarray(sel(grid_role_array(sd, reduction, ax)[0]).values, dtype=np.float64).ravel()
         except (NotComputed, IndexError, ValueError, KeyError):
@@ -444,6 +479,51 @@ def _failures(da, excluded: int = 0) -> tuple:
 # ---------------------------------------------------------------------------
 
 
+#: ``{r}_polished_status`` (contract of issue 44): -1 not computed, 0 converged, 1 cap reached,
+#: 2 no valid solve; the store's own ``flag_values`` / ``flag_meanings`` attributes name them when present
+POLISH_STATUS = {-1: "not computed", 0: "converged", 1: "cap reached, not converged", 2: "solve failed or no valid start"}
+
+
+def _worst_status(a, dims):
+    """``a`` (a status array) reduced over ``dims`` to the status of largest magnitude: a peak or a
+    location reads every cell of those dimensions, so any cell not converged (-1, 1, 2) shows."""
+    for d in dims:
+        a = a.reduce(lambda x, axis: np.take_along_axis(
+            x, np.expand_dims(np.argmax(np.abs(x), axis=axis), axis), axis).squeeze(axis), dim=d)
+    return a
+
+
+def polish_record(sd, reduction):
+    """(status, uncertainty) arrays of a polished reduction's record, each None when the store
+    holds none (a store polished before issue 44)."""
+    st, un = f"{reduction}_polished_status", f"{reduction}_polished_uncertainty"
+    return (sd.ds[st] if st in sd.ds else None), (sd.ds[un] if un in sd.ds else None)
+
+
+def _status_names(status) -> dict:
+    names = dict(POLISH_STATUS)
+    values, meanings = status.attrs.get("flag_values"), status.attrs.get("flag_meanings")
+    if values is not None and meanings:
+        words = meanings.split() if isinstance(meanings, str) else list(meanings)
+        if len(words) == len(np.atleast_1d(values)):
+            names.update({int(k): str(w).replace("_", " ") for k, w in zip(np.atleast_1d(values), words)})
+    return names
+
+
+def _status_words(status) -> str:
+    """Why the data cannot decide, from the selected polish statuses ("" when all are 0)."""
+    names = _status_names(status)
+    v = np.asarray(status.values).ravel()
+    v = v[np.isfinite(v.astype(np.float64))].astype(int)
+    bad = v[v != 0]
+    if not bad.size:
+        return ""
+    kinds = ", ".join(f"{int((bad == k).sum())} {names.get(int(k), f'status {int(k)}')}"
+                      for k in sorted(set(bad.tolist())))
+    return (f"cannot judge: {bad.size} of {v.size} selected polished optima did not converge ({kinds}; "
+            "_polished_status ≠ 0)")
+
+
 @dataclass
 class _Source:
     sd: object
@@ -452,14 +532,23 @@ class _Source:
     grid: object = None   # the selected grid counterpart of a polished array
     polished: bool = False
     excluded: int = 0
+    status: object = None       # the selected polish status (the worst over a peak), or None
+    uncertainty: object = None  # the selected relative uncertainty of the polished value, or None
 
 
 def _selected(stores, scene, *, reduction=None, role="value", quantity=None, absolute=False, at=None, cells=None,
               ranges=None, exclude=None, exclude_ranges=None, peak_over=(), location_along=None,
-              grid=False) -> _Source:
+              grid=False, tau0_window=None) -> _Source:
     """The selected array of one claim source (see the module docstring); ``grid``: the grid
-    optimum even where a polished one is stored (what the grid alone resolves)."""
+    optimum even where a polished one is stored (what the grid alone resolves);
+    ``tau0_window``: the τ0 window's half-width (the paper's domain is 0.45)."""
     sd = scene_store(stores, scene)
+    if tau0_window is not None:
+        dim = "duty_cycle_halfwidth"
+        if reduction is None or dim not in sd.ds.dims:
+            raise NotComputed(f"store {sd.name} has no τ0 window {tau0_window:g} (dimension {dim}: the scene's "
+                              "reductions are not repeated over τ0 windows; issue 44: rerun after the polish merge)")
+        at = {**(at or {}), dim: tau0_window}
     grid_da, polished = None, False
     if reduction is not None:
         da, grid_da, polished = grid_role_array(sd, reduction, role)
@@ -487,22 +576,68 @@ def _selected(stores, scene, *, reduction=None, role="value", quantity=None, abs
             a = _location_along(a, location_along)
         return a
 
+    def sel_cells(arr, status=False):  # the record of the cells a peak or a location reads: worst / largest
+        a, _ = select(arr, at=at, cells=cells, ranges=ranges, exclude=exclude, exclude_ranges=exclude_ranges)
+        dims = [*peak_over, *([location_along] if location_along else [])]
+        if status:
+            return _worst_status(a, dims)
+        for d in dims:
+            a = a.max(d)
+        return a
+
     excluded = (select(da, at=at, cells=cells, ranges=ranges, exclude=exclude, exclude_ranges=exclude_ranges)[1]
                 if exclude or exclude_ranges else 0)
     # a peak or a located coordinate has no grid counterpart of the same meaning
     grid = sel(grid_da) if grid_da is not None and not peak_over and not location_along else None
-    return _Source(sd, sel(da), sel, grid, polished, excluded)
+    status = uncertainty = None
+    if polished and reduction is not None:
+        st, un = polish_record(sd, reduction)
+        status = sel_cells(st, status=True) if st is not None else None
+        uncertainty = sel_cells(un) if un is not None else None
+    return _Source(sd, sel(da), sel, grid, polished, excluded, status, uncertainty)
+
+
+def _apply_record(m: Measurement, *sources, index=None) -> None:
+    """The polish record of the sources read (issue 44): ``cannot_judge`` when a selected
+    polished optimum did not converge; the error estimate from the relative uncertainties (of
+    cell ``index`` of a single source, else the largest over the selected cells, summed over the
+    sides of a ratio) where every source stores one."""
+    why = [(s.sd.name, w) for s, w in ((s, _status_words(s.status)) for s in sources if s.status is not None) if w]
+    if len(why) == 1:
+        m.cannot_judge = why[0][1]
+    elif why:  # the sides of a ratio: one sentence, each side named
+        m.cannot_judge = "cannot judge: " + "; ".join(
+            f"side {k + 1} ({name}): {w.removeprefix('cannot judge: ')}" for k, (name, w) in enumerate(why))
+    if not sources or any(s.uncertainty is None for s in sources) or not isinstance(m.value, float):
+        return
+    rel = 0.0
+    for s in sources:
+        u = np.asarray(s.uncertainty.values, dtype=np.float64)
+        if index is not None and u.size > 1 and len(sources) == 1:
+            u = u.ravel()[index: index + 1]
+        if not np.isfinite(u).any():
+            return
+        rel += float(np.nanmax(np.abs(u)))
+    if math.isfinite(m.value):
+        m.error_value = rel * abs(m.value)
+        m.error = f"polish uncertainty {rel:.2g} (relative; the polish record)"
 
 
 _SAMPLED = ("anisotropy_ratio", "scaled_period")
 
 
-def stat(stores, *, scene, statistic="only", test=None, location=None, **source) -> Measurement:
-    """One value of a store (see the module docstring for the selection)."""
+def stat(stores, *, scene, statistic="only", test=None, location=None, where_best=None, **source) -> Measurement:
+    """One value of a store (see the module docstring for the selection). ``where_best``: the
+    value of ``role`` at the cell where role ``where_best`` of the same selection is largest
+    (e.g. A1/A0 at the peak relative efficiency of a regime)."""
+    if where_best is not None:
+        return _at_best(stores, scene, where_best, source)
     src = _selected(stores, scene, **source)
     sd, da = src.sd, src.da
     value, where, index = _collapse(da, statistic, test, location)
     m = Measurement(value=value, where=where, failed=_failures(da, src.excluded))
+    if statistic in ("max", "min") and index is not None and not location:
+        m.edges = _period_edge(da, index)
     counted = statistic == "fraction" or source.get("location_along") or location
     reduction = source.get("reduction")
     if reduction:
@@ -512,13 +647,17 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
                         + f"; solver rtol {sd.rtol:g}")
         if src.grid is not None and not counted:
             _polish_change(m, da, src.grid, index)
+        if not counted:
+            _apply_record(m, src, index=index)
+        elif src.status is not None:
+            m.cannot_judge = _status_words(src.status)
         role = source.get("role", "value")
         if not src.polished and role in over and not counted:
             coord = np.asarray(sd.ds[role].values, dtype=np.float64)
             step = float(np.min(np.diff(coord)))
             m.error, m.error_value = f"grid optimum: {axis_name(role)} within one grid step ({step:.3g})", step
         if index is not None or statistic == "only":
-            m.edges = _edges(sd, reduction, lambda arr: _cell(src.sel(arr), index))
+            m.edges = tuple(m.edges) + _edges(sd, reduction, lambda arr: _cell(src.sel(arr), index))
         elif not source.get("peak_over"):
             m.edges = _edge_shares(sd, reduction, src.sel)
     elif source.get("quantity"):
@@ -547,6 +686,43 @@ def stat(stores, *, scene, statistic="only", test=None, location=None, **source)
                 m.coarse, m.coarse_value = gap, math.inf
             # a finer sampling can only raise a maximum (lower a minimum)
             m.coarse_side = "below" if statistic == "max" else "above"
+    return m
+
+
+def _period_edge(da, index) -> tuple:
+    """An extremum over the periods at our shortest or longest sampled period: a supremum over
+    our period range (issue 44, REREADING44 P6), said in the verdict."""
+    if "scaled_period" not in da.dims or da.sizes["scaled_period"] < 2:
+        return ()
+    k = da.dims.index("scaled_period")
+    i = np.unravel_index(index, da.shape)[k]
+    c = np.asarray(da["scaled_period"].values, dtype=np.float64)
+    if i in (0, c.size - 1):
+        end = "shortest" if i == 0 else "longest"
+        return (f"scaled period at our {end} sample {value_text('scaled_period', c[i])}: a supremum over our "
+                "period range",)
+    return ()
+
+
+def _at_best(stores, scene, best_role, source) -> Measurement:
+    """``role`` of the cell where ``best_role`` (same selection) is largest."""
+    role = source.get("role", "value")
+    best = _selected(stores, scene, **{**source, "role": best_role})
+    v = np.asarray(best.da.values, dtype=np.float64)
+    if not np.isfinite(v).any():
+        return Measurement(value=math.nan, where="no valid value")
+    index = int(np.nanargmax(v))
+    src = _selected(stores, scene, **source)
+    value = float(np.asarray(src.da.values, dtype=np.float64).ravel()[index])
+    m = Measurement(value=value, where=f"{axis_name(role) if role != 'value' else 'value'} at the largest "
+                                      f"{best_role} ({v.ravel()[index]:.3g}, {_where(best.da, index)})")
+    reduction = source.get("reduction")
+    if reduction:
+        sd = src.sd
+        over = [a for a in _reduction(sd, reduction).get("over", []) if a in sd.ds.sizes]
+        m.resolution = _grid_text(sd, over) + (", polished optimum" if src.polished else ", grid optimum")
+        m.edges = _period_edge(best.da, index) + _edges(sd, reduction, lambda arr: _cell(src.sel(arr), index))
+        _apply_record(m, _without_uncertainty(src), index=index)
     return m
 
 
@@ -601,7 +777,7 @@ def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=N
     over their shared coordinates (a collapsed side broadcasts), then ``statistic``."""
     import xarray as xr
 
-    [(sa, a, pa), (sb, b, pb)], excluded, unpolished = _aligned_sides(stores, numerator, denominator)
+    [(sa, a, pa), (sb, b, pb)], excluded, unpolished, srcs = _aligned_sides(stores, numerator, denominator)
     with np.errstate(invalid="ignore", divide="ignore"):
         r = a / b
     if test and test.get("figure_equal"):
@@ -613,7 +789,15 @@ def gain(stores, *, numerator: dict, denominator: dict, statistic="only", test=N
     m.error = "ratio of two optima, each within its own resolution"
     if unpolished:  # a ratio of grid optima: the grid's error is not bounded by anything stored
         m.coarse, m.coarse_value = "; ".join(dict.fromkeys(unpolished)) + ", an error we cannot bound", math.inf
+    if statistic in ("only", "max", "min", "median") and not test:
+        _apply_record(m, *srcs)
+    else:  # a share of cells: the record decides only whether the cells can be judged
+        _apply_record(m, *[_without_uncertainty(x) for x in srcs])
     return m
+
+
+def _without_uncertainty(src: _Source) -> _Source:
+    return _Source(src.sd, src.da, src.sel, src.grid, src.polished, src.excluded, src.status, None)
 
 
 def _figure_equal(a, b):
@@ -638,15 +822,17 @@ def _sides_resolution(*sides) -> str:
 def _aligned_sides(stores, *sides):
     """The selected arrays of two or more selections (gain's sides), aligned on the coordinates
     they share (a side collapsed by its own ``statistic`` broadcasts): ([(store, array,
-    polished)], masked cells, notes on unpolished grid optima)."""
+    polished)], masked cells, notes on unpolished grid optima, the sides' sources (their polish
+    records))."""
     import xarray as xr
 
-    parts, excluded, unpolished = [], 0, []
+    parts, excluded, unpolished, sources = [], 0, [], []
     for side in sides:
         side = dict(side)
         scene = side.pop("scene")
         side_stat = side.pop("statistic", None)
         src = _selected(stores, scene, **side)
+        sources.append(src)
         sd, da, polished = src.sd, src.da, src.polished
         excluded = max(excluded, src.excluded)
         if side.get("reduction") and not polished:
@@ -674,7 +860,7 @@ def _aligned_sides(stores, *sides):
     arrays[0] = a.drop_vars(extra_a, errors="ignore")
     for k in range(1, len(arrays)):
         arrays[k] = arrays[k].drop_vars([c for c in arrays[k].coords if c not in arrays[k].dims], errors="ignore")
-    return [(p[0], arr, p[2]) for p, arr in zip(parts, arrays)], excluded, unpolished
+    return [(p[0], arr, p[2]) for p, arr in zip(parts, arrays)], excluded, unpolished, sources
 
 
 def monotone(stores, *, along: str, scene=None, numerator=None, denominator=None, direction="increasing",
@@ -688,13 +874,13 @@ def monotone(stores, *, along: str, scene=None, numerator=None, denominator=None
     if numerator is not None:
         if scene is not None or denominator is None:
             raise NotComputed("monotone takes a scene, or a numerator and a denominator")
-        [(sd, a, pa), (sb, b, pb)], excluded, unpolished = _aligned_sides(stores, numerator, denominator)
+        [(sd, a, pa), (sb, b, pb)], excluded, unpolished, srcs = _aligned_sides(stores, numerator, denominator)
         with np.errstate(invalid="ignore", divide="ignore"):
             da = a / b
         source = {}
     else:
         src = _selected(stores, scene, **source)
-        sd, da, excluded = src.sd, src.da, src.excluded
+        sd, da, excluded, srcs = src.sd, src.da, src.excluded, [src]
     shares, pairs, against = [], 0, []
     for d in dims or [along]:
         dt = da.transpose(*[x for x in da.dims if x != d], d)
@@ -745,6 +931,7 @@ def monotone(stores, *, along: str, scene=None, numerator=None, denominator=None
         m.resolution, m.error = _optima_resolution(sd)
     m.error = (m.error + "; " if m.error else "") + f"a share of {pairs} pairs: one pair is {share_error:.2g}"
     m.error_value = share_error
+    _apply_record(m, *[_without_uncertainty(x) for x in srcs])
     return m
 
 
@@ -771,6 +958,9 @@ def harmonic_phi_span(stores, *, scene, reduction, statistic="max", **select_arg
         a, _ = select(arr, **select_args)
         return a.isel(dict(zip(a.dims, np.unravel_index(index, a.shape)))) if a.size > 1 else a
     m.edges = _edges(sd, reduction, cell_sel)
+    status, _ = polish_record(sd, reduction)
+    if polished and status is not None:  # the polish record (issue 44): the optimum read must have converged
+        m.cannot_judge = _status_words(cell_sel(status))
     return m
 
 
@@ -781,7 +971,7 @@ def improvement_share(stores, *, base: dict, partial: dict, full: dict, statisti
     ``base`` not equal to two significant digits, the shared rule "figure"); then ``statistic``
     (e.g. the share of those cells where ``partial`` reaches more than half, "most of the
     improvement")."""
-    [(sa, b, pa), (sp, p, pp), (sf, f, pf)], excluded, unpolished = _aligned_sides(stores, base, partial, full)
+    [(sa, b, pa), (sp, p, pp), (sf, f, pf)], excluded, unpolished, srcs = _aligned_sides(stores, base, partial, full)
     shows = ~np.asarray(_figure_equal(f, b)) & np.isfinite(np.asarray(f - b, dtype=np.float64))
     with np.errstate(invalid="ignore", divide="ignore"):
         share = ((p - b) / (f - b)).where(shows)
@@ -794,6 +984,7 @@ def improvement_share(stores, *, base: dict, partial: dict, full: dict, statisti
     m.error = "shares of differences of optima, each within its own resolution"
     if unpolished:
         m.coarse, m.coarse_value = "; ".join(dict.fromkeys(unpolished)) + ", an error we cannot bound", math.inf
+    _apply_record(m, *[_without_uncertainty(x) for x in srcs])
     return m
 
 
@@ -833,6 +1024,58 @@ def switched(stores, *, scene: str, quantity: str, at: dict, change: dict, absol
     return m
 
 
+def aitken_limit(v1: float, v2: float, v3: float) -> float:
+    """The geometric (Aitken) extrapolation of v1, v2, v3 (v3 nearest the limit): v3 + d q/(1 − q)
+    with d = v3 − v2, q = d/(v2 − v1); 0 when q ≥ 1 (a fall that does not slow reaches 0), NaN
+    when the steps change sign or the middle step is 0 (no geometric trend)."""
+    d, dprev = v3 - v2, v2 - v1
+    if dprev == 0 or not math.isfinite(d / dprev) or d / dprev < 0:
+        return math.nan
+    q = d / dprev
+    return 0.0 if q >= 1 else v3 + d * q / (1 - q)
+
+
+def limit(stores, *, scene, along="scaled_period", toward="min", fraction_of_peak=0.1, **source) -> Measurement:
+    """The shared rule "limit" (reports/CAUSES.md): "X tends to zero as ``along`` → its ``toward``
+    end", per line of the selection (every other dimension): the three samples nearest that end
+    fall toward it and their Aitken limit (:func:`aitken_limit`) is at most ``fraction_of_peak``
+    of the line's peak over ``along``. The value: the share of lines where it holds."""
+    src = _selected(stores, scene, **source)
+    sd, da = src.sd, src.da
+    if along not in da.dims or da.sizes[along] < 3:
+        raise NotComputed(f"the limit along {axis_name(along)} needs three samples of it")
+    dt = da.sortby(along, ascending=(toward == "min")).transpose(*[d for d in da.dims if d != along], along)
+    v = np.asarray(dt.values, dtype=np.float64).reshape(-1, da.sizes[along])
+    lines = dt.isel({along: 0}, drop=True)
+    held, words, n = 0, [], 0
+    for k, row in enumerate(v):
+        if not np.isfinite(row[:3]).all():
+            continue
+        n += 1
+        v3, v2, v1 = row[0], row[1], row[2]
+        peak = float(np.nanmax(row))
+        L = aitken_limit(v1, v2, v3)
+        ok = bool(v3 < v2 < v1 and math.isfinite(L) and L <= fraction_of_peak * peak)
+        held += ok
+        if not ok:
+            at = _where(lines, k) if lines.ndim else ""
+            words.append(f"{at}: {v1:.3g}, {v2:.3g}, {v3:.3g} toward the limit, Aitken limit "
+                         f"{L:.3g} vs a tenth of the peak {fraction_of_peak * peak:.3g}")
+    if not n:
+        return Measurement(value=math.nan, where="no line with three valid samples")
+    c = np.sort(np.asarray(da[along].values, dtype=np.float64))
+    ends = c[:3] if toward == "min" else c[::-1][:3]
+    m = Measurement(value=held / n, where=(f"{held} of {n} lines fall toward {axis_name(along)} → {toward} with an "
+                                           f"Aitken limit ≤ {fraction_of_peak:g} of the peak (samples "
+                                           + ", ".join(value_text(along, x) for x in ends[::-1]) + ")"
+                                           + ("; not at " + "; ".join(words[:3]) + (" …" if len(words) > 3 else "")
+                                              if words else "")),
+                    failed=_failures(da, src.excluded))
+    m.resolution = _grid_text(sd, sd.dims) + f"; solver rtol {sd.rtol:g}"
+    m.error, m.error_value = f"a share of {n} lines: one line is {1 / n:.2g}", 1.0 / n
+    return m
+
+
 #: The reductions a claim may name (``compute = "<key>"``).
 COMPUTE = {"stat": stat, "gain": gain, "monotone": monotone, "harmonic_phi_span": harmonic_phi_span,
-           "improvement_share": improvement_share, "switched": switched}
+           "improvement_share": improvement_share, "switched": switched, "limit": limit}

@@ -102,6 +102,9 @@ def test_registry_names_existing_scenes_reductions_roles_and_dimensions():
                 elif key in c.args and src is not c.args:  # a monotone gain: its axis is in both sides
                     named.add(c.args[key])
             assert named <= dims, (c.id, named - dims)
+            if "tau0_window" in src:  # the paper's τ0 domain (issue 44): only a reduction over τ0 has windows
+                assert "duty_cycle" in next(r["over"] for r in scenes[src["scene"]]["reductions"]
+                                            if r["name"] == src["reduction"]), c.id
 
 
 def test_figures_follow_the_papers_label_order():
@@ -507,13 +510,16 @@ def _row(claim, stores):
 # -- resolution ---------------------------------------------------------------------------------
 
 
-def _levels(factors, extents=None):
-    """Stores lvl0, lvl1, ... of one computation at rising resolution: the maximum times ``factors``."""
+def _levels(factors, extents=None, same_grid=False):
+    """Stores lvl0, lvl1, ... of one computation at rising resolution (A0 sampled at 5, 9, 17, ...
+    points of one range; ``same_grid``: all at 9, as ``paper --quick`` reduces the levels): the
+    maximum times ``factors``."""
     rng = np.random.default_rng(11)
     value = rng.uniform(0.1, 1.0, (9, 7))
     stores = {}
     for k, f in enumerate(factors):
-        a0 = None if extents is None or extents[k] is None else extents[k]
+        a0 = np.linspace(0, 1.5708, 9 if same_grid else 4 * 2 ** k + 1)
+        a0 = a0 if extents is None or extents[k] is None else extents[k]
         stores[f"lvl{k}"] = _plane_store(f"lvl{k}", value * f, a0_coords=a0)
     levels = [{"label": f"level {k}", "resolution": f"{4 * 2 ** k} points", "override": {"scene": f"lvl{k}"}}
               for k in range(len(factors))]
@@ -558,6 +564,54 @@ def test_converges_fails_when_the_levels_diverge_or_change_domain():
     # fewer than three levels cannot show convergence
     row = _row(_with_cause(claim, _cause("resolution", "converges", levels=levels[1:])), stores)
     assert row.cause == "unexplained" and "could not run" in row.evidence.result
+
+
+def test_a_resolution_series_on_identical_inputs_cannot_judge():
+    """Issue 44 item 5: ``paper --quick`` reduced the three exponent_sets levels to one grid, every
+    array was equal, and the audit printed "converging … control (passed)". Levels that read
+    identical inputs (the same grid, the same polish) are "cannot judge": the check does not hold
+    and its control neither passed nor failed. Negative control: the same values on three
+    different grids of one domain are judged."""
+    from reports._audit import audit_html
+
+    stores, levels, top = _levels([1.0, 1.0, 1.0], same_grid=True)
+    claim = _with_cause(_stat_claim({"value": 2 * top, "tolerance": 0.01}, scene="lvl2"),
+                        _cause("resolution", "converges", levels=levels))
+    row = _row(claim, stores)
+    assert row.verdict == "differs" and row.cause == "unexplained"
+    assert not row.evidence.judged and not row.evidence.holds and row.evidence.control["passed"] is None
+    assert "cannot judge" in row.evidence.result and "identical inputs" in row.evidence.result
+    page = audit_html([row])
+    assert "control</b> (cannot judge)" in page and "(passed)" not in page and "criterion met" not in page
+    assert row.evidence.to_json()["judged"] is False
+    # the same values on three grids of one domain: a refinement took place, so it is judged
+    # (it settled at ours, which does not reach the paper: not shown, and the control passed)
+    stores, levels, top = _levels([1.0, 1.0, 1.0])
+    row = _row(_with_cause(claim, _cause("resolution", "converges", levels=levels)), stores)
+    assert row.evidence.judged and row.evidence.control["passed"] is True and row.cause == "unexplained"
+    # a grid level and a polished level on one grid are two computations (the polish is the refinement)
+    stores, levels, top = _levels([0.98, 1.0, 1.0], same_grid=True)
+    for sd in stores.values():
+        sd.science["reductions"][0]["polish"] = True
+    levels[0]["override"] = {"scene": "lvl0", "grid": True}
+    levels[1]["override"] = {"scene": "lvl1"}
+    stores["lvl2"].science["reductions"][0]["polish_max_evaluations"] = 200
+    row = _row(_with_cause(claim, _cause("resolution", "converges", levels=levels)), stores)
+    assert row.evidence.judged, row.evidence.result
+
+
+def test_a_cross_check_on_one_grid_cannot_judge():
+    """Issue 44 item 5 for cross-checks: two sides on one grid are "cannot judge" (control passed
+    None, printed so), not a FAILED control and never a passed one."""
+    from reports._audit import audit_html
+
+    rng = np.random.default_rng(9)
+    value = rng.uniform(0.1, 1.0, (9, 7))
+    claim = _with_cause(_stat_claim({"value": 5.0, "tolerance": 0.1}),
+                        _cause("cross-check", "cross_check", label="twin", override={"scene": "twin"}))
+    row = _row(claim, {"plane": _plane_store("plane", value), "twin": _plane_store("twin", value)})
+    assert row.cause == "unexplained" and not row.evidence.judged and row.evidence.control["passed"] is None
+    assert "cannot judge" in row.evidence.result and "control</b> (cannot judge)" in audit_html([row])
 
 
 def test_a_check_that_ignores_the_paper_fails_its_control():
@@ -771,7 +825,7 @@ def test_audit_json_and_front_page_carry_causes_controls_and_honest_counts(plane
     assert "<b>control</b> (passed)" in html
     assert ("4 claims of the paper's results: 1 agree (and 1 more true by construction, not counted as "
             "reproductions), 1 differ with a cause whose check and control hold (domain 1), 1 differ unexplained, "
-            "0 not run") in audit_summary(tmp_path / "audit.json")
+            "0 cannot judge, 0 not run") in audit_summary(tmp_path / "audit.json")
 
 
 def _ensemble(mult, n_starts):
@@ -1045,3 +1099,212 @@ def test_switched_is_the_best_motions_value_over_that_with_its_law_changed():
     bad = Claim(**{**claim.__dict__, "args": {**claim.args, "change": {"closing_shape": 3.0}}})
     bad = Claim(**{**bad.__dict__, "args": {**bad.args, "at": {"anisotropy_ratio": 0.015625, "opening_shape": 3.0}}})
     assert _row(bad, stores).verdict == "not run"
+
+
+# ---------------------------------------------------------------------------
+# Issue 44: the polish record, the paper's τ0 window, beside, cannot judge, the limit rule
+# ---------------------------------------------------------------------------
+
+
+def _record_store(status=None, uncertainty=1e-5, edge_upper_at_wide=True):
+    """A polished reduction "best" over (duty_cycle, A0) on the plane, repeated on the τ0 windows
+    0.45 and 0.49 (``duty_cycle_halfwidth``), with its polish record (contract44 names): the wider
+    window's optimum sits at τ0 = 0.99, on the upper edge, and is 20 % higher."""
+    ratios, periods, windows = 2.0 ** np.arange(-2, 3), 2.0 ** np.arange(-3, 4, 2), [0.45, 0.49]
+    dims = ("anisotropy_ratio", "scaled_period", "duty_cycle_halfwidth")
+    rng = np.random.default_rng(3)
+    base = rng.uniform(0.1, 1.0, (5, 4))
+    value = np.stack([base, 1.2 * base], axis=-1)
+    tau0 = np.stack([np.full(base.shape, 0.9), np.full(base.shape, 0.99)], axis=-1)
+    edge = np.zeros(value.shape, dtype=np.int8)
+    if edge_upper_at_wide:
+        edge[..., 1] = 1
+    st = np.zeros(value.shape, dtype=np.int8) if status is None else status
+    ds = xr.Dataset({"best": (dims, 0.99 * value), "best_polished": (dims, value),
+                     "best_polished_duty_cycle": (dims, tau0), "best_duty_cycle": (dims, tau0),
+                     "best_polished_A0": (dims, np.full(value.shape, 0.7)), "best_A0": (dims, np.full(value.shape, 0.7)),
+                     "best_polished_status": (dims, st),
+                     "best_polished_uncertainty": (dims, np.full(value.shape, uncertainty)),
+                     "best_polished_duty_cycle_edge": (dims, edge),
+                     "best_polished_A0_edge": (dims, np.zeros(value.shape, dtype=np.int8))},
+                    coords={"anisotropy_ratio": ratios, "scaled_period": periods, "duty_cycle_halfwidth": windows,
+                            "duty_cycle": np.linspace(0.01, 0.99, 5), "A0": np.linspace(0.02, 1.5708, 5)})
+    red = {"name": "best", "quantity": "q", "statistic": "absmax", "over": ["duty_cycle", "A0"], "polish": True}
+    return {"lin": _store("lin", ds, [red])}, base, value
+
+
+def test_the_paper_tau0_window_is_read_and_the_wider_one_quoted_beside():
+    """P2: ``tau0_window = 0.45`` reads the paper's domain; ``beside`` quotes the wider window
+    without a verdict of its own; a store without windows is "not run" (never read on the
+    other domain)."""
+    stores, base, value = _record_store()
+    claim = Claim(id="t", figure="EtaOptt0", claim="c", paper_value="p", expect={"value": float(base.max()),
+                  "tolerance": 1e-9}, compute="stat", basis="printed: test",
+                  args={"scene": "lin", "reduction": "best", "tau0_window": 0.45, "statistic": "max"},
+                  beside=({"label": "wider", "override": {"tau0_window": 0.49}},))
+    row = _row(claim, stores)
+    assert row.verdict == "agrees" and row.measurement.value == pytest.approx(base.max())
+    assert f"beside, wider: {1.2 * base.max():.3g}" in row.reason
+    # negative control: the wider window is not the paper's value
+    wide = Claim(**{**claim.__dict__, "args": {**claim.args, "tau0_window": 0.49}})
+    assert _row(wide, stores).verdict == "differs"
+    # a store without the window dimension: not run, naming the missing window
+    plain = _plane_store("lin", np.ones((9, 7)))
+    row = _row(claim, {"lin": plain})
+    assert row.verdict == "not run" and "no τ0 window 0.45" in row.reason
+
+
+def test_a_polished_optimum_that_did_not_converge_cannot_be_judged():
+    """P1: a selected cell with ``_polished_status`` ≠ 0 makes the claim "cannot judge", naming
+    the status; converged cells are judged. Counted apart in the audit's sentence."""
+    from reports._audit import audit_counts
+
+    status = np.zeros((5, 4, 2), dtype=np.int8)
+    status[4, 3, 0] = 1  # cap reached at the largest ratio, longest period, paper's window
+    stores, base, value = _record_store(status=status)
+    claim = _stat_claim({"min": 0.0}, scene="lin", tau0_window=0.45)
+    row = _row(claim, stores)
+    assert row.verdict == "cannot judge" and "cap reached" in row.reason and "1 of 20" in row.reason
+    assert audit_counts([row])["cannot judge"] == 1
+    # negative control: the same claim on cells that converged is judged
+    row = _row(_stat_claim({"min": 0.0}, scene="lin", tau0_window=0.45,
+                           ranges={"anisotropy_ratio": [0.0, 2.0]}), stores)
+    assert row.verdict == "agrees"
+    # a share over cells: the unconverged cell also makes it cannot judge
+    row = _row(_stat_claim({"min": 0.0}, scene="lin", tau0_window=0.45, **{"statistic": "fraction",
+                                                                          "test": {"min": 0.0}}), stores)
+    assert row.verdict == "cannot judge"
+    # a peak over the periods reads every period: -1 (not computed) beside 0s still shows, and the
+    # store's flag_meanings name it
+    status[4, 3, 0] = -1
+    stores, base, value = _record_store(status=status)
+    stores["lin"].ds["best_polished_status"].attrs.update(flag_values=[-1, 0, 1, 2],
+                                                          flag_meanings="not_computed converged cap_reached failed")
+    row = _row(_stat_claim({"min": 0.0}, scene="lin", tau0_window=0.45, statistic="only",
+                           at={"anisotropy_ratio": 4.0}, peak_over=["scaled_period"]), stores)
+    assert row.verdict == "cannot judge" and "1 not computed" in row.reason
+
+
+def test_the_polish_uncertainty_is_the_error_estimate_and_edges_are_named():
+    """P1: the error estimate of a polished value is its uncertainty times |value| (a miss within
+    it is said to be within our error); an arg-max flagged on an edge is named in the verdict."""
+    stores, base, value = _record_store(uncertainty=0.01)
+    cell = {"anisotropy_ratio": 1.0, "scaled_period": 0.5}
+    v = float(base[2, 1])
+    claim = _stat_claim({"value": v * 1.004, "tolerance": 1e-9}, scene="lin", tau0_window=0.45, at=cell,
+                        statistic="only")
+    row = _row(claim, stores)
+    assert row.verdict == "differs" and row.measurement.error_value == pytest.approx(0.01 * v)
+    assert "polish uncertainty" in row.measurement.error and "error estimate" in row.reason, row.reason
+    # negative control: a miss beyond the uncertainty is a difference in the data
+    far = _row(_stat_claim({"value": v * 1.1, "tolerance": 1e-9}, scene="lin", tau0_window=0.45, at=cell,
+                           statistic="only"), stores)
+    assert "a difference in the data" in far.reason
+    # P6: a maximum over the periods at our longest period is said to be a supremum
+    peak = _row(_stat_claim({"value": 99.0, "tolerance": 1e-9}, scene="lin", tau0_window=0.45), stores)
+    assert any("supremum over our period range" in e for e in peak.measurement.edges) == (
+        int(np.unravel_index(np.argmax(base), base.shape)[1]) in (0, 3))
+    wide = _row(_stat_claim({"value": 0.5, "tolerance": 1e-9}, scene="lin", tau0_window=0.49,
+                            role="duty_cycle"), stores)
+    assert any("upper end of the polish domain" in e for e in wide.measurement.edges), wide.measurement.edges
+    paper = _row(_stat_claim({"value": 0.9, "tolerance": 1e-9}, scene="lin", tau0_window=0.45, role="duty_cycle"),
+                 stores)
+    assert not any("polish domain" in e for e in paper.measurement.edges)
+    # a gain of two polished values: the two relative uncertainties add
+    g = Claim(id="g", figure="EtaOptt0", claim="c", paper_value="p", expect={"value": 1.0, "tolerance": 1e-9},
+              compute="gain", basis="printed: test",
+              args={"numerator": {"scene": "lin", "reduction": "best", "tau0_window": 0.49, "statistic": "max"},
+                    "denominator": {"scene": "lin", "reduction": "best", "tau0_window": 0.45, "statistic": "max"}})
+    m = _row(g, stores).measurement
+    assert m.value == pytest.approx(1.2) and m.error_value == pytest.approx(0.02 * 1.2)
+
+
+def test_a_claim_the_paper_does_not_locate_cannot_be_judged_and_shows_our_value():
+    """P5: ``cannot_judge`` gives the verdict "cannot judge" with the reason and our value, even
+    where the value would agree (it is not a way to hide a difference) or differ."""
+    stores, base, value = _record_store()
+    for expect in ({"value": float(base.max()), "tolerance": 1e-9}, {"value": 99.0, "tolerance": 1e-9}):
+        claim = Claim(**{**_stat_claim(expect, scene="lin", tau0_window=0.45).__dict__,
+                         "cannot_judge": "the corner is not stated"})
+        row = _row(claim, stores)
+        assert row.verdict == "cannot judge" and row.reason.startswith("the corner is not stated")
+        assert f"ours {base.max():.3g}" in row.reason and row.to_json()["cannot_judge"]
+
+
+def _speed_store(exponents):
+    """Best speed per (ratio, period) ~ T^a on periods 2^-3 .. 2^4 (a peak at 2^1), one line per
+    exponent a (ratios 1, 2, ...)."""
+    periods = 2.0 ** np.arange(-3, 5)
+    rows = []
+    for a in exponents:
+        rise = periods ** a
+        fall = rise[5] * (periods / periods[5]) ** -1.0
+        rows.append(np.where(periods <= periods[5], rise, fall))
+    v = np.asarray(rows)[:, :, None, None] * np.ones((1, 1, 2, 2))
+    ds = xr.Dataset({"scaled_speed": (("anisotropy_ratio", "scaled_period", "A0", "A1_ratio"), v)},
+                    coords={"anisotropy_ratio": 2.0 ** np.arange(len(exponents)), "scaled_period": periods,
+                            "A0": [0.5, 1.0], "A1_ratio": [0.3, 0.6]})
+    return {"h": _store("h", ds)}
+
+
+def test_the_limit_rule_reads_the_sequence_toward_the_limit():
+    """Rule limit: speeds ~ T^a toward T → 0 fall geometrically, their Aitken limit is 0 and the
+    sentence holds at every ratio, although at the shortest period (2^-3) the value is still
+    above a tenth of the peak for a = 0.5 (what the old one-value reading failed). Negative
+    controls: a speed that levels off at a constant (half the peak) as T → 0, and one that rises
+    toward T → 0."""
+    from reports._claim_values import aitken_limit, limit
+
+    assert aitken_limit(4.0, 2.0, 1.0) == pytest.approx(0.0)
+    assert aitken_limit(1.5, 1.25, 1.125) == pytest.approx(1.0)
+    assert aitken_limit(1.0, 2.0, 1.5) != aitken_limit(1.0, 2.0, 1.5)  # NaN: the steps change sign
+    args = {"scene": "h", "quantity": "scaled_speed", "absolute": True, "peak_over": ["A0", "A1_ratio"],
+            "along": "scaled_period", "toward": "min"}
+    m = limit(_speed_store([0.5, 1.0, 2.0]), **args)
+    assert m.value == 1.0 and "3 of 3 lines" in m.where
+    periods = 2.0 ** np.arange(-3, 5)
+    st = _speed_store([1.0, 1.0])
+    v = st["h"].ds["scaled_speed"].values.copy()
+    v[1, :3] = (v[1, 5, 0, 0] * (0.5 + 0.05 * periods[:3]))[:, None, None]  # levels off at half the peak
+    st["h"].ds["scaled_speed"].values[:] = v
+    assert limit(st, **args).value == 0.5
+    rising = _speed_store([-0.5])
+    assert limit(rising, **args).value == 0.0
+
+
+def test_where_best_reads_a_role_at_the_cell_of_another_roles_maximum():
+    """burst-A1 (REREADING44 #19): A1/A0 at the cell of the peak relative efficiency of a regime,
+    against brute force; a cell elsewhere (a negative control) gives another value."""
+    stores, base, value = _record_store()
+    ds = stores["lin"].ds
+    a0 = np.arange(base.size * 2, dtype=float).reshape(value.shape)
+    ds["best_polished_A0"] = (ds["best_polished"].dims, a0)
+    m = stat(stores, scene="lin", reduction="best", role="A0", tau0_window=0.45, where_best="value",
+             ranges={"anisotropy_ratio": [1.5, np.inf]})
+    sub = base[3:]
+    i, j = np.unravel_index(np.argmax(sub), sub.shape)
+    assert m.value == a0[3 + i, j, 0] and "at the largest value" in m.where
+    low = stat(stores, scene="lin", reduction="best", role="A0", tau0_window=0.45, where_best="value",
+               ranges={"anisotropy_ratio": [0.0, 0.6]})
+    assert low.value != m.value
+
+
+def test_harmonic_phi_span_reads_the_polish_status_of_its_cell():
+    """EtaA0A1.upper-left-phi (REREADING44 #2): the span of the optimum of the cell selected is
+    "cannot judge" when that cell's polish did not converge, judged when it did."""
+    from reports._claim_values import harmonic_phi_span
+
+    stores, base, value = _record_store()
+    ds = stores["lin"].ds
+    ds["best_polished_A1_ratio"] = (ds["best_polished"].dims, np.full(value.shape, 0.5))
+    stores["lin"].science["reductions"][0]["over"] = ["A0", "A1_ratio"]
+    ds = ds.assign_coords(A1_ratio=np.linspace(0.02, 0.98, 5))
+    stores["lin"].ds = ds
+    args = {"scene": "lin", "reduction": "best", "at": {"duty_cycle_halfwidth": 0.45, "anisotropy_ratio": 1.0,
+                                                         "scaled_period": 0.5}, "statistic": "only"}
+    m = harmonic_phi_span(stores, **args)
+    assert m.value == pytest.approx((0.35, 1.05)) and not m.cannot_judge
+    st = ds["best_polished_status"].values.copy()
+    st[2, 1, 0] = 2
+    ds["best_polished_status"].values[:] = st
+    assert "solve failed" in harmonic_phi_span(stores, **args).cannot_judge

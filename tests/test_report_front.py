@@ -137,9 +137,10 @@ def test_command_line_and_page_print_the_same_audit_sentence(quick_run):
     doc = json.loads((quick_run["index"].parent / "audit.json").read_text())
     n = audit_counts(doc)
     assert sentence == audit_sentence(n)
-    numbers = [int(x) for x in re.findall(r"\b(\d+) (?:claims|agree|more|differ|not run)", sentence)]
+    numbers = [int(x) for x in re.findall(r"\b(\d+) (?:claims|agree|more|differ|cannot judge|not run)", sentence)]
     assert numbers[:3] == [n["claims"], n["reproduced"], n["by construction"]]
-    assert n["reproduced"] + n["by construction"] + n["differs"] + n["not run"] == n["claims"] == len(doc)
+    assert (n["reproduced"] + n["by construction"] + n["differs"] + n["cannot judge"] + n["not run"] == n["claims"]
+            == len(doc))
     assert n["explained"] + n["unexplained"] == n["differs"]
 
 
@@ -154,12 +155,13 @@ def test_audit_counts_from_rows_and_from_audit_json_agree():
 
     rows = [AuditRow(claim("a"), "agrees", "", None), AuditRow(claim("b", "nested"), "agrees", "", None),
             AuditRow(claim("c"), "differs", "", None, cause="unexplained"),
-            AuditRow(claim("d"), "differs", "", None, cause="domain"), AuditRow(claim("e"), "not run", "", None)]
+            AuditRow(claim("d"), "differs", "", None, cause="domain"), AuditRow(claim("e"), "not run", "", None),
+            AuditRow(claim("f"), "cannot judge", "", None)]
     doc = [{"verdict": r.verdict, "by_construction": r.claim.by_construction or None, "cause": r.cause} for r in rows]
     n = audit_counts(rows)
     assert n == audit_counts(doc)
     assert (n["claims"], n["agrees"], n["reproduced"], n["by construction"], n["explained"], n["unexplained"],
-            n["not run"]) == (5, 2, 1, 1, 1, 1, 1)
+            n["not run"], n["cannot judge"]) == (6, 2, 1, 1, 1, 1, 1, 1)
 
 
 # -- the paper's LaTeX --------------------------------------------------------------------------
