@@ -102,7 +102,8 @@ START_INTS = {
 #: per-start flags (int8; -1 not computed)
 START_FLAGS = {
     "certified": "1: grid_error <= optimizer.certify_tolerance (the frozen steps' optimum is the "
-                 "engine's to that tolerance); only certified starts are kept; 0: not",
+                 "engine's to that tolerance; below STILL_EFFICIENCY lambda_ub measured against "
+                 "that floor); only certified starts are kept; 0: not",
     "at_rest": "1: phi(tau) spans no more than STILL_AMPLITUDE (the zero-amplitude stationary "
                "point, no optimum); 0: a motion",
 }
@@ -327,7 +328,10 @@ def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: fl
                               gtol=opt.gtol, max_iterations=opt.max_iterations,
                               grid_rtol=opt.grid_rtol, grid_rounds=opt.grid_rounds,
                               certify_tolerance=opt.certify_tolerance,
-                              certify_rounds=opt.certify_rounds, fidelity=opt.fidelity,
+                              certify_rounds=opt.certify_rounds,
+                              certify_floor=STILL_EFFICIENCY / min(float(physics.mu_n[0]),
+                                                                   float(physics.mu_s[0])),
+                              fidelity=opt.fidelity,
                               fidelity_gtol=opt.fidelity_gtol)
     except (RuntimeError, ValueError, FloatingPointError, ZeroDivisionError) as exc:
         print(f"optima: ratio {ratio:g} Kmax {kmax} p {p:g} start ({a0:.4f}, {a1:.4f}): "
@@ -464,6 +468,10 @@ def reduce_optima(scene: OptimaScene, data: dict[str, np.ndarray]) -> dict[str, 
 
 #: phi(tau) spanning no more than this [rad] is a body at rest, not an optimal motion
 STILL_AMPLITUDE = 1e-3
+#: |lambda|/lambda_ub below this is no motion (``compare_optima.STILL``: isotropic friction at
+#: p >= 1 gives 1e-35 .. 1e-8): certification measures the grid error against this floor
+#: there, as a relative error of a value at rounding level certifies nothing
+STILL_EFFICIENCY = 1e-6
 
 PER_START = ("status", "U", "efficiency", "relative_efficiency", "scaled_period", "gradient_norm",
              "period_at_bound", "certified", "coefficients")

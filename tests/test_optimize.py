@@ -316,3 +316,17 @@ def test_the_coarse_stage_switches_at_its_gradient_norm_and_ends_certified():
     assert plain.coarse_iterations == 0 and 0 < coarse.coarse_iterations < coarse.iterations
     assert coarse.certified and coarse.converged
     assert coarse.engine_efficiency == pytest.approx(plain.engine_efficiency, rel=1e-6)
+
+
+def test_a_value_at_rounding_level_is_certified_against_the_floor():
+    """Isotropic friction at p = 1: lambda ~ 1e-35, noise; its relative grid error is ~1 and
+    certifies nothing (force_laws: 96 of 864 starts uncertified for that alone, ratio 1, p 1).
+    Against ``certify_floor`` (the pipeline's 1e-6 lambda_ub) it is certified; without the floor
+    (the control) it is not."""
+    physics = solver.Physics.from_scaled(1.0, 2.0, p=1.0, delta=1e-5)
+    start = solver.Fourier(np.array([[0.6, 0.4]]), np.zeros((1, 1)))
+    settings = dict(direction=-1, gtol=1e-7, max_iterations=60, grid_rtol=1e-4, certify_rounds=0)
+    bare = optimize_motion(start, physics, **settings)
+    assert abs(bare.engine_efficiency) < 1e-20 and not bare.certified
+    floored = optimize_motion(start, physics, **settings, certify_floor=1e-6)
+    assert floored.certified and floored.grid_error == bare.grid_error

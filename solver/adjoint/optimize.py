@@ -138,8 +138,8 @@ class OptimizeResult:
         maximises the discrete objective, steps made elsewhere); nan where the engine fails
     grid_error : |value - engine_value| / |engine_value| (for "speed_at_power" the larger of
         that and P's): the discretisation error of the reported optimum on its fixed grid
-    certified : grid_error <= ``certify_tolerance`` (``OptimizerOptions``): the optimum of the
-        frozen steps is the engine's to that tolerance
+    certified : grid_error <= ``certify_tolerance`` (``OptimizerOptions``; against
+        ``certify_floor`` below it): the optimum of the frozen steps is the engine's to that tolerance
     certify_rounds : searches on finer steps that certification took (0: none was needed)
     coarse_iterations : accepted steps of the coarse stage (``fidelity``; 0 without one)
     cpu_seconds : CPU time of this thread [s] (the solves of one point run on the calling
@@ -593,6 +593,11 @@ class OptimizerOptions:
         ``grid_rtol`` / 10, then / 100, up to ``certify_rounds`` times, until the error is
         within the tolerance.  ``certified`` says whether it is.  The default 1e-4 is issue
         47's: the paper prints relative efficiencies to three digits.
+    certify_floor : float
+        Where |the engine's value| is below this, the error is measured against the floor
+        instead (certified: |value - engine value| <= certify_tolerance x certify_floor): a value
+        at rounding level (isotropic friction at p >= 1: lambda ~ 1e-35) has no relative
+        error to certify.  The optima pipeline passes 1e-6 lambda_ub (``_optima.STILL_EFFICIENCY``).
     fidelity, fidelity_gtol : float
         Coarse stage (off at ``fidelity`` = 1).  Switching rule: the descent starts on steps
         adapted at ``fidelity`` x ``grid_rtol`` (at most 0.1) and stays there, one round,
@@ -620,6 +625,7 @@ class OptimizerOptions:
     warm_rounds: bool = False
     certify_tolerance: float = 1e-4
     certify_rounds: int = 2
+    certify_floor: float = 0.0
     fidelity: float = 1.0
     fidelity_gtol: float = 1e-2
 
@@ -790,7 +796,7 @@ def optimize_motion(family_template, physics_template, start=None, *, grid=None,
         # than ``certify_tolerance`` is searched again on steps adapted at rtol / 10 (then / 100)
         # from where it stands; what it ends with is what the engine certifies, or not
         while (not fixed_grid and certify_rounds < opts.certify_rounds
-               and not check["grid_error"] <= opts.certify_tolerance):
+               and not _certified(check, opts)):
             certify_rounds += 1
             fine_rtol = grid_rtol * 10.0 ** -certify_rounds
             try:
@@ -844,8 +850,15 @@ def optimize_motion(family_template, physics_template, start=None, *, grid=None,
         converged=reason == "gradient_tolerance", ill_conditioned=bool(ill),
         condition_number=cond, n_steps=grid.n_steps, grid_rounds=rounds,
         seconds=time.perf_counter() - t_start, at_bounds=bound_names, solves=totals["solves"],
-        certified=bool(check["grid_error"] <= opts.certify_tolerance), certify_rounds=certify_rounds,
+        certified=_certified(check, opts), certify_rounds=certify_rounds,
         coarse_iterations=coarse_iterations, cpu_seconds=time.thread_time() - cpu_start, **check)
+
+
+def _certified(check, opts) -> bool:
+    """grid_error within ``certify_tolerance``, measured against ``certify_floor`` where the
+    engine's value is smaller (``OptimizerOptions``)."""
+    scale = max(1.0, opts.certify_floor / abs(check["engine_value"])) if check["engine_value"] else math.inf
+    return bool(check["grid_error"] <= opts.certify_tolerance * scale)
 
 
 def _engine_check(kinematics, physics, objective, value, P):
