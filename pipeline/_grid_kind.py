@@ -19,17 +19,17 @@ from ._grid_scene import Scene, parse_grid_scene
 from ._kind import RunContext, SceneKind, Step, tasks_by_count
 from ._reduce import grid_reduction, objective, polish_cells
 from ._schedule import Progress, Task, compute, take_start_seconds
-from ._store import (ChunkWrite, SolvedChunk, create_skeleton, read_arrays, reduction_arrays, store_chunk,
-                     write_arrays)
+from ._store import ChunkWrite, SolvedChunk, create_skeleton, read_arrays, reduction_arrays, write_arrays
 
 #: points one task aims at (about 0.5-2 s of one core's solving at rtol 1e-4)
 TASK_POINTS = 1024
 
-__all__ = ["GRID", "GridKind", "compute_chunk", "compute_series", "reduce_grid", "solve_chunk"]
+__all__ = ["GRID", "GridKind", "compute_series", "reduce_grid", "solve_chunk"]
 
 
 def solve_chunk(scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> SolvedChunk:
-    """Solve every point of chunk ``index`` of the layout ``chunks``: its outputs, unwritten."""
+    """Solve every point of block ``index`` of the layout ``chunks``: its outputs, unwritten (the
+    driver writes them: ``_store.ChunkWriter``)."""
     region = chunk_region(index, scene.shape, chunks)
     params = region_parameters(scene, region)
     rshape = tuple(sl.stop - sl.start for sl in region)
@@ -50,11 +50,6 @@ def solve_chunk(scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -
     return SolvedChunk(writes=(ChunkWrite(region, tuple(index), tuple(chunks), scene.shape, values),),
                        points=int(np.prod(rshape)), failures=int(np.count_nonzero(values["status"] != 0)),
                        seconds=seconds)
-
-
-def compute_chunk(store: str, scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> dict:
-    """Solve chunk ``index``, write its outputs, then mark it done (``_store.store_chunk``)."""
-    return store_chunk(Path(store), tuple(index), solve_chunk(scene, chunks, index))
 
 
 def compute_series(store: str, scene: Scene) -> dict:
@@ -176,12 +171,12 @@ class GridKind(SceneKind):
     def parse(self, doc, ctx, text):
         return parse_grid_scene(doc, ctx, text)
 
-    def chunk_layout(self, scene) -> tuple[int, ...]:
+    def block_layout(self, scene) -> tuple[int, ...]:
         """``_grid.scene_chunks``: from the grid's shape and ``[execution] points_per_chunk``."""
         return scene_chunks(scene)
 
     def create_skeleton(self, run: RunContext) -> None:
-        create_skeleton(run.store, run.scene, self.chunk_layout(run.scene))
+        create_skeleton(run.store, run.scene, self.block_layout(run.scene))
 
     def chunks_per_task(self, run: RunContext, chunks: tuple[int, ...], pending: list) -> int:
         """Chunks of about ``[execution] points_per_task`` points per task, else

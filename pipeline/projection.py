@@ -41,7 +41,7 @@ __all__ = ["lpt_makespan", "project_store", "main"]
 #: phases during which the tasks run (the rest of a run record's phases are the driver's)
 TASK_PHASES = ("chunks", "reductions", "series")
 #: not-solving parts spent inside tasks (they scale with the workers)
-IN_TASKS = ("waiting for chunk writes", "in tasks, besides solving and writing")
+IN_TASKS = ("in tasks, besides solving",)
 
 
 def lpt_makespan(tasks, workers: int) -> float:
