@@ -85,13 +85,13 @@ def _folder_of_files(tmp, stack):
 
 def _other_scene_store(tmp, stack):
     other = load_scene(_scene(tmp, small_scene_text(rtol=5e-4), "other.toml"))
-    create_skeleton(tmp / "s.zarr", other, GRID.chunk_layout(other))
+    create_skeleton(tmp / "s.zarr", other, GRID.block_layout(other))
     return _run(tmp)
 
 
 def _format_1_store(tmp, stack):
     scene = load_scene(_scene(tmp))
-    create_skeleton(tmp / "s.zarr", scene, GRID.chunk_layout(scene))
+    create_skeleton(tmp / "s.zarr", scene, GRID.block_layout(scene))
     downgrade_to_format_1(tmp / "s.zarr")
     return _run(tmp)
 

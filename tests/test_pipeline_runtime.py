@@ -125,7 +125,7 @@ _KILL_SKELETON = textwrap.dedent("""
 
     st.open_group, Path.write_bytes, st.os.replace, Path.unlink = open_group, write_bytes, replace, unlink
     scene = load_scene(sys.argv[1])
-    st.create_skeleton(Path(sys.argv[2]), scene, GRID.chunk_layout(scene))
+    st.create_skeleton(Path(sys.argv[2]), scene, GRID.block_layout(scene))
     print("not killed")
 """)
 
