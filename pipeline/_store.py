@@ -455,7 +455,7 @@ def _write_skeleton(g: Skeleton, store: Path) -> None:
                 arr[...] = g.values[key]
         for key in sorted(made, key=lambda k: (k == "", k)):
             if g.group_attrs.get(key):
-                made[key].attrs.update(g.group_attrs[key])
+                made[key].update_attributes(g.group_attrs[key])
 
 
 def finish_skeleton(g, scene, *, store: Path, dims, shape, chunks, head: dict | None = None,

@@ -174,7 +174,7 @@ MISTAKES = [
                                                      rf"\(pid {os.getpid()} on .+ since \d{{4}}-.*\)",
             _locked_store, repeat=2),
     Mistake("store of format 1", 3, r"error: .*s\.zarr: store format version 1.*--overwrite", _format_1_store),
-    Mistake("store of another chunk layout", 3, r"error: .*s\.zarr: its chunks \(1 x 1 x 4 x 4\).*--overwrite",
+    Mistake("store of another chunk layout", 3, r"error: .*s\.zarr: its blocks \(1 x 1 x 4 x 4\).*--overwrite",
             _other_layout_store),
     Mistake("Ctrl-C", 130, KEPT.format("interrupted"), _signalled, untouched=False, signal="SIGINT"),
     Mistake("SIGTERM", 143, KEPT.format(r"terminated \(SIGTERM\)"), _signalled, untouched=False, signal="SIGTERM"),
