@@ -1,8 +1,9 @@
 """Scene kind "grid" (the default): a grid of parameter points, its series and its reductions.
 
-Tasks receive only picklable arguments (paths, the frozen scene, indices) and open the store
-themselves, so they run unchanged on the local schedulers and on a dask.distributed cluster
-sharing the file system.  Steps after the chunks: u(tau) at the scene's series points (one
+Tasks receive only picklable arguments (the frozen scene, indices) and return what they
+computed; the driver writes the store (``_store.ChunkWriter``, ``write_arrays``), so they run
+unchanged on the local schedulers and on a dask.distributed cluster, whose workers never open
+the store.  Steps after the chunks: u(tau) at the scene's series points (one
 task), then every reduction of the stored grid, whose polishing fans out again.
 """
 
@@ -52,14 +53,11 @@ def solve_chunk(scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -
                        seconds=seconds)
 
 
-def compute_series(store: str, scene: Scene) -> dict:
-    """Solve the scene's series points and write u(tau), resampled to uniform nodes tau_k = k/n_tau
-    by periodic linear interpolation of the solver's final grid. Returns the number of
-    ``failures`` and the task's timing."""
-    import warnings
-
-    import zarr
-
+def compute_series(scene: Scene) -> dict:
+    """Solve the scene's series points: u(tau), resampled to uniform nodes tau_k = k/n_tau by
+    periodic linear interpolation of the solver's final grid, unwritten.  Returns ``values``
+    ({"series_u", "series_status"}: the driver writes them), the number of ``failures`` and the
+    task's timing."""
     t0, c0 = time.perf_counter(), time.process_time()
     s = scene.series
     params = {d: np.array([dict(p)[d] for p in s.points], dtype=np.float64) for d in scene.dims}
@@ -72,11 +70,7 @@ def compute_series(store: str, scene: Scene) -> dict:
     for i, (ui, ti) in enumerate(zip(out["u"], out["tau"])):
         if out["status"][i] == 0 and ui.size:
             u[i] = np.interp(tau, ti, ui, period=1.0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        zarr.open_array(store=store, path="series_u", mode="r+")[...] = u
-        zarr.open_array(store=store, path="series_status", mode="r+")[...] = out["status"]
-    return {"failures": int(np.count_nonzero(out["status"] != 0)), "seconds": seconds,
+    return {"values": {"series_u": u, "series_status": out["status"]}, "failures": int(np.count_nonzero(out["status"] != 0)), "seconds": seconds,
             "task_seconds": time.perf_counter() - t0, "task_cpu_seconds": time.process_time() - c0,
             **take_start_seconds()}
 
@@ -156,10 +150,13 @@ def reduce_grid(run: RunContext) -> list[dict]:
 
 
 def series_step(run: RunContext) -> list[dict]:
-    """u(tau) at the scene's series points, in one task; its timing."""
-    task = Task("pipeline-series", compute_series, (str(run.store), run.scene))
-    return compute([task], run.scheduler,
-                   Progress(1, len(run.scene.series.points), f"{run.scene.name} series", run.progress))
+    """u(tau) at the scene's series points, in one task, written by the driver; its timing."""
+    task = Task("pipeline-series", compute_series, (run.scene,))
+    results = compute([task], run.scheduler,
+                      Progress(1, len(run.scene.series.points), f"{run.scene.name} series", run.progress))
+    for r in results:
+        write_arrays(run.store, r.pop("values"))
+    return results
 
 
 class GridKind(SceneKind):
