@@ -656,16 +656,29 @@ async def _listed(store, prefix: str) -> list[str]:
     return [key async for key in store.list_prefix(prefix)]
 
 
+def _listing(store, prefix: str) -> list[str]:
+    """The keys ``store`` lists under ``prefix`` (zarr's asynchronous store API), from a thread
+    of its own where this one runs an event loop already (a notebook's)."""
+    import asyncio
+
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:
+        return asyncio.run(_listed(store, prefix))
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, _listed(store, prefix)).result()
+
+
 def sync_written(array, since_ns: int) -> int:
     """Make what was written to ``array`` (a ``zarr.Array`` of a local store) since
     ``since_ns`` (``time.time_ns()``) durable: every file zarr's store lists under the array,
     whatever its chunk key encoding or sharding, modified since then (a second's margin for the
     file system's coarser clock) is fsynced, then its folders and the array's.  The files
     synced."""
-    import asyncio
-
     root = Path(array.store.root)
-    keys = asyncio.run(_listed(array.store, array.path))
+    keys = _listing(array.store, array.path)
     files = []
     for key in keys:
         path = root / key

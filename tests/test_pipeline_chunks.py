@@ -191,6 +191,26 @@ def test_a_chunks_files_are_synced_in_every_layout_zarr_may_use(tmp_path, monkey
     assert {str(Path(tmp_path / "s.zarr" / k).parent) for k in changed} <= set(synced)
 
 
+def test_a_chunk_is_synced_from_inside_a_running_event_loop(tmp_path, monkeypatch):
+    """A run started from a notebook (an event loop already running in the driver's thread)
+    still lists and syncs its chunk files."""
+    import asyncio
+    import time
+
+    from pipeline import _store as st
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        a = zarr.create_array(str(tmp_path / "a.zarr"), shape=(4,), chunks=(2,), dtype="f8", fill_value=np.nan)
+    since = time.time_ns()
+    a[0:2] = [1.0, 2.0]
+
+    async def in_a_loop():
+        return st.sync_written(a, since)
+
+    assert asyncio.run(in_a_loop()) >= 1  # the chunk (and the metadata written this second)
+
+
 def test_the_sync_check_sees_a_file_left_unsynced(tmp_path, monkeypatch):
     """Negative control of the test above: a ``sync_written`` that syncs nothing is caught."""
     from pipeline import _store as st
