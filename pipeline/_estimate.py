@@ -15,7 +15,7 @@ machine of issue 45, at a third of a core, its wall time read 3x the run's).  Th
 are spread over the scene (every prefix of :func:`spread_order` is), one of every cost class
 first; the probe stops at ``max_chunks`` or, once every class has one, after ``budget_seconds``
 of it.  Not projected: worker start-up, writes, scheduling and the driver's steps besides
-polishing (series, reductions, compaction; seconds each), contention, and a wall-time cap
+polishing (series, reductions; seconds each), contention, and a wall-time cap
 met sooner on a loaded machine (the accuracy study's scipy baseline).
 """
 
@@ -123,15 +123,16 @@ def _one_thread():
 
 
 def _skeleton(scene, kind, folder: Path):
-    """An empty store of ``scene`` in ``folder`` (the kind's own skeleton: its chunk layout and
-    chunk list come from the code a run uses); its chunk layout and every chunk index."""
+    """An empty store of ``scene`` in ``folder`` (the kind's own skeleton: its blocks come from
+    the code a run uses); its block layout and every block index (the tasks' units)."""
     from ._kind import RunContext
-    from ._store import store_meta
+    from ._store import blocks_in, store_meta
 
     store = folder / "probe.zarr"
     kind.create_skeleton(RunContext(scene, store, None, 1, False, print))
-    chunks = tuple(int(c) for c in store_meta(store)["layout"]["chunks"])
-    return chunks, kind.pending_chunks(store)
+    layout = store_meta(store)["layout"]
+    shape, blocks, chunks = (tuple(int(n) for n in layout[k]) for k in ("shape", "blocks", "chunks"))
+    return blocks, [b for c in kind.pending_chunks(store) for b in blocks_in(c, shape, blocks, chunks)]
 
 
 def _solve(kind, scene, chunks, index) -> tuple[int, dict]:

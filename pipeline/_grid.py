@@ -1,4 +1,4 @@
-"""Parameter grid: chunk layout and the mapping from scene parameters to solver inputs.
+"""Parameter grid: block layout and the mapping from scene parameters to solver inputs.
 
 Pure functions of arrays; no I/O.
 """
@@ -91,7 +91,8 @@ def chunk_shape(shape: tuple[int, ...], target: int) -> tuple[int, ...]:
 
 
 def scene_chunks(scene: Scene) -> tuple[int, ...]:
-    """The chunk shape of ``scene``'s store: a function of the scene alone.
+    """The block shape of ``scene``'s store (what a task solves at a time; its chunks are whole
+    blocks, ``_store.storage_chunks``): a function of the scene alone.
 
     :func:`chunk_shape` of the grid's shape and ``[execution] points_per_chunk`` (default
     :data:`DEFAULT_POINTS_PER_CHUNK`); no timing, worker count or load enters it.

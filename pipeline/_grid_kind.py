@@ -1,8 +1,9 @@
 """Scene kind "grid" (the default): a grid of parameter points, its series and its reductions.
 
-Tasks receive only picklable arguments (paths, the frozen scene, indices) and open the store
-themselves, so they run unchanged on the local schedulers and on a dask.distributed cluster
-sharing the file system.  Steps after the chunks: u(tau) at the scene's series points (one
+Tasks receive only picklable arguments (the frozen scene, indices) and return what they
+computed; the driver writes the store (``_store.ChunkWriter``, ``write_arrays``), so they run
+unchanged on the local schedulers and on a dask.distributed cluster, whose workers never open
+the store.  Steps after the chunks: u(tau) at the scene's series points (one
 task), then every reduction of the stored grid, whose polishing fans out again.
 """
 
@@ -20,17 +21,17 @@ from ._kind import RunContext, SceneKind, Step, tasks_by_count
 from ._reduce import grid_reduction, polish_starts
 from .polish import polish_cells
 from ._schedule import Progress, Task, compute, take_start_seconds
-from ._store import (ChunkWrite, SolvedChunk, create_skeleton, read_arrays, reduction_arrays, store_chunk,
-                     write_arrays)
+from ._store import ChunkWrite, SolvedChunk, create_skeleton, read_arrays, reduction_arrays, write_arrays
 
 #: points one task aims at (about 0.5-2 s of one core's solving at rtol 1e-4)
 TASK_POINTS = 1024
 
-__all__ = ["GRID", "GridKind", "compute_chunk", "compute_series", "reduce_grid", "solve_chunk", "write_polish_records"]
+__all__ = ["GRID", "GridKind", "compute_series", "reduce_grid", "solve_chunk", "write_polish_records"]
 
 
 def solve_chunk(scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> SolvedChunk:
-    """Solve every point of chunk ``index`` of the layout ``chunks``: its outputs, unwritten."""
+    """Solve every point of block ``index`` of the layout ``chunks``: its outputs, unwritten (the
+    driver writes them: ``_store.ChunkWriter``)."""
     region = chunk_region(index, scene.shape, chunks)
     params = region_parameters(scene, region)
     rshape = tuple(sl.stop - sl.start for sl in region)
@@ -53,19 +54,11 @@ def solve_chunk(scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -
                        seconds=seconds)
 
 
-def compute_chunk(store: str, scene: Scene, chunks: tuple[int, ...], index: tuple[int, ...]) -> dict:
-    """Solve chunk ``index``, write its outputs, then mark it done (``_store.store_chunk``)."""
-    return store_chunk(Path(store), tuple(index), solve_chunk(scene, chunks, index))
-
-
-def compute_series(store: str, scene: Scene) -> dict:
-    """Solve the scene's series points and write u(tau), resampled to uniform nodes tau_k = k/n_tau
-    by periodic linear interpolation of the solver's final grid. Returns the number of
-    ``failures`` and the task's timing."""
-    import warnings
-
-    import zarr
-
+def compute_series(scene: Scene) -> dict:
+    """Solve the scene's series points: u(tau), resampled to uniform nodes tau_k = k/n_tau by
+    periodic linear interpolation of the solver's final grid, unwritten.  Returns ``values``
+    ({"series_u", "series_status"}: the driver writes them), the number of ``failures`` and the
+    task's timing."""
     t0, c0 = time.perf_counter(), time.process_time()
     s = scene.series
     params = {d: np.array([dict(p)[d] for p in s.points], dtype=np.float64) for d in scene.dims}
@@ -78,11 +71,7 @@ def compute_series(store: str, scene: Scene) -> dict:
     for i, (ui, ti) in enumerate(zip(out["u"], out["tau"])):
         if out["status"][i] == 0 and ui.size:
             u[i] = np.interp(tau, ti, ui, period=1.0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        zarr.open_array(store=store, path="series_u", mode="r+")[...] = u
-        zarr.open_array(store=store, path="series_status", mode="r+")[...] = out["status"]
-    return {"failures": int(np.count_nonzero(out["status"] != 0)), "seconds": seconds,
+    return {"values": {"series_u": u, "series_status": out["status"]}, "failures": int(np.count_nonzero(out["status"] != 0)), "seconds": seconds,
             "task_seconds": time.perf_counter() - t0, "task_cpu_seconds": time.process_time() - c0,
             **take_start_seconds()}
 
@@ -166,10 +155,13 @@ def reduce_grid(run: RunContext) -> list[dict]:
 
 
 def series_step(run: RunContext) -> list[dict]:
-    """u(tau) at the scene's series points, in one task; its timing."""
-    task = Task("pipeline-series", compute_series, (str(run.store), run.scene))
-    return compute([task], run.scheduler,
-                   Progress(1, len(run.scene.series.points), f"{run.scene.name} series", run.progress))
+    """u(tau) at the scene's series points, in one task, written by the driver; its timing."""
+    task = Task("pipeline-series", compute_series, (run.scene,))
+    results = compute([task], run.scheduler,
+                      Progress(1, len(run.scene.series.points), f"{run.scene.name} series", run.progress))
+    for r in results:
+        write_arrays(run.store, r.pop("values"))
+    return results
 
 
 class GridKind(SceneKind):
@@ -181,12 +173,12 @@ class GridKind(SceneKind):
     def parse(self, doc, ctx, text):
         return parse_grid_scene(doc, ctx, text)
 
-    def chunk_layout(self, scene) -> tuple[int, ...]:
+    def block_layout(self, scene) -> tuple[int, ...]:
         """``_grid.scene_chunks``: from the grid's shape and ``[execution] points_per_chunk``."""
         return scene_chunks(scene)
 
     def create_skeleton(self, run: RunContext) -> None:
-        create_skeleton(run.store, run.scene, self.chunk_layout(run.scene))
+        create_skeleton(run.store, run.scene, self.block_layout(run.scene))
 
     def chunks_per_task(self, run: RunContext, chunks: tuple[int, ...], pending: list) -> int:
         """Chunks of about ``[execution] points_per_task`` points per task, else

@@ -186,9 +186,10 @@ class Series:
     points: tuple[tuple[tuple[str, float], ...], ...]
 
 
-#: Points of one chunk of a grid store unless the scene says ``[execution] points_per_chunk``.
-#: A constant, never a timing: where chunks begin decides which grid neighbours a chunk's
-#: sweep may start from, so it must follow from the scene alone (``_grid.scene_chunks``).
+#: Points of one block (a task's unit) of a grid store unless the scene says ``[execution]
+#: points_per_chunk``.  A constant, never a timing: where blocks begin decides which grid
+#: neighbours a block's sweep may start from, so it must follow from the scene alone
+#: (``_grid.scene_chunks``); the store's chunks are whole blocks (``_store.storage_chunks``).
 DEFAULT_POINTS_PER_CHUNK = 256
 
 

@@ -3,29 +3,31 @@
 A run is a chain of small named steps, the same for every kind (pangeo-forge-recipes'
 ``StoreToZarr`` is the model)::
 
-    lock the store -> open or create its skeleton -> pending chunks -> check their layout ->
-    fan out tasks of whole chunks -> the kind's driver-side steps (series, reductions) -> run
-    record, consolidation
+    lock the store -> open or create its skeleton -> pending chunks -> check their blocks ->
+    fan out tasks of their blocks, the driver writing each chunk once whole -> the kind's
+    driver-side steps (series, reductions) -> run record, consolidation
 
-A kind supplies the parts that differ:
+Two units (``_store``): a *block* is what a task solves at a time, a *chunk* what the store
+keeps in one file per array (whole blocks, ~1 MiB), the unit of resuming.  A kind supplies
+the parts that differ:
 
 * ``create_skeleton(run)``: every array, coordinate and attribute of an empty store, before
   any task runs (``pipeline.kind`` names the kind; format-1 grid stores carry no kind): the
   kind's own arrays between ``_store.new_group`` and ``_store.finish_skeleton`` (done
   markers, provenance, layout, state: the same for every kind);
-* ``chunk_layout(scene)``: the chunk shape the scene's store must have, a function of the
-  scene alone (never of a timing); a store of another layout with chunks still to compute is
+* ``block_layout(scene)``: the block shape the scene's store must have, a function of the
+  scene alone (never of a timing); a store of other blocks with chunks still to compute is
   refused.  ``None`` (the default): whatever the kind's skeleton chose;
-* ``pending_chunks(store)``: the chunk indices without their done marker;
-* ``chunks_per_task(run, chunks, pending)``: how many consecutive pending chunks one task
-  computes (default 1); it moves no chunk boundary, so no stored value depends on it;
-* ``solve_chunk(scene, chunks, index)``: a module-level function, run inside a task
-  (picklable arguments only), that computes chunk ``index`` of the layout ``chunks`` and
-  returns a ``_store.SolvedChunk`` (its whole aligned writes, points, failures, seconds
-  solving); the shared mechanics (``_store.store_chunk``, called by ``_run.run_chunks``)
-  write each whole and durable, then the done marker, for every kind alike;
-* ``chunk_cost(scene, index)``: relative cost of a chunk where the kind can tell (tasks run
-  longest first; default: equal);
+* ``pending_chunks(store)``: the (storage) chunk indices without their done marker;
+* ``chunks_per_task(run, blocks, pending)``: how many consecutive pending blocks one task
+  computes (default 1); it moves no block boundary, so no stored value depends on it;
+* ``solve_chunk(scene, blocks, index)``: a module-level function, run inside a task
+  (picklable arguments only), that computes block ``index`` of the layout ``blocks`` and
+  returns a ``_store.SolvedChunk`` (its writes, points, failures, seconds solving); the
+  shared mechanics (``_store.ChunkWriter``, in the driver) write each chunk whole once its
+  blocks are back, make it durable, then set its done marker, for every kind alike;
+* ``chunk_cost(scene, index)``: relative cost of block ``index`` where the kind can tell
+  (tasks run longest first; default: equal);
 * ``steps(scene)``: driver-side :class:`Step` objects after the chunks (reductions), each
   owning one flag of ``pipeline.state`` (a step's ``run`` may return its tasks' timings, for
   the run's time budget);
@@ -113,22 +115,22 @@ class SceneKind:
     def create_skeleton(self, run: RunContext) -> None:
         raise NotImplementedError
 
-    def chunk_layout(self, scene) -> tuple[int, ...] | None:
-        """The chunk shape of ``scene``'s store, from the scene alone; None: not checked."""
+    def block_layout(self, scene) -> tuple[int, ...] | None:
+        """The block shape of ``scene``'s store, from the scene alone; None: not checked."""
         return None
 
     def chunks_per_task(self, run: RunContext, chunks: tuple[int, ...], pending: list) -> int:
-        """Consecutive pending chunks one task computes (each written whole, then marked)."""
+        """Consecutive pending blocks one task computes."""
         return 1
 
     def pending_chunks(self, store: Path) -> list[tuple[int, ...]]:
-        """Chunk indices (C order) whose done marker is not set."""
+        """Storage chunk indices (C order) whose done marker is not set."""
         done = read_done(store)
         return [tuple(int(i) for i in idx) for idx in zip(*np.nonzero(~done))]
 
     def chunk_cost(self, scene, index: tuple[int, ...]) -> float:
-        """Relative cost of chunk ``index`` where the kind can tell it from the scene (tasks
-        run longest first); equal by default (tasks run in chunk order)."""
+        """Relative cost of block ``index`` where the kind can tell it from the scene (tasks
+        run longest first); equal by default (tasks run in block order)."""
         return 0.0
 
     def steps(self, scene) -> tuple[Step, ...]:

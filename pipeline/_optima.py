@@ -63,11 +63,11 @@ import numpy as np
 
 from ._kind import RunContext, SceneKind, Step, tasks_by_count
 from ._optima_scene import DIMS, KIND, KIND_VERSION, STOP_CODES, OptimaScene, parse_optima_scene
-from ._store import (ChunkWrite, SolvedChunk, create_array, finish_skeleton, new_group, read_arrays, store_chunk,
+from ._store import (ChunkWrite, SolvedChunk, create_array, finish_skeleton, new_group, read_arrays,
                      write_arrays)
 
 __all__ = ["OPTIMA", "OptimaKind", "distinct_optima", "fourier_samples", "STOP_CODES", "KIND_VERSION",
-           "create_optima_skeleton", "compute_optima_chunk", "reduce_optima", "accepted_starts",
+           "create_optima_skeleton", "reduce_optima", "accepted_starts",
            "reflect_about_half_pi", "START_FLAGS"]
 
 #: starts one task aims at (``OptimaKind.chunks_per_task``)
@@ -400,12 +400,6 @@ def solve_optima_chunk(scene: OptimaScene, chunks: tuple[int, ...], index: tuple
     return SolvedChunk(writes=writes, points=n,
                        failures=int(np.count_nonzero(values["status"] == STOP_CODES["error"])),
                        seconds=float(np.nansum(values["seconds"])))
-
-
-def compute_optima_chunk(store: str, scene: OptimaScene, chunks: tuple[int, ...],
-                         index: tuple[int, ...]) -> dict:
-    """Optimise chunk ``index``, write its arrays, then mark it done (``_store.store_chunk``)."""
-    return store_chunk(Path(store), tuple(index), solve_optima_chunk(scene, chunks, index))
 
 
 # ---------------------------------------------------------------------------------------------

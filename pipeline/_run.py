@@ -5,16 +5,15 @@
     open_run        resolve store and scheduler; refuse, before anything is written, a cluster
                     that does not answer and a store that would be refused; hold the lock
     prepare_store   refuse a store of a different scene, or (re)create the skeleton, or resume
-    check_layout    refuse chunks still to compute in a layout that is not the scene's
-    expand          a compacted store with chunks to compute gets its task chunks back
+    check_layout    refuse chunks still to compute in a block layout that is not the scene's
     warm_up         compile the solver's kernels once, here, before work fans out
-    compute_chunks  tasks of consecutive chunks without their done marker (each chunk whole)
+    compute_chunks  tasks of the blocks of the chunks without their done marker; this driver
+                    writes each chunk once its blocks are back, syncs it, then marks it done
     finish          the kind's steps whose state flag is unset (series, reductions)
-    record          state flags set, then ``compact`` where the store has many chunk files
-                    (every array of many chunks rewritten in few, values unchanged), run
-                    record and consolidated metadata, when anything was computed
+    record          state flags set, run record and consolidated metadata, when anything was
+                    computed
 
-Only this driver writes the store's attributes; tasks write whole chunks and their markers.
+Only this driver writes the store: tasks return what they computed (``_store.ChunkWriter``).
 """
 
 from __future__ import annotations
@@ -30,10 +29,9 @@ from ._kind import RunContext, SceneKind
 from ._registry import kind_of
 from ._scene import engine_versions
 from ._schedule import Progress, Scheduler, Session, Task, compute, take_start_seconds
-from ._store import (FORMAT_VERSION, STATE_FLAGS, StoreForeign, StoreMismatch, StoreUnwritable, compact,
-                     consolidate, expand, is_complete, is_marked, open_existing, record_run, recover_rechunk,
-                     remove_partials, run_lock, set_state, store_chunk, store_meta, unwritable_reason,
-                     wants_compaction)
+from ._store import (FORMAT_VERSION, STATE_FLAGS, ChunkWriter, StoreForeign, StoreMismatch, StoreUnwritable,
+                     blocks_in, consolidate, is_complete, open_existing, record_run, remove_partials, run_lock,
+                     set_state, store_meta, unwritable_reason)
 
 __all__ = ["KeptChunks", "RunSummary", "Session", "default_store", "kept_chunks", "resumable_record", "run_scene",
            "warm_up_kernels"]
@@ -179,7 +177,7 @@ def resumable_record(scene, store: Path, overwrite: bool) -> dict | None:
         if not overwrite:
             raise StoreMismatch(
                 f"{store}: store format version {meta.get('format_version', 1)}, this pipeline writes version "
-                f"{FORMAT_VERSION} (attributes as netCDF takes them); rerun with --overwrite to rebuild it, or "
+                f"{FORMAT_VERSION} (chunks of whole blocks); rerun with --overwrite to rebuild it, or "
                 "choose another --store (the reports read it as it is)")
         return None  # overwrite: start over
     old = meta["provenance"]["scene_hash"]
@@ -226,7 +224,6 @@ def prepare_store(run: RunContext, kind: SceneKind, overwrite: bool, replace: bo
                                   "choose another --store (or --out)") from None
         return open_existing(store)
     remove_partials(store)
-    recover_rechunk(store)
     return store_meta(store)
 
 
@@ -235,154 +232,90 @@ def _shape(chunks) -> str:
 
 
 def check_layout(run: RunContext, kind: SceneKind, meta: dict, pending) -> None:
-    """Refuse a store whose chunk layout is not the scene's (``kind.chunk_layout``) while chunks
+    """Refuse a store whose blocks are not the scene's (``kind.block_layout``) while chunks
     remain to compute: the store was started by an older pipeline, whose layout came from a
     timing probe, or with another ``[execution] points_per_chunk``.  A store with every chunk
     done is left as it is (nothing is computed in its layout)."""
-    want = kind.chunk_layout(run.scene)
-    have = tuple(int(c) for c in meta["layout"]["chunks"])
+    want = kind.block_layout(run.scene)
+    have = tuple(int(c) for c in meta["layout"]["blocks"])
     if want is None or not pending or tuple(want) == have:
         return
     raise StoreMismatch(
-        f"{run.store}: its chunks ({_shape(have)}) are not this scene's chunk layout ({_shape(want)}), so its "
+        f"{run.store}: its blocks ({_shape(have)}) are not this scene's block layout ({_shape(want)}), so its "
         f"{len(pending)} unfinished chunks cannot be resumed (a store started by an older pipeline, which chose "
         "chunks by a timing probe, or with another [execution] points_per_chunk); rerun with --overwrite to "
         "start over, or choose another --store")
 
 
-#: this worker process's chunk writer where tasks leave their last chunk's write running
-#: (``run_chunks(..., detach=True)``, the local process pool): one thread, and the one write
-#: it may still hold, ``(store, future)``, which the process's next task collects first
-_WRITER = None
-_LEFT: tuple[str, object] | None = None
+def run_chunks(solve_chunk, scene, chunks: tuple[int, ...], indices) -> dict:
+    """One task: ``solve_chunk`` on each block of ``indices`` (``chunks``: the block layout) in
+    turn; the blocks' values go back to the driver, which writes them (``_store.ChunkWriter``).
 
-#: seconds the driver waits, after the last task returned, for a chunk's done marker (a write
-#: takes milliseconds; the marker delay of the tests' hook comes on top)
-MARKER_TIMEOUT = 60.0
-
-
-def run_chunks(solve_chunk, store: str, scene, chunks: tuple[int, ...], indices, detach: bool = False) -> dict:
-    """One task: ``solve_chunk`` on each chunk of ``indices`` in turn, each stored whole and then
-    marked done (``_store.store_chunk``) by a writer thread while the next chunk is solved (the
-    solver's kernels release the GIL), so a chunk's fsyncs do not hold up the solving; at most
-    one chunk waits to be written.
-
-    ``detach``: the task returns without waiting for its last chunk's write, which the
-    process's writer thread finishes while the process's next task solves (that task collects
-    it first, raising its error if it failed); the driver waits for the done markers
-    (:func:`wait_for_markers`).  Only for a pool of worker processes: tasks of other schedulers
-    share a process.
-
-    Returns the sums of the chunks' ``points``, ``failures``, ``seconds`` (solving), the
-    ``write_seconds`` and ``mark_seconds`` (in the writer thread, overlapping the solving) of
-    the ``written_chunks`` of ``store`` whose writes the task collected, ``write_wait_seconds``
-    (the solving held up waiting for the writer, for this store's chunks or a write left by an
-    earlier task), ``task_seconds`` (the task's wall time), ``task_cpu_seconds``, and the
-    worker's start-up on its first task (``_schedule.take_start_seconds``).
+    Returns ``solved`` [(block index, ``_store.SolvedChunk``)], the sums of the blocks'
+    ``points``, ``failures``, ``seconds`` (solving), ``task_seconds`` (the task's wall time),
+    ``task_cpu_seconds``, and the worker's start-up on its first task
+    (``_schedule.take_start_seconds``).
     """
-    global _WRITER, _LEFT
-    from concurrent.futures import ThreadPoolExecutor
-
     t0, c0 = time.perf_counter(), time.process_time()
     total = {"points": 0, "failures": 0, "seconds": 0.0}
-    writes = {"write_seconds": 0.0, "mark_seconds": 0.0, "written_chunks": 0}
-    wait = 0.0
-
-    def collect(pending):
-        nonlocal wait
-        owner, future = pending
-        tw = time.perf_counter()
-        r = future.result()  # raises the write's error, in this task
-        wait += time.perf_counter() - tw
-        if owner == store:
-            writes["write_seconds"] += r["write_seconds"]
-            writes["mark_seconds"] += r["mark_seconds"]
-            writes["written_chunks"] += 1
-
-    if detach:
-        if _WRITER is None:
-            _WRITER = ThreadPoolExecutor(1, thread_name_prefix="chunk-writer")
-        writer, pending, _LEFT = _WRITER, _LEFT, None
-    else:
-        writer, pending = ThreadPoolExecutor(1, thread_name_prefix="chunk-writer"), None
-    try:
-        for idx in indices:
-            solved = solve_chunk(scene, chunks, idx)
-            total["points"] += int(solved.points)
-            total["failures"] += int(solved.failures)
-            total["seconds"] += float(solved.seconds)
-            if pending is not None:
-                waited, pending = pending, None  # a failed write is raised once, here, not left again
-                collect(waited)
-            pending = (store, writer.submit(store_chunk, Path(store), tuple(idx), solved))
-        if pending is not None and not detach:
-            waited, pending = pending, None
-            collect(waited)
-    finally:
-        if detach:
-            _LEFT = pending
-        else:
-            writer.shutdown(wait=True)
-    return {**total, **writes, "write_wait_seconds": wait, "task_seconds": time.perf_counter() - t0,
+    solved = []
+    for idx in indices:
+        s = solve_chunk(scene, chunks, idx)
+        total["points"] += int(s.points)
+        total["failures"] += int(s.failures)
+        total["seconds"] += float(s.seconds)
+        solved.append((tuple(int(i) for i in idx), s))
+    return {"solved": solved, **total, "task_seconds": time.perf_counter() - t0,
             "task_cpu_seconds": time.process_time() - c0, **take_start_seconds()}
 
 
-def compute_chunks(run: RunContext, kind: SceneKind, meta: dict, pending, clock: Clock | None = None) -> list[dict]:
-    """Tasks of ``kind.chunks_per_task`` consecutive pending chunks, fanned out on the run's
-    scheduler; their results.  On the local process pool the tasks leave their last chunk's
-    write to the worker (``run_chunks(..., detach=True)``) and this waits for the done markers
-    of every chunk before it returns (the phase "last writes")."""
+def compute_chunks(run: RunContext, kind: SceneKind, meta: dict, pending, clock: Clock | None = None
+                   ) -> tuple[list[dict], ChunkWriter | None]:
+    """The blocks of the ``pending`` storage chunks, in tasks of ``kind.chunks_per_task``
+    consecutive blocks (a chunk's blocks together), fanned out on the run's scheduler; each
+    chunk written, synced and marked by this driver once its last block is back
+    (``_store.ChunkWriter``).  The tasks' results (without their blocks' values), and the
+    writer (its seconds)."""
     if not pending:
-        return []
-    chunks = tuple(int(c) for c in meta["layout"]["chunks"])
-    per_task = max(1, int(kind.chunks_per_task(run, chunks, pending)))
+        return [], None
+    layout = meta["layout"]
+    shape, blocks, chunks = (tuple(int(n) for n in layout[k]) for k in ("shape", "blocks", "chunks"))
+    todo = [b for c in pending for b in blocks_in(c, shape, blocks, chunks)]
+    per_task = max(1, int(kind.chunks_per_task(run, blocks, todo)))
     if clock is not None:
         clock.lap("plan")
-    groups = [pending[i:i + per_task] for i in range(0, len(pending), per_task)]
+    groups = [todo[i:i + per_task] for i in range(0, len(todo), per_task)]
     # the longest tasks first (where the kind can tell), so no long task starts last
     costs = [sum(kind.chunk_cost(run.scene, idx) for idx in group) for group in groups]
     groups = [groups[i] for i in sorted(range(len(groups)), key=lambda i: -costs[i])]  # stable
     label = run.scene.kind
-    detach = run.scheduler.name == "processes"
 
     def key(group):
         first = f"pipeline-{label}-" + "-".join(map(str, group[0]))
         return first if len(group) == 1 else f"{first}-and-{len(group) - 1}"
 
-    tasks = [Task(key(group), run_chunks, (kind.solve_chunk, str(run.store), run.scene, chunks, group, detach))
-             for group in groups]
-    total = int(_chunk_count(meta))
-    bar = Progress(len(tasks), per_task * run.scene.n_points / total, run.scene.name, run.progress,
-                   unit="tasks" if per_task > 1 else "chunks", rate_unit=kind.rate_unit)
-    results = compute(tasks, run.scheduler, bar)
+    tasks = [Task(key(group), run_chunks, (kind.solve_chunk, run.scene, blocks, group)) for group in groups]
+    writer = ChunkWriter(run.store, layout, pending)
+
+    def write(_, result):
+        for idx, solved in result.pop("solved"):
+            writer.add(idx, solved)
+
+    bar = Progress(len(tasks), per_task * run.scene.n_points / max(1, _block_count(layout)), run.scene.name,
+                   run.progress, unit="tasks" if per_task > 1 else "blocks", rate_unit=kind.rate_unit)
+    results = compute(tasks, run.scheduler, bar, on_result=write)
+    if writer.missing:
+        raise RuntimeError(f"{run.store}: {len(writer.missing)} chunks not whole after their tasks returned")
     if clock is not None:
         clock.lap("chunks")
-    if detach:
-        wait_for_markers(run.store, pending)
-        if clock is not None:
-            clock.lap("last writes")
-    return results
+    return results, writer
 
 
-def wait_for_markers(store: Path, indices, timeout: float | None = None) -> None:
-    """Return once every chunk of ``indices`` has its done marker; raise RuntimeError naming
-    the first missing one ``timeout`` seconds (``MARKER_TIMEOUT`` and the tests' marker delay)
-    after the call: its write failed in a worker that ran no later task, or its worker died."""
-    import os
-
-    if timeout is None:
-        timeout = MARKER_TIMEOUT + float(os.environ.get("TWOLINK_PIPELINE_MARKER_DELAY", "0") or 0)
-    remaining = [tuple(int(i) for i in idx) for idx in indices]
-    deadline = time.monotonic() + timeout
-    while True:
-        remaining = [idx for idx in remaining if not is_marked(Path(store), idx)]
-        if not remaining:
-            return
-        if time.monotonic() > deadline:
-            raise RuntimeError(
-                f"{store}: {len(remaining)} chunks without their done marker {timeout:g} s after their tasks "
-                f"returned (the first: {remaining[0]}): a write failed or a worker died; a rerun computes them")
-        time.sleep(0.002)
+def _block_count(layout: dict) -> int:
+    count = 1
+    for s, b in zip(layout["shape"], layout["blocks"]):
+        count *= -(-int(s) // int(b))
+    return count
 
 
 def _chunk_count(meta: dict) -> int:
@@ -436,13 +369,15 @@ def _sum(results, key) -> float:
     return float(sum(r.get(key, 0.0) for r in results))
 
 
-def time_budget(clock: Clock, workers: int, chunk_results: list[dict], step_results: dict[str, list[dict]]) -> dict:
+def time_budget(clock: Clock, workers: int, chunk_results: list[dict], step_results: dict[str, list[dict]],
+                writer: ChunkWriter | None = None) -> dict:
     """Where the run's time went, in worker-seconds of a budget ``wall x workers``.
 
     ``solve``: seconds inside the solver (or optimiser), summed over the tasks of the chunks
     and of the steps (polish, series).  The rest, by part: the driver's phases while the
     workers wait (each phase's wall x workers, its tasks' own time taken out), and inside the
-    tasks the workers' start-up (imports, kernels), the chunks' writes and done markers.
+    tasks the workers' start-up (imports, kernels) and what else the tasks did.  The driver's
+    writes of the chunks (``writer``: while the workers solve) are ``driver_write_seconds``.
     ``efficiency`` = solve / (wall x workers).
     """
     wall = clock.wall
@@ -459,20 +394,17 @@ def time_budget(clock: Clock, workers: int, chunk_results: list[dict], step_resu
         else:
             parts[name] = seconds * workers
     parts["worker start-up"] = _sum(tasks, "start_seconds")
-    parts["waiting for chunk writes"] = _sum(chunk_results, "write_wait_seconds")
-    in_tasks = _sum(tasks, "task_seconds") - solve - parts["waiting for chunk writes"]
-    parts["in tasks, besides solving and writing"] = max(0.0, in_tasks)
+    parts["in tasks, besides solving"] = max(0.0, _sum(tasks, "task_seconds") - solve)
     return {"wall_seconds": round(wall, 3), "workers": workers, "solve_worker_seconds": round(solve, 3),
             "efficiency": round(solve / budget, 4) if budget > 0 else 0.0,
             "phases_wall_seconds": {k: round(v, 3) for k, v in clock.phases.items()},
             "driver_cpu_seconds": {k: round(v, 3) for k, v in clock.cpu.items()},
             "tasks_cpu_seconds": round(_sum(tasks, "task_cpu_seconds"), 3),
             "worker_start_cpu_seconds": round(_sum(tasks, "start_cpu_seconds"), 3),
-            "writer_thread_seconds": {"writes (fsync included)": round(_sum(chunk_results, "write_seconds"), 3),
-                                      "done markers": round(_sum(chunk_results, "mark_seconds"), 3),
-                                      # a task leaves its last write to its worker's next task
-                                      # (run_chunks' detach), whose scene may be the next one
-                                      "chunks counted": int(_sum(chunk_results, "written_chunks"))},
+            "driver_write_seconds": {"writes": round(writer.seconds["write"], 3) if writer else 0.0,
+                                     "fsync": round(writer.seconds["sync"], 3) if writer else 0.0,
+                                     "done markers": round(writer.seconds["mark"], 3) if writer else 0.0,
+                                     "chunks written": writer.written if writer else 0},
             "not_solving_worker_seconds": {k: round(v, 3) for k, v in
                                            sorted(parts.items(), key=lambda kv: -kv[1]) if v >= 0.0005}}
 
@@ -510,28 +442,21 @@ def run_scene(scene, store: str | Path | None = None, *, scheduler: str | None =
                 raise
             meta = prepare_store(run, kind, overwrite, replace=True)
             pending = kind.pending_chunks(run.store)
-        if pending and meta.get("compacted_from"):
-            expand(run.store)  # each task writes whole chunk files of its own again
-            meta = store_meta(run.store)
         clock.lap("setup")
         if pending or not is_complete(meta["state"]):
             start_workers(run, kind, echo)
             clock.lap("warm-up")
         t_solve = time.perf_counter()
-        results = compute_chunks(run, kind, meta, pending, clock)
+        results, writer = compute_chunks(run, kind, meta, pending, clock)
         solve_seconds = time.perf_counter() - t_solve if pending else 0.0
         computed_points = sum(r["points"] for r in results)
         ran, step_results = finish(run, kind, meta["state"], bool(pending), clock)
         failures = kind.failures(run.store, scene)
         timing = None
-        compacting = wants_compaction(run.store)
-        if pending or ran or not is_complete(meta["state"]) or compacting:
+        if pending or ran or not is_complete(meta["state"]):
             set_state(run.store, **{flag: True for flag in STATE_FLAGS})
             clock.lap("record")
-            if compacting:
-                compact(run.store)
-                clock.lap("compact")
-            timing = time_budget(clock, run.n_workers, results, step_results)
+            timing = time_budget(clock, run.n_workers, results, step_results, writer)
             record_run(run.store, {
                 "finished": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
                 "wall_seconds": round(clock.wall, 3),

@@ -149,7 +149,7 @@ class Execution:
     scheduler: str = "processes"
     workers: int | None = None
     store: str | None = None
-    #: grid scenes: points of one store chunk (the chunk layout; see ``_grid.scene_chunks``)
+    #: grid scenes: points of one block, a task's unit (the block layout; ``_grid.scene_chunks``)
     points_per_chunk: int | None = None
 
 

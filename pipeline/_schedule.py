@@ -389,10 +389,13 @@ class Task:
     args: tuple
 
 
-def compute(tasks: list[Task], scheduler: Scheduler, progress: Progress) -> list:
+def compute(tasks: list[Task], scheduler: Scheduler, progress: Progress, on_result=None) -> list:
     """Run ``tasks`` on ``scheduler``; their results in order.  ``progress`` is advanced as each
     task finishes, on every scheduler (on "processes" it waited for the first exception or the
-    last task, so the bar stood still, then printed every line at once: issue 45).
+    last task, so the bar stood still, then printed every line at once: issue 45), and
+    ``on_result(i, result)`` is called, in this thread, with each task's result as it comes
+    (the driver writes the finished chunks there: ``_store.ChunkWriter``); an exception it
+    raises stops the run as a task's does.
 
     On "processes" the tasks go straight to the scheduler's pool in the order given (so a kind
     can put its longest tasks first), all queued at once; on the other schedulers through dask
@@ -409,6 +412,8 @@ def compute(tasks: list[Task], scheduler: Scheduler, progress: Progress) -> list
         try:
             for f in as_completed(futures):
                 results[index[f]] = f.result()  # raises the task's exception
+                if on_result is not None:
+                    on_result(index[f], results[index[f]])
                 progress.update()
         except BaseException:
             for f in futures:
@@ -428,6 +433,8 @@ def compute(tasks: list[Task], scheduler: Scheduler, progress: Progress) -> list
         try:
             for fut in as_completed(futures, loop=client.loop):
                 results[index[fut.key]] = fut.result()
+                if on_result is not None:
+                    on_result(index[fut.key], results[index[fut.key]])
                 progress.update()
         except BaseException:
             with contextlib.suppress(Exception):
@@ -436,9 +443,14 @@ def compute(tasks: list[Task], scheduler: Scheduler, progress: Progress) -> list
         return results
     from dask.callbacks import Callback
 
+    index = {t.key: i for i, t in enumerate(tasks)}
+
     class _Count(Callback):
+        # called by dask's local scheduler in the thread that called dask.compute (this one)
         def _posttask(self, key, result, dsk, state, worker_id):
-            if isinstance(key, str) and key.startswith("pipeline-"):
+            if isinstance(key, str) and key in index:
+                if on_result is not None:
+                    on_result(index[key], result)
                 progress.update()
 
     kwargs = {"scheduler": scheduler.name}

@@ -9,10 +9,15 @@ Layout (Zarr format 3, one group per scene)::
         <reduction arrays>        labelled by the kept axes (+ a subset dimension)
         pipeline_state/chunk_done uint8 per chunk, 1 once the chunk's outputs are all written
 
-Only the driver writes attributes; tasks write only their own chunks and then their marker.
+Two units (issue 46): a *block* is what one task solves at a time (``layout.blocks``; with
+sweeps a unit of the science, ``_grid.scene_chunks``); a *chunk* is what the store keeps in one
+file per array (``layout.chunks``: whole blocks, ~1 MiB of the largest output,
+:func:`storage_chunks`), and the unit of resuming.  The driver is the one writer: tasks return
+their blocks, and :class:`ChunkWriter` writes each chunk once it is whole, through zarr's
+public API, syncs it, then sets its done marker.  Only the driver writes attributes.
 Every attribute goes through :mod:`pipeline._attrs` (:func:`create_array`, the record's
 functions here), so a store is netCDF- and CF-ready: ``xarray.open_zarr(store).to_netcdf(path)``
-works on it as it is (format 2, issue 34).
+works on it as it is (issue 34).
 """
 
 from __future__ import annotations
@@ -20,11 +25,13 @@ from __future__ import annotations
 import datetime as _dt
 import fcntl
 import functools
+import itertools
 import json
 import os
 import platform
 import shutil
 import subprocess
+import time
 import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -36,63 +43,25 @@ import zarr
 from solver.periodic.options import engine_options
 
 from ._attrs import ATTRS_KEY, encode_attrs, read_record, record_text
-from ._chunks import chunk_key, layout_is_plain, read_whole, write_chunk, write_whole
 from ._grid_scene import DIAGNOSTICS, QUANTITIES, Reduction, Scene, axis_attrs
 from ._scene import engine_versions
 
 __all__ = [
-    "ATTRS_KEY",
-    "FORMAT_VERSION",
-    "NOT_COMPUTED",
-    "STATE_GROUP",
-    "STARTED_MARKER",
-    "StoreBusy",
-    "StoreForeign",
-    "StoreMismatch",
-    "StoreUnwritable",
-    "unwritable_reason",
-    "create_skeleton",
-    "finish_skeleton",
-    "SkeletonGroup",
-    "new_group",
-    "open_existing",
-    "output_dtype",
-    "reduction_arrays",
-    "run_lock",
-    "read_done",
-    "is_marked",
-    "mark_done",
-    "write_region",
-    "ChunkWrite",
-    "SolvedChunk",
-    "store_chunk",
-    "remove_partials",
-    "provenance",
-    "set_state",
-    "record_run",
-    "status_meanings",
-    "create_array",
-    "open_group",
-    "read_arrays",
+    "ATTRS_KEY", "CHUNK_BYTES", "FORMAT_VERSION", "NOT_COMPUTED", "STATE_FLAGS", "STATE_GROUP", "STARTED_MARKER",
+    "ChunkWrite", "ChunkWriter", "Skeleton", "SolvedChunk", "StoreBusy", "StoreForeign", "StoreMismatch",
+    "StoreUnwritable", "blocks_in", "chunk_bytes", "consolidate", "create_array", "create_skeleton",
+    "finish_skeleton", "is_complete", "mark_done", "new_group", "open_existing", "open_group", "output_dtype",
+    "provenance", "read_arrays", "read_done", "record_run", "reduction_arrays", "remove_partials", "run_lock",
+    "set_state", "status_meanings", "storage_chunks", "store_meta", "sync_written", "unwritable_reason",
     "write_arrays",
-    "consolidate",
-    "store_meta",
-    "is_complete",
-    "STATE_FLAGS",
-    "COMPACT_ELEMENTS",
-    "COMPACT_FILES",
-    "wants_compaction",
-    "compact",
-    "compact_chunks",
-    "expand",
-    "rechunk",
-    "recover_rechunk",
 ]
 
-#: Layout version of the store (readers such as reports/ check it).  2 (issue 34): attributes
-#: as netCDF takes them (``_attrs``: the record as JSON text, CF flags, ``units`` on every float
-#: array); 1: nested attributes (read by the reports, refused for resuming).
-FORMAT_VERSION = 2
+#: Layout version of the store (readers such as reports/ check it).  3 (issue 46): chunks of
+#: whole blocks (``layout.blocks``, ``layout.chunks``), markers per chunk; 2 (issue 34):
+#: attributes as netCDF takes them (``_attrs``: the record as JSON text, CF flags, ``units`` on
+#: every float array), a chunk per block; 1: nested attributes.  The reports read all three;
+#: a run resumes only its own.
+FORMAT_VERSION = 3
 STATE_GROUP = "pipeline_state"
 DONE_ARRAY = f"{STATE_GROUP}/chunk_done"
 NOT_COMPUTED = -1
@@ -359,32 +328,27 @@ def create_array(group, name, *, shape, chunks, dtype, fill, dims, attrs):
     """A new array ``name`` in ``group`` (replacing one of that name), labelled by ``dims``,
     its attributes ``attrs`` (the Python view) stored as netCDF takes them
     (:func:`pipeline._attrs.encode_attrs`).  A float array must say its ``units`` ("1" where
-    dimensionless): CF asks it of every quantity."""
+    dimensionless): CF asks it of every quantity.  In a kind's skeleton (:class:`Skeleton`)
+    ``chunks`` over the scene's dimensions is the task unit, a block; :func:`finish_skeleton`
+    stores the array in chunks of whole blocks (:func:`storage_chunks`)."""
     if np.dtype(dtype).kind == "f" and "units" not in attrs:
         raise ValueError(f"array {name!r}: a float array needs 'units' in its attributes ('1' if dimensionless)")
-    return group.create_array(name, shape=shape, chunks=chunks, dtype=dtype, fill_value=fill,
+    return group.create_array(name, shape=tuple(shape), chunks=tuple(chunks), dtype=dtype, fill_value=fill,
                               dimension_names=list(dims), attributes=encode_attrs(attrs, np.dtype(dtype)),
                               overwrite=True)
 
 
-class SkeletonGroup:
-    """A kind's skeleton as it is declared: the groups, arrays (``create_array``'s arguments,
-    and the values assigned with ``[:] = values``) and root attributes, recorded, then built
-    in memory in one pass (:meth:`files`) and written by :func:`_write_skeleton`.
+class Skeleton:
+    """A kind's skeleton as it declares it (``create_array``, ``create_group``, ``in``,
+    ``attrs``, and ``[:] = values`` on an array), recorded: :func:`finish_skeleton` chooses the
+    storage chunks once every array is known, then creates them through zarr's public API."""
 
-    Through zarr-python every array created or filled is one round trip through its event
-    loop (~1 ms idle, 3-5 ms loaded, ~48 of them for a grid scene's skeleton: most of a
-    small scene's set-up); recorded, they are made together, concurrently, in one.  Supports
-    what the kinds' skeletons use of a zarr group: ``create_array``, ``create_group``, ``in``,
-    ``attrs``."""
-
-    def __init__(self, path: str = "", root: "SkeletonGroup | None" = None):
-        self.path = path
-        self.root = root or self
+    def __init__(self, path: str = "", root: "Skeleton | None" = None):
+        self.path, self.root = path, root or self
         if root is None:
             self.groups: list[str] = []
-            self.arrays: list[tuple[str, dict]] = []
-            self.values: dict[str, object] = {}
+            self.arrays: dict[str, dict] = {}
+            self.values: dict[str, np.ndarray] = {}
             self.group_attrs: dict[str, dict] = {}
         self.attrs: dict = self.root.group_attrs.setdefault(path, {})
 
@@ -392,54 +356,21 @@ class SkeletonGroup:
         return f"{self.path}/{name}" if self.path else name
 
     def __contains__(self, name: str) -> bool:
-        key = self._key(name)
-        return key in self.root.groups or any(k == key for k, _ in self.root.arrays)
+        return self._key(name) in self.root.groups or self._key(name) in self.root.arrays
 
-    def create_group(self, name: str) -> "SkeletonGroup":
+    def create_group(self, name: str) -> "Skeleton":
         self.root.groups.append(self._key(name))
-        return SkeletonGroup(self._key(name), self.root)
+        return Skeleton(self._key(name), self.root)
 
-    def create_array(self, name: str, **kwargs) -> "_DeclaredArray":
-        key = self._key(name)
-        self.root.arrays.append((key, kwargs))
-        return _DeclaredArray(self.root, key)
-
-    def files(self) -> dict[str, bytes]:
-        """{key: bytes} of every file of the skeleton, built by zarr in a memory store in one
-        pass: groups, then every array at once, then their values, then the root's attributes."""
-        import asyncio
-
-        from zarr.core.group import AsyncGroup
-        from zarr.core.sync import sync
-        from zarr.storage import MemoryStore
-
-        mem = MemoryStore()
-
-        async def build():
-            root = await AsyncGroup.from_store(mem, zarr_format=3)
-            made = {"": root}
-            for key in self.groups:  # parents before children, as declared
-                parent, _, name = key.rpartition("/")
-                made[key] = await made[parent].create_group(name)
-            arrays = await asyncio.gather(*(made[k.rpartition("/")[0]].create_array(k.rpartition("/")[2], **kw)
-                                            for k, kw in self.arrays))
-            by_key = {k: a for (k, _), a in zip(self.arrays, arrays)}
-            await asyncio.gather(*(by_key[k].setitem(slice(None), v) for k, v in self.values.items()))
-            for key, group in made.items():
-                attrs = self.group_attrs.get(key)
-                if attrs:
-                    await group.update_attributes(attrs)
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            sync(build())
-        return {k: v.to_bytes() for k, v in mem._store_dict.items()}
+    def create_array(self, name: str, **kwargs) -> "_Declared":
+        self.root.arrays[self._key(name)] = kwargs
+        return _Declared(self.root, self._key(name))
 
 
-class _DeclaredArray:
-    """An array of a :class:`SkeletonGroup`: ``[:] = values`` records its values."""
+class _Declared:
+    """An array of a :class:`Skeleton`: ``[:] = values`` records its values."""
 
-    def __init__(self, root: SkeletonGroup, key: str):
+    def __init__(self, root: Skeleton, key: str):
         self.root, self.key = root, key
 
     def __setitem__(self, selection, values) -> None:
@@ -448,11 +379,10 @@ class _DeclaredArray:
         self.root.values[self.key] = np.asarray(values)
 
 
-def new_group(store: Path) -> SkeletonGroup:
+def new_group(store: Path) -> Skeleton:
     """The first step of every kind's skeleton: an empty root group at ``store`` (whatever was
-    there removed: the caller decides whether that is allowed), and the group the kind
-    declares its skeleton in (:class:`SkeletonGroup`), built and written to ``store`` by
-    :func:`finish_skeleton`.
+    there removed: the caller decides whether that is allowed), and the :class:`Skeleton` the
+    kind declares its arrays in, created in ``store`` by :func:`finish_skeleton`.
 
     The store's :data:`STARTED_MARKER` is written (and synced) before anything else, so a run
     killed at any point before the skeleton's record is in place leaves a store that the next
@@ -466,44 +396,106 @@ def new_group(store: Path) -> SkeletonGroup:
                    "since": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}, f)
         f.flush()
         os.fsync(f.fileno())
-    _fsync_path(store)  # the marker's entry durable before the group exists
+    _fsync_all([store])  # the marker's entry durable before the group exists
     open_group(store, "a")  # on disk at once ("a": the marker kept); from here on an interrupted skeleton
-    return SkeletonGroup()
+    return Skeleton()
 
 
-def _write_skeleton(g: SkeletonGroup, store: Path) -> None:
-    """Write the files of the skeleton ``g`` to ``store``: every file but the root group's
-    metadata, then that one (its ``pipeline`` record, ``skeleton_complete`` set) last,
-    replacing the empty group's atomically."""
-    files = g.files()
-    root = files.pop("zarr.json")
-    for key in sorted(files):
-        path = store / key
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(files[key])
-    tmp = store / "zarr.json.partial"
-    tmp.write_bytes(root)
-    os.replace(tmp, store / "zarr.json")
+#: uncompressed bytes aimed at for one chunk of the largest output per point (1 MiB: 131,072
+#: float64 grid points), inside the 0.5-8 MB that xarray, Dask and object stores work well
+#: with (issue 46); a chunk holds at least one block (a task's unit), so it may be smaller
+CHUNK_BYTES = 1 << 20
+
+
+def chunk_bytes() -> int:
+    """:data:`CHUNK_BYTES`, or ``TWOLINK_PIPELINE_CHUNK_BYTES`` where set (the tests set 1: one
+    block per chunk, so that a small scene has several chunks to kill and resume).  It decides
+    a new store's chunks only: a store keeps the chunks its record names."""
+    return int(os.environ.get("TWOLINK_PIPELINE_CHUNK_BYTES") or CHUNK_BYTES)
+
+
+def storage_chunks(shape, blocks, point_bytes: int, target: int | None = None) -> tuple[int, ...]:
+    """The storage chunk over ``shape``: whole ``blocks`` (so each block lies in one chunk), as
+    many as fit ``target`` bytes (:func:`chunk_bytes`) at ``point_bytes`` per point, trailing
+    axes first (whole while they fit, then the axis where the room runs out cut into the fewest
+    equal runs of blocks); at least one block.
+
+    >>> storage_chunks((3, 3, 20, 20), (1, 1, 10, 20), 8, 8 * 1000)   # room for 1000 points: 2 x 400
+    (1, 2, 20, 20)
+    """
+    target = chunk_bytes() if target is None else int(target)
+    room = max(1, target // max(1, int(point_bytes)))
+    chunks = [int(b) for b in blocks]
+    for i in range(len(chunks) - 1, -1, -1):
+        others = int(np.prod(chunks)) // chunks[i]
+        n_blocks = -(-int(shape[i]) // int(blocks[i]))
+        fit = room // (others * int(blocks[i]))
+        if fit >= n_blocks:
+            chunks[i] = int(shape[i])
+            continue
+        if fit > 1:
+            chunks[i] = -(-n_blocks // -(-n_blocks // fit)) * int(blocks[i])
+        break
+    return tuple(chunks)
+
+
+def _laid_over(kw: dict, dims, shape, blocks) -> bool:
+    """Whether a declared array is laid over the scene's dimensions in blocks (its leading
+    dimensions, shape and chunks those of the layout): stored in the layout's chunks."""
+    n = len(dims)
+    return (tuple(kw["dimension_names"][:n]) == tuple(dims) and tuple(kw["shape"][:n]) == tuple(shape)
+            and tuple(kw["chunks"][:n]) == tuple(blocks))
+
+
+def _write_skeleton(g: Skeleton, store: Path) -> None:
+    """Create the skeleton ``g`` in ``store`` through zarr: groups, arrays, their values, then
+    the groups' attributes, the root's (its ``pipeline`` record, ``skeleton_complete`` set)
+    last."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        made = {"": open_group(store, "r+")}
+        for key in g.groups:  # parents before children, as declared
+            parent, _, name = key.rpartition("/")
+            made[key] = made[parent].create_group(name)
+        for key, kw in g.arrays.items():
+            parent, _, name = key.rpartition("/")
+            arr = made[parent].create_array(name, **kw)
+            if key in g.values:
+                arr[...] = g.values[key]
+        for key in sorted(made, key=lambda k: (k == "", k)):
+            if g.group_attrs.get(key):
+                made[key].update_attributes(g.group_attrs[key])
 
 
 def finish_skeleton(g, scene, *, store: Path, dims, shape, chunks, head: dict | None = None,
                     layout: dict | None = None, reductions_complete: bool = False,
                     series_complete: bool = True) -> None:
-    """The part of every kind's skeleton that is the same: the done markers (one per chunk of
-    the layout ``chunks`` over ``shape``, labelled ``chunk_<dim>``) and the ``pipeline``
-    attributes (``head`` first: ``kind`` and its version; provenance, layout, state); then the
-    skeleton ``g`` (built in memory, :func:`new_group`) is written to ``store``, its record
-    last, so that ``skeleton_complete`` is set only on a whole skeleton."""
-    grid = tuple(-(-int(s) // int(c)) for s, c in zip(shape, chunks))
+    """The part of every kind's skeleton that is the same.  ``chunks`` is the task unit over
+    the scene's ``dims`` and ``shape``, a block (what one task solves at a time, and with
+    sweeps a unit of the science: ``_grid.scene_chunks``); every declared array laid over the
+    scene in blocks is stored in chunks of whole blocks (:func:`storage_chunks`, sized by the
+    largest of them per point), each written once, by the driver, whole (:class:`ChunkWriter`).
+    Then the done markers (one per storage chunk, labelled ``chunk_<dim>``) and the ``pipeline``
+    attributes (``head`` first: ``kind`` and its version; provenance, layout with ``blocks``
+    and ``chunks``, state); the skeleton ``g`` is created in ``store`` with its record last, so
+    that ``skeleton_complete`` is set only on a whole skeleton."""
+    blocks = tuple(int(c) for c in chunks)
+    laid = {k: kw for k, kw in g.arrays.items() if _laid_over(kw, dims, shape, blocks)}
+    point_bytes = max((np.dtype(kw["dtype"]).itemsize * int(np.prod(kw["shape"][len(dims):]))
+                       for kw in laid.values()), default=8)
+    stored = storage_chunks(shape, blocks, point_bytes)
+    for kw in laid.values():
+        kw["chunks"] = stored + tuple(kw["chunks"][len(dims):])
+    grid = tuple(-(-int(s) // int(c)) for s, c in zip(shape, stored))
     sg = g.create_group(STATE_GROUP)
     create_array(sg, "chunk_done", shape=grid, chunks=(1,) * len(grid), dtype=np.uint8, fill=0,
                  dims=tuple(f"chunk_{d}" for d in dims),
-                 attrs={"long_name": "1 once every output of the chunk is written (written last by its task)"})
+                 attrs={"long_name": "1 once every output of the chunk is written and synced (written last)"})
     g.attrs[ATTRS_KEY] = record_text({
         "format_version": FORMAT_VERSION, **(head or {}),
         "provenance": provenance(scene),
-        "layout": {"dims": list(dims), "shape": [int(s) for s in shape], "chunks": [int(c) for c in chunks],
-                   "chunk_grid": list(grid), **(layout or {})},
+        "layout": {"dims": list(dims), "shape": [int(s) for s in shape], "blocks": list(blocks),
+                   "chunks": list(stored), "chunk_grid": list(grid), **(layout or {})},
         "state": {"skeleton_complete": True, "chunks_complete": False,
                   "reductions_complete": bool(reductions_complete), "series_complete": bool(series_complete)},
     })
@@ -515,12 +507,13 @@ def _remove_started_marker(store: Path) -> None:
     """The skeleton's record in place: the store is recognised by it from now on, and its
     :data:`STARTED_MARKER` has done its work (the folder synced first, so that no power loss
     leaves a store with neither)."""
-    _fsync_path(store)
+    _fsync_all([store])
     (store / STARTED_MARKER).unlink(missing_ok=True)
 
 
 def create_skeleton(store: Path, scene: Scene, chunks: tuple[int, ...]) -> None:
-    """Create the whole store (every array, coordinate and attribute) before any task runs.
+    """Create the whole store (every array, coordinate and attribute) before any task runs;
+    ``chunks``: the blocks the tasks solve (``_grid.scene_chunks``).
 
     Any existing content at ``store`` is removed first (the caller decides whether that is allowed).
     ``pipeline.state.skeleton_complete`` is set last, so a skeleton interrupted half-way is
@@ -649,135 +642,69 @@ def remove_partials(store: Path) -> int:
     return n
 
 
-def is_marked(store: Path, index: tuple[int, ...]) -> bool:
-    """Whether chunk ``index`` has its done marker (its marker's file exists: a marker is
-    written as a value 1 where the fill is 0, so zarr and ``_chunks.write_chunk`` keep a file
-    for it; read through zarr where the layout is not plain)."""
-    meta = _plain_meta(store, DONE_ARRAY)
-    if meta is None:
-        return bool(read_done(store)[tuple(index)])
-    return (store / DONE_ARRAY / chunk_key(meta, index)).is_file()
-
-
 def read_done(store: Path) -> np.ndarray:
-    """The done markers, one per chunk: True where the chunk is stored whole (read as
-    :func:`read_arrays` reads, one file per chunk)."""
+    """The done markers, one per storage chunk: True where the chunk is stored whole."""
     return read_arrays(store, [DONE_ARRAY])[DONE_ARRAY] == 1
 
 
-def _fsync_path(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except FileNotFoundError:
-        return  # an all-fill chunk is not written by Zarr
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-#: array handles of this process, by (store, array), with the mtime of the array's zarr.json:
-#: a task's chunks reopen the same arrays, and opening one reads and parses its metadata (~1 ms
-#: idle, ~10 ms loaded, for each of a chunk's arrays); a skeleton rebuilt in place has a new mtime
-_ARRAYS: dict[tuple[str, str], tuple[int, object]] = {}
-_ARRAYS_KEPT = 256
-
-
-def _array(store: Path, name: str):
-    key = (str(store), name)
-    mtime = os.stat(store / name / "zarr.json").st_mtime_ns
-    hit = _ARRAYS.get(key)
-    if hit is not None and hit[0] == mtime:
-        return hit[1]
-    if len(_ARRAYS) >= _ARRAYS_KEPT:
-        _ARRAYS.clear()
-    arr = zarr.open_array(store=str(store), path=name, mode="r+")
-    _ARRAYS[key] = (mtime, arr)
-    return arr
-
-
-_FSYNC_POOL = None
-
-
 def _fsync_all(paths) -> None:
-    """fsync every path, concurrently: a journalling file system commits concurrent fsyncs
-    together (ext4's group commit) instead of one journal commit each."""
-    global _FSYNC_POOL
-    paths = list(paths)
-    if len(paths) <= 1:
-        for path in paths:
-            _fsync_path(path)
-        return
-    if _FSYNC_POOL is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _FSYNC_POOL = ThreadPoolExecutor(8, thread_name_prefix="fsync")
-    list(_FSYNC_POOL.map(_fsync_path, paths))
+    """fsync every path (files and folders); one that is gone (a chunk zarr removed because it
+    held only fill values) has nothing left to sync."""
+    for path in paths:
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except FileNotFoundError:
+            continue
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
-#: decoded ``zarr.json`` of this process's arrays written directly, by (store, array), keyed by
-#: the file's inode and mtime (a skeleton rebuilt in place writes a new file); None where the
-#: layout is not ``_chunks.layout_is_plain`` (written through zarr then)
-_METAS: dict[tuple[str, str], tuple[tuple[int, int], dict | None]] = {}
+async def _listed(store, prefix: str) -> list[str]:
+    return [key async for key in store.list_prefix(prefix)]
 
 
-def _plain_meta(store: Path, name: str) -> dict | None:
-    key = (str(store), name)
-    path = store / name / "zarr.json"
-    st = os.stat(path)
-    stamp = (st.st_ino, st.st_mtime_ns)
-    hit = _METAS.get(key)
-    if hit is not None and hit[0] == stamp:
-        return hit[1]
-    if len(_METAS) >= _ARRAYS_KEPT:
-        _METAS.clear()
-    meta = json.loads(path.read_text())
-    meta = meta if layout_is_plain(meta) else None
-    _METAS[key] = (stamp, meta)
-    return meta
+def _listing(store, prefix: str) -> list[str]:
+    """The keys ``store`` lists under ``prefix`` (zarr's asynchronous store API), from a thread
+    of its own where this one runs an event loop already (a notebook's)."""
+    import asyncio
+
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:
+        return asyncio.run(_listed(store, prefix))
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, _listed(store, prefix)).result()
 
 
-def _write_whole_chunk(store: Path, name: str, region: tuple[slice, ...], chunk_index: tuple[int, ...],
-                       chunks: tuple[int, ...], values) -> Path | None:
-    """Write whole chunk ``chunk_index`` of array ``name``: its file straight from here
-    (``_chunks.write_chunk``, the bytes zarr writes) where the layout is plain, else through
-    zarr.  The path of the chunk file (None where no file is kept: only fill values)."""
-    meta = _plain_meta(store, name)
-    if meta is not None:
-        layout = tuple(int(n) for n in meta["chunk_grid"]["configuration"]["chunk_shape"])
-        assert layout == tuple(chunks), f"{name}: chunks {layout} != layout {chunks}"
-        return write_chunk(store / name, meta, chunk_index, values)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        arr = _array(store, name)
-        assert tuple(arr.chunks) == tuple(chunks), f"{name}: chunks {arr.chunks} != layout {chunks}"
-        arr[region] = values
-    return store / name / "c" / "/".join(str(i) for i in chunk_index)
-
-
-def write_region(store: Path, region: tuple[slice, ...], chunk_index: tuple[int, ...],
-                 chunks: tuple[int, ...], shape: tuple[int, ...], values: dict[str, np.ndarray]) -> None:
-    """Write one whole chunk of every output, then make it durable before the marker is written."""
-    for i, c, n, sl in zip(chunk_index, chunks, shape, region):
-        # Whole, aligned chunks only: two tasks never touch the same chunk file.
-        assert sl.start == i * c and sl.stop == min((i + 1) * c, n), f"region {region} is not chunk {chunk_index}"
-    files = [_write_whole_chunk(store, name, region, chunk_index, chunks, v) for name, v in values.items()]
-    # Durable before the marker: after power loss a marked chunk must have its data on disk
-    # (the files and their entries in their folders, in one round of concurrent fsyncs).
-    files = [f for f in files if f is not None]
-    _fsync_all(files + sorted({f.parent for f in files}))
-
-
-def mark_done(store: Path, chunk_index: tuple[int, ...]) -> None:
-    ones = np.ones((1,) * len(chunk_index), dtype=np.uint8)
-    _write_whole_chunk(store, DONE_ARRAY, tuple(slice(i, i + 1) for i in chunk_index), tuple(chunk_index),
-                       (1,) * len(chunk_index), ones)
+def sync_written(array, since_ns: int) -> int:
+    """Make what was written to ``array`` (a ``zarr.Array`` of a local store) since
+    ``since_ns`` (``time.time_ns()``) durable: every file zarr's store lists under the array,
+    whatever its chunk key encoding or sharding, modified since then (a second's margin for the
+    file system's coarser clock) is fsynced, then its folders and the array's.  The files
+    synced."""
+    root = Path(array.store.root)
+    keys = _listing(array.store, array.path)
+    files = []
+    for key in keys:
+        path = root / key
+        try:
+            if path.stat().st_mtime_ns >= since_ns - 1_000_000_000:
+                files.append(path)
+        except FileNotFoundError:
+            pass
+    _fsync_all(files + sorted({p.parent for p in files} | {root / array.path}))
+    return len(files)
 
 
 @dataclass(frozen=True)
 class ChunkWrite:
-    """Whole aligned chunk ``chunk_index`` of a layout ``chunks`` over arrays of ``shape``:
-    ``values`` {array name: ndarray of the region's shape}, written at ``region``."""
+    """What a task computed for one block of some arrays: ``values`` {array name: ndarray of
+    the region's shape}, at ``region`` of arrays of ``shape``; ``chunk_index`` and ``chunks``
+    are the block's index and the block layout (the trailing, non-scene axes whole)."""
 
     region: tuple
     chunk_index: tuple
@@ -788,8 +715,8 @@ class ChunkWrite:
 
 @dataclass(frozen=True)
 class SolvedChunk:
-    """What a kind's ``solve_chunk`` computed for one chunk: its writes (one per chunk layout
-    its arrays use), the points it holds, their failures and the seconds spent solving."""
+    """What a kind's ``solve_chunk`` computed for one block: its writes (one per group of
+    arrays of one shape), the points it holds, their failures and the seconds spent solving."""
 
     writes: tuple
     points: int
@@ -797,54 +724,125 @@ class SolvedChunk:
     seconds: float
 
 
-def store_chunk(store: Path, index: tuple[int, ...], solved: SolvedChunk) -> dict:
-    """The one way a chunk reaches a store, for every kind: each write whole and durable, then
-    the chunk's done marker (last: a chunk without it is recomputed on resume).
+def mark_done(store: Path, index: tuple[int, ...]) -> None:
+    """Set the done marker of storage chunk ``index`` (after its data is durable)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        zarr.open_array(store=str(store), path=DONE_ARRAY, mode="r+")[tuple(index)] = 1
 
-    Returns ``{"points", "failures", "seconds"}`` of ``solved`` and the seconds spent writing
-    (``write_seconds``, fsyncs included) and marking (``mark_seconds``).
+
+def blocks_in(index, shape, blocks, chunks) -> list[tuple[int, ...]]:
+    """The blocks (indices in the block layout) of storage chunk ``index``, in C order."""
+    ranges = []
+    for i, s, b, c in zip(index, shape, blocks, chunks):
+        lo = i * c // b
+        ranges.append(range(lo, -(-min((i + 1) * c, s) // b)))
+    return [tuple(ix) for ix in itertools.product(*ranges)]
+
+
+class ChunkWriter:
+    """The driver's writer of one run's chunks, the one writer of every chunk of the store.
+
+    The tasks return what they computed (:class:`SolvedChunk`, one per block); :meth:`add`
+    places a block in its storage chunk's buffers, and once every block of the chunk has come,
+    writes each array's region of the chunk through zarr (``array[region] = values``: whole,
+    aligned chunks), makes them durable (:func:`sync_written`), and only then sets the chunk's
+    done marker (:func:`mark_done`).  A run stopped before that loses the chunk's blocks, and
+    the next run computes them again: a resumed store equals an uninterrupted one.
+
+    ``layout``: the record's (``dims``, ``shape``, ``blocks``, ``chunks``); ``pending``: the
+    storage chunks to write.  ``seconds``: time spent writing, syncing and marking.
     """
-    import time
 
-    t0 = time.perf_counter()
-    for w in solved.writes:
-        write_region(store, w.region, w.chunk_index, w.chunks, w.shape, w.values)
-    t1 = time.perf_counter()
-    # Test hook: widen the window between data and marker, where a kill leaves a half-done chunk.
-    time.sleep(float(os.environ.get("TWOLINK_PIPELINE_MARKER_DELAY", "0") or 0))
-    t2 = time.perf_counter()
-    mark_done(store, index)
-    return {"points": int(solved.points), "failures": int(solved.failures), "seconds": float(solved.seconds),
-            "write_seconds": t1 - t0, "mark_seconds": time.perf_counter() - t2}
+    def __init__(self, store: Path, layout: dict, pending):
+        self.store = Path(store)
+        self.shape = tuple(int(n) for n in layout["shape"])
+        self.blocks = tuple(int(n) for n in layout["blocks"])
+        self.chunks = tuple(int(n) for n in layout["chunks"])
+        self.missing = {tuple(c): len(blocks_in(c, self.shape, self.blocks, self.chunks)) for c in pending}
+        self.buffers: dict[tuple, dict[str, np.ndarray]] = {}
+        self.arrays: dict[str, object] = {}
+        self.seconds = {"write": 0.0, "sync": 0.0, "mark": 0.0}
+        self.written = 0
+
+    def chunk_of(self, block) -> tuple[int, ...]:
+        return tuple(int(i) * b // c for i, b, c in zip(block, self.blocks, self.chunks))
+
+    def chunk_region(self, index) -> tuple[slice, ...]:
+        return tuple(slice(i * c, min((i + 1) * c, s)) for i, c, s in zip(index, self.chunks, self.shape))
+
+    def add(self, block, solved: SolvedChunk) -> tuple[int, ...] | None:
+        """Place block ``block``'s values; the storage chunk written and marked if it is whole
+        now (else None)."""
+        chunk = self.chunk_of(block)
+        if chunk not in self.missing:
+            raise ValueError(f"{self.store}: block {tuple(block)} lies in chunk {chunk}, which is not to be written")
+        n = len(self.shape)
+        region = self.chunk_region(chunk)
+        own = tuple(slice(i * b, min((i + 1) * b, s)) for i, b, s in zip(block, self.blocks, self.shape))
+        buffers = self.buffers.setdefault(chunk, {})
+        for w in solved.writes:
+            if tuple(w.region[:n]) != own or any(sl != slice(0, m) for sl, m in zip(w.region[n:], w.shape[n:])):
+                raise ValueError(f"{self.store}: a write at {w.region} is not block {tuple(block)} (whole trailing axes)")
+            at = tuple(slice(o.start - r.start, o.stop - r.start) for o, r in zip(own, region))
+            for name, v in w.values.items():
+                v = np.asarray(v)
+                if name not in buffers:
+                    buffers[name] = np.empty(tuple(r.stop - r.start for r in region) + tuple(w.shape[n:]), v.dtype)
+                buffers[name][at] = v
+        self.missing[chunk] -= 1
+        if self.missing[chunk] > 0:
+            return None
+        self.write(chunk, self.buffers.pop(chunk))
+        del self.missing[chunk]
+        return chunk
+
+    def _array(self, name: str):
+        if name not in self.arrays:
+            self.arrays[name] = zarr.open_array(store=str(self.store), path=name, mode="r+")
+        return self.arrays[name]
+
+    def write(self, chunk, values: dict[str, np.ndarray]) -> None:
+        """Write storage chunk ``chunk`` of every array in ``values``, sync it, then mark it."""
+        region = self.chunk_region(chunk)
+        t0, since = time.perf_counter(), time.time_ns()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            arrays = {name: self._array(name) for name in values}
+            for name, v in values.items():
+                a = arrays[name]
+                # whole, aligned chunks: the region is exactly the array's chunk ``chunk``
+                assert tuple(a.chunks[:len(region)]) == self.chunks, f"{name}: chunks {a.chunks} != {self.chunks}"
+                a[region + (slice(None),) * (v.ndim - len(region))] = v.astype(a.dtype, copy=False)
+        t1 = time.perf_counter()
+        for a in arrays.values():
+            sync_written(a, since)
+        t2 = time.perf_counter()
+        # Test hook: widen the window between data and marker, where a kill leaves a half-done chunk.
+        time.sleep(float(os.environ.get("TWOLINK_PIPELINE_MARKER_DELAY", "0") or 0))
+        t3 = time.perf_counter()
+        mark_done(self.store, chunk)
+        self.seconds["write"] += t1 - t0
+        self.seconds["sync"] += t2 - t1
+        self.seconds["mark"] += time.perf_counter() - t3
+        self.written += 1
 
 
 def read_arrays(store: Path, names) -> dict[str, np.ndarray]:
-    """The whole arrays ``names`` of ``store``, in memory: the chunk files read straight from
-    disk where the array has the layout this pipeline writes (``_chunks.read_whole``; through
-    zarr-python each chunk costs ~0.3 ms of CPU, and a grid scene's reductions read ~20 arrays
-    of up to 1,309 chunks), else through zarr."""
+    """The whole arrays ``names`` of ``store``, in memory (through zarr)."""
     out = {}
-    for n in names:
-        whole = read_whole(Path(store) / n) if (Path(store) / n / "zarr.json").is_file() else None
-        if whole is None:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                whole = zarr.open_array(store=str(store), path=n, mode="r")[...]
-        out[n] = whole
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for n in names:
+            out[n] = zarr.open_array(store=str(store), path=n, mode="r")[...]
     return out
 
 
 def write_arrays(store: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write whole arrays (the driver's reductions), cast to each stored array's dtype: their
-    chunk files straight from here (``_chunks.write_whole``) where the layout is plain (through
-    zarr each array costs ~3-5 ms, and a grid scene's reductions write ~15-40), else through zarr."""
-    for n, v in arrays.items():
-        meta = _plain_meta(store, n)
-        if meta is not None:
-            write_whole(store / n, meta, v)
-            continue
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+    """Write whole arrays (the driver's reductions), cast to each stored array's dtype."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for n, v in arrays.items():
             a = zarr.open_array(store=str(store), path=n, mode="r+")
             a[...] = np.asarray(v).astype(a.dtype)
 
@@ -868,153 +866,3 @@ STATE_FLAGS = ("chunks_complete", "reductions_complete", "series_complete")
 def is_complete(state: dict) -> bool:
     """Every part of the store written (``state``: the ``pipeline.state`` attribute)."""
     return all(state.get(flag) for flag in STATE_FLAGS)
-
-
-# ---------------------------------------------------------------------------
-# Compaction: few chunk files once a store is complete (issue 34 item 6)
-# ---------------------------------------------------------------------------
-
-#: elements per chunk at most once a store is complete (8 MiB of float64 before compression):
-#: a whole array of up to 2^20 points is one file, a 10^6-point scene's array one or two
-COMPACT_ELEMENTS = 1 << 20
-#: a complete store of at least this many chunk files is compacted (reading one through
-#: zarr-python costs ~0.3 ms of CPU, and a rewrite about as much as one read).  Above the
-#: paper's stores (force_laws 11,636 files, fourier_optima 9,623, linear_two_phase 6,622): at
-#: 4,096 the rewrite took 4.5 s of linear_two_phase's 42.4 s wall on 2 idle cores, its
-#: solving share 76 % instead of 85 % (docs/validation.md, issue 34); a user's 10^6-point
-#: grid scene (~3,900 chunks of 256 points x ~14 arrays, ~55,000 files) is compacted
-COMPACT_FILES = 16384
-_STAGING = f"{STATE_GROUP}/rechunk_new"  # a rewritten array, until it is swapped in
-_RETIRED = f"{STATE_GROUP}/rechunk_old"  # the array it replaces, until the swap is done
-
-
-def compact_chunks(shape: tuple[int, ...], limit: int = COMPACT_ELEMENTS) -> tuple[int, ...]:
-    """Chunks of at most ``limit`` elements over ``shape``: the trailing axes whole while they
-    fit, the axis where that runs out cut into the fewest equal pieces that fit, the axes
-    before it single values."""
-    chunk, n = [1] * len(shape), 1
-    for i in range(len(shape) - 1, -1, -1):
-        if n * shape[i] <= limit:
-            chunk[i], n = int(shape[i]), n * int(shape[i])
-        else:
-            pieces = -(-n * int(shape[i]) // limit)
-            chunk[i] = -(-int(shape[i]) // pieces)
-            break
-    return tuple(max(1, c) for c in chunk)
-
-
-def _key(name: str) -> str:
-    return name.replace("/", "~")
-
-
-def _fsync_tree(root: Path) -> None:
-    paths = [p for p in root.rglob("*") if p.is_file()]
-    _fsync_all(paths)
-    _fsync_all({p.parent for p in paths} | {root, root.parent})
-
-
-def recover_rechunk(store: Path) -> None:
-    """Finish or undo the swap of an array that a kill interrupted in :func:`rechunk`: a staged
-    copy whose array is still in place may be partial and is removed; one whose array was
-    already moved away is complete (it is moved away only then) and is moved in; a moved-away
-    array whose place is empty is moved back."""
-    for area in (_STAGING, _RETIRED):
-        folder = store / area
-        if not folder.is_dir():
-            continue
-        for d in sorted(folder.iterdir()):
-            target = store / d.name.replace("~", "/")
-            if target.exists():
-                shutil.rmtree(d)
-            else:
-                os.rename(d, target)
-        folder.rmdir()
-
-
-def _chunked_arrays(store: Path) -> dict[str, tuple[tuple[int, ...], tuple[int, ...]]]:
-    """{path: (shape, chunks)} of the store's arrays (root and ``pipeline_state``) of more than
-    one chunk."""
-    out = {}
-    for zj in sorted(list(store.glob("*/zarr.json")) + list((store / STATE_GROUP).glob("*/zarr.json"))):
-        meta = json.loads(zj.read_text())
-        if meta.get("node_type") != "array" or meta["chunk_grid"]["name"] != "regular":
-            continue
-        shape, chunks = meta["shape"], meta["chunk_grid"]["configuration"]["chunk_shape"]
-        if any(-(-s // c) > 1 for s, c in zip(shape, chunks)):
-            out[str(zj.parent.relative_to(store))] = (tuple(int(s) for s in shape), tuple(int(c) for c in chunks))
-    return out
-
-
-def wants_compaction(store: Path) -> bool:
-    """Whether :func:`compact` is due on ``store`` once complete: not compacted yet, and an
-    interrupted compaction to finish or :data:`COMPACT_FILES` chunk files or more."""
-    meta = store_meta(store)
-    if meta["state"].get("compacted"):
-        return False
-    if meta.get("compacted_from"):
-        return True
-    files = sum(int(np.prod([-(-s // c) for s, c in zip(shape, chunks)]))
-                for shape, chunks in _chunked_arrays(store).values())
-    return files >= COMPACT_FILES
-
-
-def rechunk(store: Path, chunks_of: dict[str, tuple[int, ...]]) -> None:
-    """Rewrite arrays ``{path: chunks}`` of ``store`` in the chunks given, their values, data
-    type, fill value, dimension names and attributes unchanged, each swapped in atomically: the
-    copies are written whole under ``pipeline_state/rechunk_new`` and synced (all at once: one
-    journal commit, not one per array), then each array is moved to ``rechunk_old`` and its
-    copy into its place, and the old ones removed (a kill at any point leaves each array old or
-    wholly new: :func:`recover_rechunk`)."""
-    recover_rechunk(store)
-    staged = {}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for name, chunks in chunks_of.items():
-            old = zarr.open_array(store=str(store), path=name, mode="r")
-            if tuple(old.chunks) == tuple(chunks):
-                continue
-            staged[name] = store / _STAGING / _key(name)
-            new = zarr.create_array(store=str(staged[name]), shape=old.shape, chunks=tuple(chunks), dtype=old.dtype,
-                                    fill_value=old.metadata.fill_value, zarr_format=3,
-                                    dimension_names=old.metadata.dimension_names, attributes=dict(old.attrs))
-            new[...] = old[...]
-    if not staged:
-        return
-    _fsync_tree(store / _STAGING)  # every copy whole on disk before the first array is moved
-    retired = store / _RETIRED
-    retired.mkdir(parents=True, exist_ok=True)
-    for name, copy in staged.items():
-        os.rename(store / name, retired / _key(name))
-        os.rename(copy, store / name)
-    _fsync_all({(store / name).parent for name in staged} | {retired, store / _STAGING})
-    recover_rechunk(store)  # removes the old arrays and the emptied folders
-
-
-def compact(store: Path) -> int:
-    """Rewrite every array of more than one chunk of the complete store ``store`` (the driver
-    does so where :func:`wants_compaction`) in chunks of
-    :func:`compact_chunks` (few files: a task's chunk of ~256 points is ~2 KB, and a 10^6-point
-    scene would otherwise be tens of thousands of files), after recording each array's chunks
-    in the record (``compacted_from``) so that :func:`expand` can restore them; sets
-    ``state.compacted`` last.  Returns the arrays rewritten."""
-    meta = store_meta(store)
-    plan = meta.get("compacted_from") or {k: chunks for k, (_, chunks) in _chunked_arrays(store).items()}
-    plan = {k: [int(c) for c in v] for k, v in plan.items()}
-    _update_record(store, lambda m: {**m, "compacted_from": plan})
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        target = {name: compact_chunks(zarr.open_array(store=str(store), path=name, mode="r").shape) for name in plan}
-    rechunk(store, target)
-    _update_record(store, lambda m: {**m, "state": {**m["state"], "compacted": True}})
-    return len(plan)
-
-
-def expand(store: Path) -> None:
-    """Undo :func:`compact` (chunks to compute again on a compacted store: each task writes its
-    own chunk files): the arrays back in the chunks recorded in ``compacted_from``."""
-    meta = store_meta(store)
-    plan = meta.get("compacted_from")
-    if plan:
-        rechunk(store, {k: tuple(v) for k, v in plan.items()})
-    _update_record(store, lambda m: {**{k: v for k, v in m.items() if k != "compacted_from"},
-                                     "state": {**m["state"], "compacted": False}})

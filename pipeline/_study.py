@@ -29,10 +29,10 @@ import numpy as np
 
 from ._kind import RunContext, SceneKind
 from ._store import (NOT_COMPUTED, ChunkWrite, SolvedChunk, create_array, finish_skeleton, new_group, read_arrays,
-                     status_meanings, store_chunk)
+                     status_meanings)
 from ._study_scene import STUDY_KINDS, StudyScene, parse_study_scene
 
-__all__ = ["STUDY", "StudyKind", "compute_study_chunk", "create_study_skeleton", "result_dims", "study_arrays",
+__all__ = ["STUDY", "StudyKind", "create_study_skeleton", "result_dims", "study_arrays",
            "solver_norm_errors", "NOT_APPLICABLE", "CHECK_MARCH", "CHECK_FIXED", "NO_ANSWER"]
 
 #: Baseline status of a point the LSODA baseline does not cover (it takes harmonic motions only).
@@ -429,11 +429,6 @@ def solve_study_chunk(scene: StudyScene, chunks: tuple[int], index: tuple[int]) 
                    for rest, values in groups.items())
     failures = int(sum(np.count_nonzero(r["status"] != 0) for r in rows))
     return SolvedChunk(writes=writes, points=hi - lo, failures=failures, seconds=seconds)
-
-
-def compute_study_chunk(store: str, scene: StudyScene, chunks: tuple[int], index: tuple[int]) -> dict:
-    """Solve chunk ``index``, write its arrays, then mark it done (``_store.store_chunk``)."""
-    return store_chunk(Path(store), tuple(index), solve_study_chunk(scene, chunks, index))
 
 
 def point_parameters_vscale(scene: StudyScene, lo: int, hi: int) -> np.ndarray:

@@ -130,7 +130,7 @@ def projection(row: dict, run: dict, n: int) -> dict:
     w = row["workers"]
     parallel = float(timing.get("solve_worker_seconds", 0.0))
     parallel += sum(v for k, v in timing.get("not_solving_worker_seconds", {}).items()
-                    if k in ("waiting for chunk writes", "in tasks, besides solving and writing"))
+                    if k in ("in tasks, besides solving",))
     serial = max(0.0, row["wall_seconds"] - parallel / w)
     tasks_cpu = float(timing.get("tasks_cpu_seconds", 0.0))
     start_cpu = float(timing.get("worker_start_cpu_seconds", 0.0))

@@ -9,13 +9,13 @@ Model, per store (its run record's ``timing``, ``_run.time_budget``):
 - serial: the driver's phases outside the tasks (setup, plan, record, ...), and the part of
   the reductions and series phases in which the workers waited for the driver (their "idle
   or scheduling" worker-seconds / workers);
-- work: worker-seconds inside tasks (solving, waiting for the task's own chunk writes, the
-  rest of the task), which more workers share;
+- work: worker-seconds inside tasks (solving, the rest of the task), which more workers share
+  (the driver writes the chunks meanwhile);
 - T(n) = serial + the makespan of the work on n workers.  Grid chunks are many and alike:
   work / n.  An optima or study store's tasks are few and unequal (per-start times are
   heavy-tailed): their durations are rebuilt from the stored per-start ``seconds`` (optima:
   ``starts_per_task`` consecutive starts of a cell) or per-point ``*seconds`` (studies: the
-  layout's points per chunk), scaled so they sum to the work, and scheduled longest first
+  layout's points per block), scaled so they sum to the work, and scheduled longest first
   (LPT, Graham 1969: within 4/3 of the optimal makespan).
 The start of the worker pool (``paper``: once, before the first scene) is not included.
 
@@ -41,7 +41,7 @@ __all__ = ["lpt_makespan", "project_store", "main"]
 #: phases during which the tasks run (the rest of a run record's phases are the driver's)
 TASK_PHASES = ("chunks", "reductions", "series")
 #: not-solving parts spent inside tasks (they scale with the workers)
-IN_TASKS = ("waiting for chunk writes", "in tasks, besides solving and writing")
+IN_TASKS = ("in tasks, besides solving",)
 
 
 def lpt_makespan(tasks, workers: int) -> float:
@@ -60,12 +60,12 @@ def _task_durations(store: Path, meta: dict) -> list[float] | None:
         return None
     if kind == "optima":  # (ratio, Kmax, p, start): a task is ``chunks[-1]`` starts of one cell
         sec = np.nan_to_num(read_arrays(store, ["seconds"])["seconds"])
-        per_task = max(1, int(layout["chunks"][-1]))
+        per_task = max(1, int(layout.get("blocks", layout["chunks"])[-1]))
         flat = sec.reshape(-1, sec.shape[-1])
         return [float(flat[i, j:j + per_task].sum()) for i in range(flat.shape[0])
                 for j in range(0, flat.shape[1], per_task)]
     # a study: a task is ``chunks[0]`` points, each with every timed solve of the point
-    n_points, per_task = int(layout["shape"][0]), max(1, int(layout["chunks"][0]))
+    n_points, per_task = int(layout["shape"][0]), max(1, int(layout.get("blocks", layout["chunks"])[0]))
     timed = sorted(p.name for p in store.iterdir()
                    if p.name.endswith("seconds") and (p / "zarr.json").is_file())
     per = np.zeros(n_points)

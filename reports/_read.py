@@ -8,10 +8,10 @@ Attributes are read through ``pipeline.decode_attrs`` (the one reader of them): 
 the report sees the same values from both.
 
 Opening reads only the metadata and the coordinate arrays: a data array is read when a figure,
-table or claim first uses it, whole, and kept in memory for the rest of the build. An array in
-the pipeline's own layout is read chunk file by chunk file (:mod:`pipeline._chunks`, ~20x faster
-than zarr-python's per-chunk requests); any other through zarr (no dask graph, ``chunks=None``:
-xarray's in-memory cache).
+table or claim first uses it, whole, through xarray and zarr (no dask graph, ``chunks=None``:
+xarray's in-memory cache), and kept in memory for the rest of the build.  Stores of format 3
+hold few chunks per array (~1 MiB each, issue 46), so zarr's per-chunk cost no longer matters;
+stores of formats 1-2 (a chunk per 256-point block) read the same way, only slower.
 :meth:`SceneStore.load` reads a list of arrays up front, so a section that draws from several
 arrays (or indexes one cell by cell) reads each once. Before issue 36 every store was loaded
 whole through dask (36 s of a 44 s build over the full paper's 14 stores).
@@ -27,21 +27,18 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
-from xarray.backends import BackendArray
-from xarray.core import indexing
 
 from pipeline import decode_attrs, read_record
-
-from pipeline._chunks import layout_is_plain, read_whole
 
 __all__ = ["StoreRefused", "SceneStore", "open_scene_store", "shipped_scenes", "SUPPORTED_FORMAT", "READ_FORMATS"]
 
 #: Store layout version this report reads (the newest). Stores without ``format_version`` in their
 #: ``pipeline`` attributes predate the field and are read as version 1.
-SUPPORTED_FORMAT = 2
-#: Every store layout version this report reads: 1 (nested attributes) and 2 (issue 34:
-#: attributes as netCDF takes them); the arrays are the same.
-READ_FORMATS = (1, 2)
+SUPPORTED_FORMAT = 3
+#: Every store layout version this report reads: 1 (nested attributes), 2 (issue 34:
+#: attributes as netCDF takes them) and 3 (issue 46: chunks of whole blocks, ~1 MiB); the
+#: arrays are the same, read through zarr's public API whatever their chunks.
+READ_FORMATS = (1, 2, 3)
 ATTRS_KEY = "pipeline"
 
 
@@ -163,7 +160,7 @@ def read_meta(path: Path) -> dict:
     if not zj.is_file():
         if (path / ".zgroup").is_file() or (path / ".zarray").is_file():
             raise _refuse(path, "a Zarr format 2 store; this report reads pipeline stores in Zarr format 3 "
-                                f"(store format version {SUPPORTED_FORMAT})")
+                                f"(store format versions {', '.join(map(str, READ_FORMATS))})")
         inner = sorted(path.glob("*.zarr")) if path.is_dir() else []
         if inner:
             raise _refuse(path, f"a folder of {len(inner)} store(s), not a store; name the stores "
@@ -216,43 +213,10 @@ def open_scene_store(path) -> SceneStore:
             raise _refuse(path, f"coordinate array {d!r} missing (a different store format)")
     # Coordinates in the scene's axis order (the order zarr lists the arrays in varies from one
     # opening to the next, and with it the order of a cell's coordinates in the audit's text).
-    ds = xr.Dataset({k: _direct(path / k, ds[k].variable) for k in ds.data_vars},
+    ds = xr.Dataset({k: ds[k].variable for k in ds.data_vars},
                     coords={**{d: ds[d].variable for d in dims}, **{k: ds[k].variable for k in ds.coords if k not in dims}},
                     attrs=ds.attrs)
     return SceneStore(path=path, meta=meta, ds=ds, science=meta["provenance"]["scene"])
-
-
-class _WholeArray(BackendArray):
-    """xarray's lazy backend array over :func:`pipeline._chunks.read_whole`: the array is read
-    whole on first access and kept."""
-
-    def __init__(self, path: Path, shape, dtype):
-        self.path, self.shape, self.dtype = path, tuple(shape), dtype
-        self._data = None
-
-    def __getitem__(self, key):
-        return indexing.explicit_indexing_adapter(key, self.shape, indexing.IndexingSupport.BASIC, self._getitem)
-
-    def _getitem(self, key):
-        if self._data is None:
-            self._data = read_whole(self.path)
-        return self._data[key]
-
-
-def _direct(array_dir: Path, var):
-    """``var`` (as xarray opened it) read through :class:`_WholeArray` where its store layout is
-    the plain one and xarray decodes nothing (same dtype as stored, no mask, scale or offset);
-    else ``var`` unchanged."""
-    try:
-        meta = json.loads((array_dir / "zarr.json").read_text())
-    except (OSError, ValueError):
-        return var
-    if not layout_is_plain(meta) or np.dtype(meta["data_type"]) != var.dtype:
-        return var
-    if any(k in var.attrs or k in var.encoding for k in ("scale_factor", "add_offset", "_FillValue")):
-        return var
-    backend = _WholeArray(array_dir, meta["shape"], var.dtype)
-    return xr.Variable(var.dims, indexing.LazilyIndexedArray(backend), attrs=var.attrs, encoding=var.encoding)
 
 
 def shipped_scenes(workflows: Path | None = None) -> list[dict]:

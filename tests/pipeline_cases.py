@@ -186,7 +186,7 @@ def assert_exports_to_netcdf(store: Path, tmp_path: Path) -> None:
         warnings.simplefilter("ignore")
         raw = xr.open_zarr(str(store), zarr_format=3, consolidated=False)
     assert netcdf_problems(raw) == []
-    assert read_record(raw.attrs)["format_version"] == 2
+    assert read_record(raw.attrs)["format_version"] == 3
     flagged = [n for n, v in raw.variables.items() if "flag_values" in v.attrs]
     assert "status" in flagged
     for name in flagged:

@@ -192,7 +192,18 @@ def synthetic_store(store: Path, scene_file: Path, *, quick: bool = False) -> Pa
     """A complete store of a shipped scene at its full resolution (``quick``: its ``paper
     --quick`` variant), filled with smooth synthetic values instead of solver output (seconds
     instead of hours): the pipeline's own skeleton and reductions, so the report sees exactly
-    the real layout and sizes."""
+    the real layout and sizes (the default storage chunks, not the tests' chunk per block)."""
+    import os
+
+    saved = os.environ.pop("TWOLINK_PIPELINE_CHUNK_BYTES", None)
+    try:
+        return _synthetic_store(store, scene_file, quick=quick)
+    finally:
+        if saved is not None:
+            os.environ["TWOLINK_PIPELINE_CHUNK_BYTES"] = saved
+
+
+def _synthetic_store(store: Path, scene_file: Path, *, quick: bool = False) -> Path:
     import warnings
 
     import numpy as np

@@ -14,9 +14,9 @@ from pipeline_cases import REPO
 
 
 #: the environment of a run whose chunk writes each wait 2 s before their done marker (the
-#: tests' hook in ``_store.store_chunk``): on 2 workers the small scene's 8 chunks then take 8 s
-#: or more, so a signal sent once the first chunk is done reaches a run still computing, on a
-#: loaded machine too
+#: tests' hook in ``_store.ChunkWriter.write``, in the driver): the small scene's 8 chunks then
+#: take 16 s or more, so a signal sent once the first chunk is done reaches a run still
+#: computing, on a loaded machine too
 SLOW_WRITES = {"TWOLINK_PIPELINE_MARKER_DELAY": "2.0"}
 
 

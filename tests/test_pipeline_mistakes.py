@@ -85,13 +85,13 @@ def _folder_of_files(tmp, stack):
 
 def _other_scene_store(tmp, stack):
     other = load_scene(_scene(tmp, small_scene_text(rtol=5e-4), "other.toml"))
-    create_skeleton(tmp / "s.zarr", other, GRID.chunk_layout(other))
+    create_skeleton(tmp / "s.zarr", other, GRID.block_layout(other))
     return _run(tmp)
 
 
 def _format_1_store(tmp, stack):
     scene = load_scene(_scene(tmp))
-    create_skeleton(tmp / "s.zarr", scene, GRID.chunk_layout(scene))
+    create_skeleton(tmp / "s.zarr", scene, GRID.block_layout(scene))
     downgrade_to_format_1(tmp / "s.zarr")
     return _run(tmp)
 
@@ -174,7 +174,7 @@ MISTAKES = [
                                                      rf"\(pid {os.getpid()} on .+ since \d{{4}}-.*\)",
             _locked_store, repeat=2),
     Mistake("store of format 1", 3, r"error: .*s\.zarr: store format version 1.*--overwrite", _format_1_store),
-    Mistake("store of another chunk layout", 3, r"error: .*s\.zarr: its chunks \(1 x 1 x 4 x 4\).*--overwrite",
+    Mistake("store of another chunk layout", 3, r"error: .*s\.zarr: its blocks \(1 x 1 x 4 x 4\).*--overwrite",
             _other_layout_store),
     Mistake("Ctrl-C", 130, KEPT.format("interrupted"), _signalled, untouched=False, signal="SIGINT"),
     Mistake("SIGTERM", 143, KEPT.format(r"terminated \(SIGTERM\)"), _signalled, untouched=False, signal="SIGTERM"),

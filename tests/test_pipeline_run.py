@@ -149,7 +149,7 @@ def test_xarray_opens_store_with_labels(reference):
     assert prov["scene_hash"] == scene.hash and prov["scene"]["name"] == "small"
     assert "zarr" in prov["library_versions"] and prov["created"]
     assert prov["engine_options"] == engine_options()  # the defaults, by field
-    assert record["format_version"] == 2
+    assert record["format_version"] == 3
     run = record["run"]
     assert run["computed_points"] == 64 and run["wall_seconds"] > 0 and run["runs"] == 1
     # Label-based selection works.
@@ -328,7 +328,7 @@ def test_the_netcdf_checks_can_fail(reference, tmp_path):
     with pytest.raises(AssertionError):
         assert_same_dataset(raw, changed)
     changed = back.copy()
-    changed.attrs = {"pipeline": back.attrs["pipeline"].replace('"format_version": 2', '"format_version": 3')}
+    changed.attrs = {"pipeline": back.attrs["pipeline"].replace('"format_version": 3', '"format_version": 4')}
     with pytest.raises(AssertionError):
         assert_same_dataset(raw, changed)
     changed = back.copy()
@@ -339,7 +339,7 @@ def test_the_netcdf_checks_can_fail(reference, tmp_path):
 
 def test_a_store_of_format_1_is_read_by_the_reports_refused_for_resuming_and_rebuilt(reference, tmp_path, capsys):
     """A store written before issue 34 (format 1: nested attributes) opens in the reports with
-    the same record (but its version), attributes and arrays as the same store in format 2; the
+    the same record (but its version), attributes and arrays as the same store in format 3; the
     pipeline refuses to resume it in one line naming --overwrite (exit 3, the store untouched),
     and ``--overwrite`` rebuilds it, equal to the reference."""
     import shutil
@@ -353,8 +353,8 @@ def test_a_store_of_format_1_is_read_by_the_reports_refused_for_resuming_and_reb
     downgrade_to_format_1(old)
     new_view, old_view = open_scene_store(store), open_scene_store(old)
     assert old_view.meta["format_version"] == 1
-    assert {**old_view.meta, "format_version": 2} == new_view.meta
-    assert {**old_view.ds.attrs, "pipeline": old_view.meta | {"format_version": 2}} == new_view.ds.attrs
+    assert {**old_view.meta, "format_version": 3} == new_view.meta
+    assert {**old_view.ds.attrs, "pipeline": old_view.meta | {"format_version": 3}} == new_view.ds.attrs
     assert sorted(old_view.ds.variables) == sorted(new_view.ds.variables)
     for name in new_view.ds.variables:
         assert old_view.ds[name].attrs == new_view.ds[name].attrs, name
@@ -374,99 +374,43 @@ def test_a_store_of_format_1_is_read_by_the_reports_refused_for_resuming_and_reb
     summary = run_scene(scene, old, scheduler="synchronous", overwrite=True, progress=False)
     assert summary.computed_chunks == summary.total_chunks
     assert_stores_equal(old, store)
-    assert open_scene_store(old).meta["format_version"] == 2
+    assert open_scene_store(old).meta["format_version"] == 3
 
 
-def test_a_complete_store_is_compacted_and_expands_back(reference, tmp_path, monkeypatch):
-    """Issue 34 item 6: a complete store of many chunk files (``COMPACT_FILES``; the small
-    scene's ~50 are below it: left as they are, the negative control) is rewritten in few
-    (``_store.compact``: here one file per array), values unchanged; ``expand`` restores the
-    task chunks (the layout's), and a lost marker on a compacted store recomputes exactly that
-    chunk into a store compacted again and equal to the reference."""
-    import json as _json
+def test_a_store_of_format_2_is_read_by_the_reports_and_refused_for_resuming_by_name(reference, tmp_path, capsys):
+    """A store of format 2 (before issue 46: a chunk file per block, ``layout.chunks`` the
+    blocks, no ``layout.blocks``) opens in the reports through zarr's public API with the
+    reference's arrays; the pipeline refuses to resume it in one line naming format 2 and
+    --overwrite, exit 3, the store untouched."""
     import shutil
 
-    import zarr
-
-    import pipeline._store as st
-
-    scene, store, _ = reference
-    meta = st.store_meta(store)
-    assert not meta["state"].get("compacted") and "compacted_from" not in meta and not st.wants_compaction(store)
-    assert len(_chunk_files(store, "status")) == 8 == len(_chunk_files(store, "pipeline_state/chunk_done"))
-    monkeypatch.setattr(st, "COMPACT_FILES", 50)
-    assert st.wants_compaction(store)
-    # a fresh run of a store above the threshold ends compacted
-    fresh = tmp_path / "fresh.zarr"
-    run_scene(scene, fresh, scheduler="synchronous", progress=False)
-    got = st.store_meta(fresh)
-    assert got["state"]["compacted"] and got["compacted_from"]["status"] == list(meta["layout"]["chunks"])
-    assert _chunk_files(fresh, "status") == {"0/0/0/0"} == _chunk_files(fresh, "pipeline_state/chunk_done")
-    assert_stores_equal(fresh, store)
-    assert not st.wants_compaction(fresh)
-    assert run_scene(scene, fresh, scheduler="synchronous", progress=False).computed_chunks == 0
-    # expand, compact again: values unchanged
-    st.expand(fresh)
-    assert not st.store_meta(fresh)["state"]["compacted"]
-    assert len(_chunk_files(fresh, "status")) == 8 == len(_chunk_files(fresh, "pipeline_state/chunk_done"))
-    assert tuple(_json.loads((fresh / "scaled_efficiency" / "zarr.json").read_text())
-                 ["chunk_grid"]["configuration"]["chunk_shape"]) == tuple(meta["layout"]["chunks"])
-    assert_stores_equal(fresh, store)
-    assert st.compact(fresh) == len(got["compacted_from"])
-    assert _chunk_files(fresh, "status") == {"0/0/0/0"}
-    assert_stores_equal(fresh, store)
-    # a lost marker on the compacted store
-    zarr.open_array(store=str(fresh), path="pipeline_state/chunk_done", mode="r+")[1, 0, 1, 0] = 0
-    summary = run_scene(scene, fresh, scheduler="synchronous", progress=False)
-    assert summary.computed_chunks == 1 and summary.computed_points == 8
-    assert st.store_meta(fresh)["state"]["compacted"] and _chunk_files(fresh, "status") == {"0/0/0/0"}
-    assert_stores_equal(fresh, store)
-
-
-@pytest.mark.parametrize("fail_at", ["staging", "between_renames", "after_swap"])
-def test_a_rechunk_killed_at_any_point_recovers(reference, tmp_path, monkeypatch, fail_at):
-    """A kill inside ``_store.rechunk`` leaves the old array or the whole new copy; the next
-    run's ``recover_rechunk`` (``prepare_store``) finishes or undoes the swap, the run finishes
-    the compaction (``compacted_from`` recorded first), and the store holds the same values."""
-    import shutil
-
-    import pipeline._store as st
+    from pipeline._attrs import ATTRS_KEY, read_record, record_text
+    from reports._read import open_scene_store
 
     scene, store, _ = reference
-    copy = tmp_path / "copy.zarr"
-    shutil.copytree(store, copy)
-    real_rename, real_rmtree, calls = os.rename, shutil.rmtree, []
+    old = tmp_path / "old.zarr"
+    shutil.copytree(store, old)
+    meta = read_record(__import__("json").loads((old / "zarr.json").read_text())["attributes"])
+    layout = {k: v for k, v in meta["layout"].items() if k != "blocks"} | {"chunks": meta["layout"]["blocks"]}
+    with __import__("warnings").catch_warnings():
+        __import__("warnings").simplefilter("ignore")
+        import zarr
 
-    class Killed(Exception):
-        pass
-
-    def rename(src, dst):
-        calls.append(src)
-        if fail_at == "between_renames" and len(calls) == 2:
-            raise Killed
-        return real_rename(src, dst)
-
-    def rmtree(path, *a, **k):
-        if fail_at == "after_swap" and "rechunk_old" in str(path):
-            raise Killed
-        return real_rmtree(path, *a, **k)
-
-    def fsync_tree(root):
-        if fail_at == "staging":
-            raise Killed
-
-    monkeypatch.setattr(st.os, "rename", rename)
-    monkeypatch.setattr(st.shutil, "rmtree", rmtree)
-    monkeypatch.setattr(st, "_fsync_tree", fsync_tree)
-    with pytest.raises(Killed):
-        st.compact(copy)
-    monkeypatch.undo()
-    assert any((copy / "pipeline_state").glob("rechunk_*"))  # debris of the kill
-    summary = run_scene(scene, copy, scheduler="synchronous", progress=False)  # COMPACT_FILES as shipped
-    assert summary.computed_chunks == 0
-    assert not any((copy / "pipeline_state").glob("rechunk_*"))
-    assert st.store_meta(copy)["state"]["compacted"] and _chunk_files(copy, "status") == {"0/0/0/0"}
-    assert_stores_equal(copy, store)
+        zarr.open_group(str(old), mode="r+").attrs[ATTRS_KEY] = record_text({**meta, "format_version": 2,
+                                                                              "layout": layout})
+        zarr.consolidate_metadata(str(old), zarr_format=3)
+    view = open_scene_store(old)
+    assert view.meta["format_version"] == 2
+    for name in ("scaled_efficiency", "status"):
+        np.testing.assert_array_equal(view.array(name), open_scene_store(store).array(name), err_msg=name)
+    before = read_store(old)
+    path = write_scene(tmp_path, small_scene_text(polish=True))
+    assert main(["run", str(path), "--store", str(old), "--no-progress"]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "format version 2" in err[0] and "--overwrite" in err[0], err
+    after = read_store(old)
+    for k in after:
+        np.testing.assert_array_equal(after[k], before[k], err_msg=k)
 
 
 def test_concurrent_run_is_refused_and_stale_lock_taken_over(tmp_path, capsys):
@@ -661,7 +605,7 @@ def test_tasks_are_sized_by_counts():
 
 
 def test_store_of_another_chunk_layout_is_refused_until_complete(reference, tmp_path, capsys):
-    """A store whose chunks are not the scene's layout (an older pipeline chose them by a
+    """A store whose blocks are not the scene's layout (an older pipeline chose them by a
     timing probe) is refused while chunks remain to compute, with a one-line error naming
     --overwrite; a complete one is left as it is."""
     from pipeline._store import create_skeleton
@@ -670,19 +614,19 @@ def test_store_of_another_chunk_layout_is_refused_until_complete(reference, tmp_
     path = write_scene(tmp_path, small_scene_text(polish=True))
     store = tmp_path / "old.zarr"
     create_skeleton(store, scene, (1, 1, 4, 4))  # as the probe of an older pipeline might have chosen
-    with pytest.raises(StoreMismatch, match=r"chunks \(1 x 1 x 4 x 4\) are not this scene's chunk layout "
+    with pytest.raises(StoreMismatch, match=r"blocks \(1 x 1 x 4 x 4\) are not this scene's block layout "
                                             r"\(1 x 1 x 2 x 4\).*--overwrite"):
         run_scene(load_scene(path), store, scheduler="synchronous", progress=False)
     assert main(["run", str(path), "--store", str(store), "--no-progress"]) == 3
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "--overwrite" in err and "chunk layout" in err
+    assert len(err.splitlines()) == 1 and "--overwrite" in err and "block layout" in err
     assert (read_store(store)["status"] == -1).all()  # untouched
     # --overwrite starts that store over in the scene's layout (same scene: replaced, not resumed)
     summary = run_scene(load_scene(path), store, scheduler="synchronous", overwrite=True, progress=False)
     assert summary.computed_chunks == summary.total_chunks
     from pipeline._store import store_meta
 
-    assert tuple(store_meta(store)["layout"]["chunks"]) == (1, 1, 2, 4)
+    assert tuple(store_meta(store)["layout"]["blocks"]) == (1, 1, 2, 4)
     # The layout of a scene without sweeps changed under a complete store (points_per_chunk is
     # then not hashed): nothing is left to compute in the old layout, so the store is accepted
     # as it is.  (With sweeps the layout is hashed: such a store is another scene's.)

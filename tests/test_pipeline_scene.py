@@ -120,12 +120,12 @@ def test_sweeps_and_their_chunk_layout_are_hashed():
 
 
 def test_a_swept_chunk_is_its_snake_ordered_sweeps(tmp_path):
-    """``compute_chunk`` with sweeps stores what ``solve_periodic`` gives the chunk's points in
+    """``solve_chunk`` with sweeps, written by the driver's ``ChunkWriter``, stores what ``solve_periodic`` gives the chunk's points in
     snake order as sweeps of ``solver.SWEEP_POINTS``, put back in grid order (computed here directly)."""
     import solver
     from pipeline._grid import chunk_region, region_parameters, scene_chunks
-    from pipeline._store import create_skeleton
-    from pipeline._grid_kind import compute_chunk
+    from pipeline._store import ChunkWriter, create_skeleton, store_meta
+    from pipeline._grid_kind import solve_chunk
     from pipeline_cases import read_store
 
     scene = parse_scene(small_scene_text().replace("points_per_chunk = 8", "points_per_chunk = 16"), "a.toml")
@@ -133,7 +133,7 @@ def test_a_swept_chunk_is_its_snake_ordered_sweeps(tmp_path):
     store = tmp_path / "s.zarr"
     create_skeleton(store, scene, chunks)
     index = (1, 0, 0, 0)
-    compute_chunk(str(store), scene, chunks, index)
+    ChunkWriter(store, store_meta(store)["layout"], [index]).add(index, solve_chunk(scene, chunks, index))
     region = chunk_region(index, scene.shape, chunks)
     rshape = tuple(r.stop - r.start for r in region)
     params = region_parameters(scene, region)
@@ -224,7 +224,8 @@ def test_chunk_shape_is_a_function_of_the_scene_only(tmp_path, monkeypatch):
         with Scheduler("synchronous", None) as sched:
             kind_of(scene).create_skeleton(RunContext(scene, store, sched, 1, True, print))
         layout = store_meta(store)["layout"]
-        assert tuple(layout["chunks"]) == scene_chunks(scene)
+        assert tuple(layout["blocks"]) == scene_chunks(scene)
+        # (a chunk per block: the tests' TWOLINK_PIPELINE_CHUNK_BYTES, tests/conftest.py)
         assert tuple(layout["chunk_grid"]) == chunk_grid(scene.shape, scene_chunks(scene))
 
 

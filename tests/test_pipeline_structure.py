@@ -109,3 +109,54 @@ def test_each_kind_keeps_its_schema_apart_and_the_shared_parser_knows_no_kind():
         assert scene.kind == kind
         assert schema.startswith("pipeline._") and schema.endswith("_scene") and schema != "pipeline._scene", schema
         assert compute != schema, (kind, compute)
+
+
+#: the libraries whose file format the package must reach only through their public API
+#: (issue 46: the store format code once imported zarr's internals)
+FORMAT_LIBRARIES = ("zarr", "numcodecs")
+#: private attributes of zarr objects the package once used (``ZstdCodec(...)._zstd_codec``,
+#: ``MemoryStore._store_dict``): named here, as an import check cannot see an attribute
+PRIVATE_ATTRIBUTES = ("_zstd_codec", "_store_dict")
+
+
+def private_library_uses(package_dir: Path) -> list[str]:
+    """``file:line: what`` for every import of ``zarr.core`` or of an underscore name (module
+    or member) of :data:`FORMAT_LIBRARIES`, and every use of :data:`PRIVATE_ATTRIBUTES`, in
+    the modules of ``package_dir`` (at any depth of the file and of the package)."""
+    found = []
+    for path in sorted(package_dir.rglob("*.py")):
+        rel = path.relative_to(package_dir.parent)
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            modules, members = [], []
+            if isinstance(node, ast.Import):
+                modules = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                modules, members = [node.module], [a.name for a in node.names]
+            elif isinstance(node, ast.Attribute) and node.attr in PRIVATE_ATTRIBUTES:
+                found.append(f"{rel}:{node.lineno}: .{node.attr}")
+            for m in modules:
+                parts = m.split(".")
+                if parts[0] not in FORMAT_LIBRARIES:
+                    continue
+                if parts[:2] == ["zarr", "core"] or any(_private(p) for p in parts):
+                    found.append(f"{rel}:{node.lineno}: import {m}")
+                found += [f"{rel}:{node.lineno}: from {m} import {n}" for n in members if _private(n)]
+    return found
+
+
+def test_no_package_reaches_into_zarrs_internals():
+    """Issue 46: no module of the packages imports ``zarr.core`` or an underscore name of zarr
+    or numcodecs (only the ``zarr>=3.1,<3.2`` pin protected such code)."""
+    for package in ("pipeline", "reports", "solver", "workflows"):
+        assert private_library_uses(REPO / package) == [], package
+
+
+def test_the_internals_check_finds_each_planted_use(tmp_path):
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "a.py").write_text("import zarr\nfrom zarr.core.sync import sync\nimport zarr.core.group\n")
+    (pkg / "sub" / "b.py").write_text("def f(z):\n    from numcodecs import _shuffle\n    return z._store_dict\n")
+    (pkg / "c.py").write_text("from zarr.storage import LocalStore\nfrom zarr import open_array\n")
+    assert private_library_uses(pkg) == ["pkg/a.py:2: import zarr.core.sync", "pkg/a.py:3: import zarr.core.group",
+                                         "pkg/sub/b.py:2: from numcodecs import _shuffle",
+                                         "pkg/sub/b.py:3: ._store_dict"]

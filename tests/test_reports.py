@@ -391,7 +391,7 @@ def test_reads_the_pipelines_format_version():
 
 
 @pytest.mark.parametrize("kind, message", [
-    ("newer", "store format version 3 is newer than the versions this report reads (1, 2)"),
+    ("newer", "store format version 4 is newer than the versions this report reads (1, 2, 3)"),
     ("foreign", "not a pipeline store"),
     ("zarr2", "a Zarr format 2 store"),
     ("not_zarr", "not a Zarr store"),
@@ -399,7 +399,7 @@ def test_reads_the_pipelines_format_version():
 def test_refuses_other_formats(tmp_path, kind, message):
     store = tmp_path / "x.zarr"
     if kind == "newer":
-        _group(store, {"pipeline": json.dumps({"format_version": 3, "provenance": {}, "layout": {}, "state": {}})})
+        _group(store, {"pipeline": json.dumps({"format_version": 4, "provenance": {}, "layout": {}, "state": {}})})
     elif kind == "foreign":
         _group(store, {"something": 1})
     elif kind == "zarr2":
