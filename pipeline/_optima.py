@@ -331,6 +331,7 @@ def optimize_start(scene: OptimaScene, ratio: float, kmax: int, p: float, a0: fl
                               certify_rounds=opt.certify_rounds,
                               certify_floor=STILL_EFFICIENCY / min(float(physics.mu_n[0]),
                                                                    float(physics.mu_s[0])),
+                              certify_gradient_norm=max(opt.gtol, scene.keep.accept_gradient_norm),
                               fidelity=opt.fidelity,
                               fidelity_gtol=opt.fidelity_gtol)
     except (RuntimeError, ValueError, FloatingPointError, ZeroDivisionError) as exc:

@@ -330,3 +330,18 @@ def test_a_value_at_rounding_level_is_certified_against_the_floor():
     assert abs(bare.engine_efficiency) < 1e-20 and not bare.certified
     floored = optimize_motion(start, physics, **settings, certify_floor=1e-6)
     assert floored.certified and floored.grid_error == bare.grid_error
+
+
+def test_an_end_that_is_no_candidate_is_judged_but_not_searched_again():
+    """``certify_gradient_norm``: start 3 of the Kmax 1 cell at 2^-8 ends ill-conditioned with a
+    gradient norm of 0.03 and a grid error of 2e-4 (measured): no optimum the pipeline would keep
+    (its acceptance: gradient norm <= 1e-5), so with that bound it is judged uncertified and not
+    searched again; without it (the control) certification takes it on to the optimum."""
+    a0, a1 = _fourier_optima_start(3)
+    physics = solver.Physics.from_scaled(2.0 ** -8, 2.0, p=0.0, delta=1e-5)
+    start = solver.Fourier(np.array([[a0, a1]]), np.zeros((1, 1)))
+    settings = dict(direction=-1, gtol=1e-7, max_iterations=300, grid_rtol=1e-4, grid_rounds=3)
+    gated = optimize_motion(start, physics, **settings, certify_gradient_norm=1e-5)
+    assert gated.certify_rounds == 0 and not gated.certified and gated.gradient_norm > 1e-5
+    full = optimize_motion(start, physics, **settings)
+    assert full.certify_rounds >= 1 and full.certified and full.converged

@@ -598,6 +598,10 @@ class OptimizerOptions:
         instead (certified: |value - engine value| <= certify_tolerance x certify_floor): a value
         at rounding level (isotropic friction at p >= 1: lambda ~ 1e-35) has no relative
         error to certify.  The optima pipeline passes 1e-6 lambda_ub (``_optima.STILL_EFFICIENCY``).
+    certify_gradient_norm : float
+        Searches on finer steps only for an end whose projected gradient norm is at most this
+        (a start that is no candidate optimum is judged, ``certified``, but not searched again):
+        the optima pipeline passes its acceptance (``keep.accept_gradient_norm`` or gtol).
     fidelity, fidelity_gtol : float
         Coarse stage (off at ``fidelity`` = 1).  Switching rule: the descent starts on steps
         adapted at ``fidelity`` x ``grid_rtol`` (at most 0.1) and stays there, one round,
@@ -626,6 +630,7 @@ class OptimizerOptions:
     certify_tolerance: float = 1e-4
     certify_rounds: int = 2
     certify_floor: float = 0.0
+    certify_gradient_norm: float = math.inf
     fidelity: float = 1.0
     fidelity_gtol: float = 1e-2
 
@@ -796,7 +801,8 @@ def optimize_motion(family_template, physics_template, start=None, *, grid=None,
         # than ``certify_tolerance`` is searched again on steps adapted at rtol / 10 (then / 100)
         # from where it stands; what it ends with is what the engine certifies, or not
         while (not fixed_grid and certify_rounds < opts.certify_rounds
-               and not _certified(check, opts)):
+               and not _certified(check, opts)
+               and float(np.linalg.norm(_projected(problem, state.x, state.g))) <= opts.certify_gradient_norm):
             certify_rounds += 1
             fine_rtol = grid_rtol * 10.0 ** -certify_rounds
             try:
