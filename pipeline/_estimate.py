@@ -3,7 +3,7 @@
 The probe runs, in this process and on one core (one numba thread), a sample of the scene's
 own chunks through its kind's ``solve_chunk`` (the code a run's tasks execute, in the store's
 chunk layout, nothing written), and for a grid scene's polished reductions the polish of a
-few cells started from the best point of each probed chunk (``pipeline.polish.polish_cells``, as the
+few cells started from the best basins of each probed chunk (``pipeline.polish.polish_cells``, as the
 run's polish tasks call it).  Each part is projected as (its units) x (the probed mean per
 unit), summed over the kind's cost classes (``SceneKind.chunk_cost``: the optima's Kmax), and
 divided over the workers.  Before issue 45 only the grid points were probed: the optima,
@@ -155,7 +155,9 @@ def _polish_cell(scene, r, chunks, index, values) -> dict | None:
     k = int(np.argmax(score))
     if not np.isfinite(score[k]):
         return None
-    params = {name: float(v[k]) for name, v in region_parameters(scene, region).items()}
+    allp = region_parameters(scene, region)
+    params = {name: float(v[k]) for name, v in allp.items()}
+    starts = _chunk_starts(scene, r, region, score, k, allp)
     subset = None
     if r.subsets is not None:
         subset = next((j for j, masks in enumerate(r.subsets.masks(scene))
@@ -163,7 +165,25 @@ def _polish_cell(scene, r, chunks, index, values) -> dict | None:
                               for a, m in masks.items())), None)
         if subset is None:
             return None
-    return {"params": params, "subset": subset, "value": float(score[k])}
+    return {"starts": starts, "subset": subset, "value": float(score[k])}
+
+
+def _chunk_starts(scene, r, region, score, k, allp) -> list[dict]:
+    """Starts as a run takes them (``_reduce.polish_starts``: distinct basins, then faces), found
+    among the chunk's points at the kept position of its best point k, best first; a probe sees
+    only its chunk, so a run's cell has these or more."""
+    from .polish import distinct_starts, face_starts
+
+    rshape = tuple(sl.stop - sl.start for sl in region)
+    dims = scene.dims
+    pos = np.unravel_index(k, rshape)
+    sel = tuple(slice(None) if d in r.over else int(i) for d, i in zip(dims, pos))
+    block = score.reshape(rshape)[sel]
+    flat_ids = np.arange(score.size).reshape(rshape)[sel]
+    cont = tuple(scene.axis(d).continuous for d in dims if d in r.over)
+    found = distinct_starts(block, cont, r.polish_starts)
+    found += face_starts(block, cont, found)
+    return [{name: float(v[int(flat_ids.flat[j])]) for name, v in allp.items()} for j in found]
 
 
 def _cells(scene, r) -> int:
