@@ -761,6 +761,7 @@ class ChunkWriter:
         self.chunks = tuple(int(n) for n in layout["chunks"])
         self.missing = {tuple(c): len(blocks_in(c, self.shape, self.blocks, self.chunks)) for c in pending}
         self.buffers: dict[tuple, dict[str, np.ndarray]] = {}
+        self.arrived: dict[tuple, set] = {}
         self.arrays: dict[str, object] = {}
         self.seconds = {"write": 0.0, "sync": 0.0, "mark": 0.0}
         self.written = 0
@@ -781,6 +782,10 @@ class ChunkWriter:
         region = self.chunk_region(chunk)
         own = tuple(slice(i * b, min((i + 1) * b, s)) for i, b, s in zip(block, self.blocks, self.shape))
         buffers = self.buffers.setdefault(chunk, {})
+        names = {name for w in solved.writes for name in w.values}
+        if buffers and set(buffers) != names:
+            raise ValueError(f"{self.store}: block {tuple(block)} writes {sorted(names)}, its chunk's other blocks "
+                             f"{sorted(buffers)}")
         for w in solved.writes:
             if tuple(w.region[:n]) != own or any(sl != slice(0, m) for sl, m in zip(w.region[n:], w.shape[n:])):
                 raise ValueError(f"{self.store}: a write at {w.region} is not block {tuple(block)} (whole trailing axes)")
@@ -790,11 +795,15 @@ class ChunkWriter:
                 if name not in buffers:
                     buffers[name] = np.empty(tuple(r.stop - r.start for r in region) + tuple(w.shape[n:]), v.dtype)
                 buffers[name][at] = v
+        arrived = self.arrived.setdefault(chunk, set())
+        if tuple(block) in arrived:
+            return None  # a task run twice (a lost worker's, rerun): the same values again
+        arrived.add(tuple(block))
         self.missing[chunk] -= 1
         if self.missing[chunk] > 0:
             return None
         self.write(chunk, self.buffers.pop(chunk))
-        del self.missing[chunk]
+        del self.missing[chunk], self.arrived[chunk]
         return chunk
 
     def _array(self, name: str):

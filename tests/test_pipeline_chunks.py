@@ -157,6 +157,39 @@ def test_a_store_in_chunks_of_several_blocks_equals_one_in_chunks_of_one(referen
     assert sorted(p.name for p in (store / "status" / "c").rglob("*") if p.is_file()) == ["0"]
 
 
+def test_the_writer_writes_a_chunk_once_every_block_has_come_once(tmp_path, monkeypatch):
+    """``ChunkWriter`` holds a chunk until each of its blocks has come (a block that comes twice,
+    as a rerun task's, counts once), then writes and marks it; a block that would leave part of
+    a chunk's buffer unset (other arrays than its chunk's other blocks) is refused."""
+    from pipeline._grid import chunk_region
+    from pipeline._grid_kind import GRID
+    from pipeline._store import ChunkWrite, ChunkWriter, SolvedChunk, create_skeleton, read_done, store_meta
+
+    monkeypatch.setenv("TWOLINK_PIPELINE_CHUNK_BYTES", "128")  # 16 points: 2 blocks of 8 a chunk
+    scene = load_scene(write_scene(tmp_path, small_scene_text()))
+    store = tmp_path / "s.zarr"
+    create_skeleton(store, scene, GRID.block_layout(scene))
+    layout = store_meta(store)["layout"]
+    blocks = tuple(layout["blocks"])
+
+    def solved(index, names=("status",)):
+        region = chunk_region(index, scene.shape, blocks)
+        shape = tuple(r.stop - r.start for r in region)
+        values = {n: np.full(shape, index[2], dtype=np.int8) for n in names}
+        return SolvedChunk((ChunkWrite(region, index, blocks, scene.shape, values),), 8, 0, 0.0)
+
+    writer = ChunkWriter(store, layout, [(0, 0, 0, 0), (0, 1, 0, 0)])
+    assert writer.add((0, 0, 0, 0), solved((0, 0, 0, 0))) is None
+    assert writer.add((0, 0, 0, 0), solved((0, 0, 0, 0))) is None  # twice: still one block of two
+    assert not read_done(store).any()
+    assert writer.add((0, 0, 1, 0), solved((0, 0, 1, 0))) == (0, 0, 0, 0)
+    assert read_done(store)[0, 0, 0, 0] and writer.written == 1
+    np.testing.assert_array_equal(read_store(store)["status"][0, 0, :, :], [[0] * 4] * 2 + [[1] * 4] * 2)
+    writer.add((0, 1, 0, 0), solved((0, 1, 0, 0)))
+    with pytest.raises(ValueError, match="writes"):
+        writer.add((0, 1, 1, 0), solved((0, 1, 1, 0), names=("status", "iterations")))
+
+
 def _written(root: Path) -> dict[str, int]:
     return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in root.rglob("*") if p.is_file()}
 
