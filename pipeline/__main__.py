@@ -222,10 +222,13 @@ def _estimate(args) -> int:
 def _quiet_after_interrupt() -> None:
     """After Ctrl-C or SIGTERM the one line says it all: a zarr write the interrupt left
     pending in its event loop is expected debris, not news ("Task was destroyed but it is
-    pending!" from asyncio's logger as the interpreter exits)."""
+    pending!" from asyncio's logger as the interpreter exits, or "coroutine ... was never
+    awaited" where the interrupt fell between a zarr call making its coroutine and running it)."""
     import logging
+    import warnings
 
     logging.getLogger("asyncio").setLevel(logging.CRITICAL)
+    warnings.filterwarnings("ignore", message=r"coroutine .* was never awaited", category=RuntimeWarning)
 
 
 @contextmanager

@@ -308,3 +308,50 @@ def test_a_declared_skeleton_keeps_every_groups_attributes(tmp_path):
     assert dict(root.attrs) == {"top": 1} and dict(root["inner"].attrs) == {"note": "kept"}
     np.testing.assert_array_equal(root["x"][...], [1.0, 2.0, 3.0])
     assert root["inner/y"].shape == (2,) and not (store / "inner" / "y" / "c").exists()
+
+
+def test_a_chunk_is_synced_without_an_event_loop_an_interrupt_could_strand(tmp_path, monkeypatch):
+    """``sync_written`` lists the array's files without asyncio: in CI a Ctrl-C fell between the
+    store listing's coroutine being made and run, and "coroutine '_listed' was never awaited"
+    stood under the run's one line.  Negative control: the former listing through
+    ``asyncio.run`` fails here (asyncio.run refused; a KeyboardInterrupt would end pytest itself)."""
+    import asyncio
+    import time
+
+    from pipeline import _store as st
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        a = zarr.create_array(str(tmp_path / "a.zarr"), shape=(4,), chunks=(2,), dtype="f8", fill_value=np.nan)
+    since = time.time_ns()
+    a[0:2] = [1.0, 2.0]
+
+    def refused(coroutine, *args, **kwargs):
+        coroutine.close()
+        raise RuntimeError("sync_written ran an event loop")
+
+    monkeypatch.setattr(asyncio, "run", refused)
+    assert st.sync_written(a, since) >= 1
+
+
+def test_an_interrupt_leaves_no_never_awaited_coroutine_warning():
+    """After Ctrl-C the driver's one line stands alone: a coroutine a zarr call made and the
+    interrupt kept from running is debris, silenced with asyncio's pending-task message.
+    Negative control: without ``_quiet_after_interrupt`` the warning is raised."""
+    import gc
+    import subprocess
+    import sys
+
+    code = ("import gc, sys\n"
+            "async def pending():\n    pass\n"
+            "{quiet}"
+            "c = pending()\n"
+            "del c\n"
+            "gc.collect()\n")
+    quiet = "from pipeline.__main__ import _quiet_after_interrupt\n_quiet_after_interrupt()\n"
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    loud = subprocess.run([sys.executable, "-c", code.format(quiet="")], capture_output=True, text=True, env=env)
+    silent = subprocess.run([sys.executable, "-c", code.format(quiet=quiet)], capture_output=True, text=True, env=env)
+    assert "was never awaited" in loud.stderr
+    assert silent.returncode == 0 and silent.stderr == "", silent.stderr
+    gc.collect()
